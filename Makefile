@@ -1,8 +1,24 @@
+# LandScape-gRPC. `make run` and `make test` install what they need on first use.
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+GRPCURL_VERSION := v1.9.3
+GRPCURL := .tools/bin/grpcurl
+PORT ?= 50051
 
+.PHONY: help install run test lint proto bench clean tools
+
+help:
+	@echo "make run      install, then start the device server on 127.0.0.1:$(PORT)"
+	@echo "make test     install, then run every test"
+	@echo "make lint     buf lint of proto/"
+	@echo "make proto    regenerate the Python stubs from proto/"
+	@echo "make bench    run the benchmarks in bench/ and print their figures"
+	@echo "make tools    build grpcurl $(GRPCURL_VERSION) into .tools/bin"
+	@echo "make clean    remove the virtualenv, generated stubs and caches"
+
+# Editable install; setup.py generates the landscape.v1 stubs from proto/ on every build.
 $(STAMP): pyproject.toml setup.py $(wildcard proto/landscape/v1/*.proto)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
@@ -10,3 +26,27 @@ $(STAMP): pyproject.toml setup.py $(wildcard proto/landscape/v1/*.proto)
 	touch $@
 
 install: $(STAMP)
+
+proto: install
+	$(PY) -c 'import setup; setup.generate_stubs()'
+
+run: install
+	$(PY) -m landscape.server --port $(PORT)
+
+test: install tools
+	$(PY) -m pytest
+
+lint: install
+	$(VENV)/bin/buf lint
+
+bench: install
+	@for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+$(GRPCURL):
+	GOBIN=$(CURDIR)/.tools/bin go install github.com/fullstorydev/grpcurl/cmd/grpcurl@$(GRPCURL_VERSION)
+
+tools: $(GRPCURL)
+
+clean:
+	rm -rf $(VENV) .tools gen build *.egg-info .pytest_cache
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

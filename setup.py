@@ -22,7 +22,8 @@ def generate_stubs() -> None:
     (package / "__init__.py").touch()
 
 
-# Every build (wheel, sdist, editable) reads this file first, and the package directory
-# gen/landscape/v1 must exist before setuptools looks for it.
-generate_stubs()
-setup()
+if __name__ == "__main__":
+    # Every build (wheel, sdist, editable) runs this file first, and the package directory
+    # gen/landscape/v1 must exist before setuptools looks for it.
+    generate_stubs()
+    setup()

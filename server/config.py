@@ -1,0 +1,18 @@
+"""Device-server settings, from the command line or a test."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+DEFAULT_ADDRESS = "127.0.0.1"   # loopback unless the operator exposes the server on purpose
+DEFAULT_PORT = 50051
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    address: str = DEFAULT_ADDRESS
+    port: int = DEFAULT_PORT          # 0 picks a free port
+    # Worker threads; each open stream (session, subscription, jog) holds one.
+    max_workers: int = 64
+    # Largest request accepted; larger ones fail with RESOURCE_EXHAUSTED. Paths stream in
+    # chunks, so no single message needs to be big.
+    max_message_bytes: int = 4 * 1024 * 1024

@@ -1,0 +1,56 @@
+"""grpcurl, a client in another language, against the device server started as users start it."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+GRPCURL = ROOT / ".tools" / "bin" / "grpcurl"
+
+
+@pytest.fixture(scope="module")
+def grpcurl() -> Path:
+    # The Makefile pins the version; `make test` builds it first, this covers a bare pytest run.
+    subprocess.run(["make", "-s", "tools"], cwd=ROOT, check=True, timeout=600)
+    return GRPCURL
+
+
+@pytest.fixture(scope="module")
+def target():
+    proc = subprocess.Popen([sys.executable, "-m", "landscape.server", "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert "listening on" in line, line
+        yield line.rsplit(" ", 1)[-1].strip()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def run(grpcurl, *args) -> str:
+    done = subprocess.run([str(grpcurl), "-plaintext", *args], capture_output=True, text=True,
+                          timeout=30)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_list_shows_the_services_health_and_reflection(grpcurl, target):
+    listed = set(run(grpcurl, target, "list").split())
+    assert {"landscape.v1.DeviceService", "landscape.v1.DigitalIOService",
+            "landscape.v1.EventService", "landscape.v1.SessionService",
+            "grpc.health.v1.Health", "grpc.reflection.v1alpha.ServerReflection"} <= listed
+
+
+def test_describe_a_method(grpcurl, target):
+    out = run(grpcurl, target, "describe", "landscape.v1.DeviceService.PathLoad")
+    assert "rpc PathLoad ( stream .landscape.v1.PathLoadRequest )" in out
+
+
+def test_health_check(grpcurl, target):
+    out = run(grpcurl, target, "grpc.health.v1.Health/Check")
+    assert json.loads(out) == {"status": "SERVING"}

@@ -1,0 +1,53 @@
+"""The device server serves the contract, health checking and reflection on loopback."""
+from __future__ import annotations
+
+import grpc
+import pytest
+from grpc_health.v1 import health_pb2, health_pb2_grpc
+from grpc_reflection.v1alpha import reflection_pb2, reflection_pb2_grpc
+
+from landscape.server import services
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, types_pb2)
+
+
+def test_health_reports_serving_for_the_server_and_each_service(channel):
+    stub = health_pb2_grpc.HealthStub(channel)
+    for name in ("", *(spec.full_name for spec in services.ALL)):
+        reply = stub.Check(health_pb2.HealthCheckRequest(service=name), timeout=5)
+        assert reply.status == health_pb2.HealthCheckResponse.SERVING, name
+
+
+def test_reflection_lists_every_service(channel):
+    stub = reflection_pb2_grpc.ServerReflectionStub(channel)
+    request = reflection_pb2.ServerReflectionRequest(list_services="")
+    reply = next(stub.ServerReflectionInfo(iter([request]), timeout=5))
+    listed = {s.name for s in reply.list_services_response.service}
+    assert listed == {*(spec.full_name for spec in services.ALL), "grpc.health.v1.Health",
+                      "grpc.reflection.v1alpha.ServerReflection"}
+
+
+def test_an_rpc_not_built_yet_is_unimplemented_and_names_the_command(channel):
+    stub = device_service_pb2_grpc.DeviceServiceStub(channel)
+    with pytest.raises(grpc.RpcError) as err:
+        stub.MoveArc(motion_pb2.MoveArcRequest(point_name="p"), timeout=5)
+    assert err.value.code() == grpc.StatusCode.UNIMPLEMENTED
+    assert "landscape.v1.DeviceService.MoveArc" in err.value.details()
+
+
+def test_robot_description_is_the_arm_urdf(channel):
+    stub = device_service_pb2_grpc.DeviceServiceStub(channel)
+    reply = stub.GetRobotDescription(control_pb2.GetRobotDescriptionRequest(), timeout=5)
+    assert reply.ret_val.ret_code == types_pb2.RETURN_CODE_CMD_EXEC_OK
+    assert reply.robot_type == "TX90"
+    assert reply.urdf.count("<joint ") == 7 and 'name="tool0"' in reply.urdf
+    assert list(reply.joint_names) == [f"joint_{i}" for i in range(1, 7)]
+
+
+def test_an_oversized_message_is_refused_and_the_server_keeps_serving(channel, server):
+    stub = device_service_pb2_grpc.DeviceServiceStub(channel)
+    huge = motion_pb2.MoveAbsoluteRequest(point_name="x" * (5 * 1024 * 1024))
+    with pytest.raises(grpc.RpcError) as err:
+        stub.MoveAbsolute(huge, timeout=5)
+    assert err.value.code() == grpc.StatusCode.RESOURCE_EXHAUSTED
+    reply = stub.GetRobotDescription(control_pb2.GetRobotDescriptionRequest(), timeout=5)
+    assert reply.robot_type == "TX90"
