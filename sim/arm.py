@@ -47,6 +47,12 @@ class ArmModel:
     max_velocity: tuple[float, ...] = tuple(d * _DEG for d in (400, 400, 430, 540, 475, 760))
     max_acceleration: tuple[float, ...] = field(default=())
     max_effort: tuple[float, ...] = (318.0, 166.0, 76.0, 34.0, 29.0, 11.0)
+    # Tool-tip Cartesian limits (m/s, rad/s, m/s^2, rad/s^2): not published either; our choice,
+    # well inside what the joint limits allow near the middle of the workspace.
+    max_linear_velocity: float = 2.0
+    max_angular_velocity: float = 2 * math.pi
+    max_linear_acceleration: float = 10.0
+    max_angular_acceleration: float = 8 * math.pi
     # base, link1 .. link6
     link_masses: tuple[float, ...] = (10.73, 16.93, 12.99, 7.50, 4.54, 0.569, 0.031)
 
@@ -73,8 +79,9 @@ class ArmModel:
     @property
     def joint_origins(self) -> tuple[tuple[float, float, float], ...]:
         """Origin of each joint in its parent link's frame at q = 0 (tx90.md table)."""
-        return ((0.0, 0.0, self.c1), (self.a1, 0.0, 0.0), (self.a2, self.b, self.c2),
-                (0.0, 0.0, 0.0), (0.0, 0.0, self.c3), (0.0, 0.0, self.c4))
+        # a2 sits at the elbow (J4's origin in link 3), so it turns with q2 + q3 as in the paper.
+        return ((0.0, 0.0, self.c1), (self.a1, 0.0, 0.0), (0.0, self.b, self.c2),
+                (self.a2, 0.0, 0.0), (0.0, 0.0, self.c3), (0.0, 0.0, self.c4))
 
     def with_overrides(self, **values) -> "ArmModel":
         return replace(self, **values)

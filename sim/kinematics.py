@@ -1,0 +1,508 @@
+"""Kinematics of the TX90-class arm: forward, closed-form inverse, and the LLI configurations.
+
+The arm is an ortho-parallel 6R arm with a spherical wrist (Brandstoetter, Angerer, Hofbaur
+2014): J1 vertical; J2 and J3 parallel and perpendicular to J1; J4, J5, J6 meet in one point,
+the wrist centre. Everything is derived from `ArmModel.joint_origins` and `JOINT_AXES`
+(sim/arm.py), so the TX90, TX90L and TX90XL share this code.
+
+Units and shapes: poses are (4, 4) homogeneous matrices of the flange (URDF frame tool0) in the
+base_link frame, metres; joint vectors are (6,) in radians, joint 1 first.
+
+Configurations (LLI_Config), as this module labels a joint vector q:
+
+- shoulder: RIGHTY when the wrist centre lies in front of the J1 axis, i.e. at x >= 0 in the
+  frame of link 1 (the arm reaches forward, the side J2 is offset to); LEFTY when it lies
+  behind (x < 0: the arm reaches backwards, J1 being turned about half a turn from RIGHTY).
+- elbow: POSITIVE when q3 >= 0. Geometrically (q3 turns the forearm about +y, towards link 1's
+  +x): reaching forward (wrist centre ahead of J2) POSITIVE is the elbow-up posture; reaching
+  backwards it is elbow-down. With a non-zero upper-arm or forearm offset the sign is that of
+  the bend between the two (q3 plus the difference of their offset angles), which is q3 for
+  the TX90 family (a2 = 0).
+- wrist: POSITIVE when q5 >= 0.
+
+Angles are compared after wrapping to (-pi, pi]. On a boundary (q3 = 0, q5 = 0, wrist centre
+on the shoulder-singular cylinder of radius b about J1) both labels name the same joints:
+`configuration` reports RIGHTY/POSITIVE there, while `solutions` returns one solution per
+branch, each tagged with its branch, so a request for either label is met.
+
+Singular cases never give NaN: at q5 = 0 (sin q5 below `SINGULAR_EPS`) q4 is taken from q_near
+and q6 absorbs the rest; with the wrist centre on the J1 axis (possible only if the lateral
+offset is zero) q1 comes from q_near; a stretched arm (q3 = 0) gives two equal elbow branches.
+
+Invalid input: `reverse` returns INVALID_ORIENTATION for a pose whose rotation is not proper
+(orthonormal within `ORTHONORMAL_TOL`, determinant +1), whose last row is not (0, 0, 0, 1), or
+which holds NaN/inf; `solutions` raises ValueError for such a pose; `solve_batch` returns NaN
+rows. Arrays of the wrong shape, or non-finite q_near or joint ranges, raise ValueError.
+
+`PinocchioModel` is the same arm in pinocchio (from the generated URDF): a cross-check, the
+flange Jacobian, and a damped-least-squares IK for comparison. pinocchio is imported lazily.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from landscape.sim.arm import JOINT_AXES, ArmModel, urdf
+
+__all__ = ["Shoulder", "PosNeg", "Config", "ReversingResult", "BRANCHES", "Kinematics",
+           "PinocchioModel", "wrap_angle", "ORTHONORMAL_TOL", "SINGULAR_EPS"]
+
+_TWO_PI = 2.0 * math.pi
+ORTHONORMAL_TOL = 1e-6   # max |R^T R - I| element accepted as a rotation
+SINGULAR_EPS = 1e-10     # below this sin(q5) (or distance, m) a joint is free and taken from q_near
+_REACH_TOL = 1e-12       # rounding slack on the reach tests: poses on the workspace boundary solve
+_RANGE_TOL = 1e-10       # rad: a joint this far past its limit is clipped onto it, not rejected
+
+
+class Shoulder(enum.IntEnum):
+    """LLI_ShoulderConfig."""
+    SAME = 0
+    LEFTY = 1
+    RIGHTY = 2
+    FREE = 3
+
+
+class PosNeg(enum.IntEnum):
+    """LLI_PositiveNegativeConfig (elbow and wrist)."""
+    SAME = 0
+    POSITIVE = 1
+    NEGATIVE = 2
+    FREE = 3
+
+
+@dataclass(frozen=True)
+class Config:
+    """LLI_RxConfig. As a request, SAME means "as q_near" and FREE "any"."""
+    shoulder: Shoulder = Shoulder.FREE
+    elbow: PosNeg = PosNeg.FREE
+    wrist: PosNeg = PosNeg.FREE
+
+
+class ReversingResult(enum.IntEnum):
+    """LLI_ReversingResult."""
+    OK = 0
+    NO_CONVERGENCE = 1
+    OUT_OF_JNT_RANGE = 2
+    OUT_OF_WORKSPACE = 3
+    INVALID_CONFIG = 4
+    INVALID_ORIENTATION = 5
+    UNSUPPORTED_KINEMATICS = 6
+    UNCONSTRAINT_FRAME = 7
+    INVALID_ERROR_CODE = 8
+
+
+# The 8 branches of the closed form, in the order of `solve_batch`'s second axis:
+# index = 4 * shoulder + 2 * elbow + wrist, with 0 = RIGHTY / POSITIVE and 1 = LEFTY / NEGATIVE.
+BRANCHES: tuple[Config, ...] = tuple(
+    Config(s, e, w)
+    for s in (Shoulder.RIGHTY, Shoulder.LEFTY)
+    for e in (PosNeg.POSITIVE, PosNeg.NEGATIVE)
+    for w in (PosNeg.POSITIVE, PosNeg.NEGATIVE))
+
+
+def _allowed(request: Config) -> frozenset[int]:
+    """Indices of the branches a request (without SAME) accepts; FREE accepts both."""
+    return frozenset(i for i, b in enumerate(BRANCHES)
+                     if request.shoulder in (Shoulder.FREE, b.shoulder)
+                     and request.elbow in (PosNeg.FREE, b.elbow)
+                     and request.wrist in (PosNeg.FREE, b.wrist))
+
+
+_ALLOWED = {Config(s, e, w): _allowed(Config(s, e, w))
+            for s in (Shoulder.LEFTY, Shoulder.RIGHTY, Shoulder.FREE)
+            for e in (PosNeg.POSITIVE, PosNeg.NEGATIVE, PosNeg.FREE)
+            for w in (PosNeg.POSITIVE, PosNeg.NEGATIVE, PosNeg.FREE)}
+
+
+def wrap_angle(a):
+    """Angles (any shape, rad) wrapped to (-pi, pi]."""
+    a = np.asarray(a, dtype=float)
+    w = a - _TWO_PI * np.round(a / _TWO_PI)
+    return np.where(w <= -math.pi, w + _TWO_PI, w)
+
+
+def _wrap(a: float) -> float:
+    w = math.remainder(a, _TWO_PI)
+    return w + _TWO_PI if w <= -math.pi else w
+
+
+def _vector6(v, name: str) -> list[float]:
+    a = np.asarray(v, dtype=float)
+    values = a.tolist() if a.shape == (6,) else None
+    if values is None or not all(map(math.isfinite, values)):
+        raise ValueError(f"{name} must be 6 finite values (rad), got {v!r}")
+    return values
+
+
+def _pose_rows(pose) -> list[list[float]]:
+    a = np.asarray(pose, dtype=float)
+    if a.shape != (4, 4):
+        raise ValueError(f"a pose is a (4, 4) matrix, got shape {a.shape}")
+    return a.tolist()
+
+
+def _is_rigid(pose: list[list[float]]) -> bool:
+    """_pose_ok for one pose given as rows: plain floats are ~10x faster here than numpy."""
+    (xx, yx, zx, _), (xy, yy, zy, _), (xz, yz, zz, _), last = pose
+    if not all(map(math.isfinite, pose[0] + pose[1] + pose[2] + last)):
+        return False
+    tol = ORTHONORMAL_TOL
+    if abs(last[0]) > tol or abs(last[1]) > tol or abs(last[2]) > tol or abs(last[3] - 1.0) > tol:
+        return False
+    # Columns x, y, z of R: unit length, mutually orthogonal, right-handed (z . (x cross y) > 0).
+    for d in (xx * xx + xy * xy + xz * xz - 1.0, yx * yx + yy * yy + yz * yz - 1.0,
+              zx * zx + zy * zy + zz * zz - 1.0, xx * yx + xy * yy + xz * yz,
+              xx * zx + xy * zy + xz * zz, yx * zx + yy * zy + yz * zz):
+        if abs(d) > tol:
+            return False
+    return zx * (xy * yz - xz * yy) + zy * (xz * yx - xx * yz) + zz * (xx * yy - xy * yx) > 0.0
+
+
+def _pose_ok(poses: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) -> (...,) bool: finite, last row (0, 0, 0, 1), rotation proper."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        R = poses[..., :3, :3]
+        ortho = np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)).max(axis=(-1, -2))
+        row = np.abs(poses[..., 3, :] - (0.0, 0.0, 0.0, 1.0)).max(axis=-1)
+        finite = np.isfinite(poses).all(axis=(-1, -2))
+        proper = (ortho <= ORTHONORMAL_TOL) & (np.linalg.det(R) > 0)
+        return finite & proper & (row <= ORTHONORMAL_TOL)
+
+
+class Kinematics:
+    """Forward and closed-form inverse kinematics of one arm.
+
+    The closed form, in the frame of link 1 (J1 turned by q1): the wrist centre C lies at
+    C = flange - c4 * z_flange. Its height and distance from the J1 axis give two q1 (wrist
+    centre in front of or behind the axis, the lateral offset b fixing the plane of J2/J3).
+    In that plane the upper arm and forearm form a triangle with the J2-C distance: two q3 (the
+    elbow bent either way) and for each one q2. The wrist then has to make
+    R3_6 = (Rz(q1) Ry(q2 + q3))^T R = Rz(q4) Ry(q5) Rz(q6), a ZYZ decomposition with two
+    solutions (q5 positive or negative).
+    """
+
+    def __init__(self, arm: ArmModel):
+        if tuple(JOINT_AXES) != ("z", "y", "y", "z", "y", "z"):
+            raise ValueError(f"unsupported joint axes {JOINT_AXES}: need z y y z y z")
+        o = np.array(arm.joint_origins, dtype=float)
+        # A spherical wrist: J5 on the J4 axis and J6 on the J5 origin's z line.
+        if np.any(o[4, :2] != 0.0) or np.any(o[5, :2] != 0.0):
+            raise ValueError("unsupported kinematics: the wrist axes do not meet in one point")
+        self.arm = arm
+        self._origins = o
+        g = o.tolist()   # plain floats: numpy scalars would slow the one-pose solver down
+        self._base = o[0]                                   # the J1 axis passes through it
+        self._base_xyz = tuple(g[0])
+        self._shoulder_x, self._shoulder_z = g[1][0], g[1][2]   # J2 in link 1
+        self._lateral = g[1][1] + g[2][1] + g[3][1]         # arm plane's offset from J1 (b)
+        ux, uz = g[2][0], g[2][2]                           # J2 -> J3, in link 2
+        fx, fz = g[3][0], g[3][2] + g[4][2]                 # J3 -> wrist centre, in link 3
+        self._lu, self._au = math.hypot(ux, uz), math.atan2(ux, uz)
+        self._lf, self._af = math.hypot(fx, fz), math.atan2(fx, fz)
+        if self._lu <= 0.0 or self._lf <= 0.0:
+            raise ValueError("unsupported kinematics: zero-length upper arm or forearm")
+        self._flange = g[5][2]                              # wrist centre -> flange, along z6
+        # Per joint, the constant part of its transform (origin, 1 on the axis) and the indices
+        # of the 2x2 rotation block about that axis, for `forward`.
+        self._fixed = np.zeros((6, 4, 4))
+        self._fixed[:, :3, 3] = o
+        self._fixed[:, 3, 3] = 1.0
+        axis = np.array(["xyz".index(a) for a in JOINT_AXES])
+        self._fixed[np.arange(6), axis, axis] = 1.0
+        # Rotation by t about axis i: [j, j] = [k, k] = cos t, [j, k] = -sin t, [k, j] = sin t.
+        self._rot_index = (np.arange(6), (axis + 1) % 3, (axis + 2) % 3)
+        self._lower = [float(v) for v in arm.joint_min]
+        self._upper = [float(v) for v in arm.joint_max]
+
+    # ---- forward ------------------------------------------------------------------------------
+
+    def forward(self, q) -> np.ndarray:
+        """Flange pose in base_link: q (6,) -> (4, 4), or batched (..., 6) -> (..., 4, 4).
+
+        The chain base_link -> link1 -> ... -> link6 (= tool0): for each joint, a translation
+        to its origin, then a rotation by q_i about its axis.
+        """
+        q = np.asarray(q, dtype=float)
+        if q.shape[-1:] != (6,):
+            raise ValueError(f"joint vectors need a last axis of 6, got shape {q.shape}")
+        c, s = np.cos(q), np.sin(q)
+        T = np.broadcast_to(self._fixed, q.shape[:-1] + (6, 4, 4)).copy()
+        n, j, k = self._rot_index
+        T[..., n, j, j] = c
+        T[..., n, k, k] = c
+        T[..., n, j, k] = -s
+        T[..., n, k, j] = s
+        out = T[..., 0, :, :]
+        for i in range(1, 6):
+            out = out @ T[..., i, :, :]
+        return out
+
+    def configuration(self, q) -> Config:
+        """Concrete labels (LEFTY/RIGHTY, POSITIVE/NEGATIVE) of a joint vector (6,)."""
+        q = _vector6(q, "q")
+        # x of the wrist centre in link 1, measured from the J1 axis.
+        x = (self._shoulder_x + self._lu * math.sin(q[1] + self._au)
+             + self._lf * math.sin(q[1] + q[2] + self._af))
+        bend = _wrap(q[2] + self._af - self._au)
+        return Config(Shoulder.RIGHTY if x >= 0.0 else Shoulder.LEFTY,
+                      PosNeg.POSITIVE if bend >= 0.0 else PosNeg.NEGATIVE,
+                      PosNeg.POSITIVE if _wrap(q[4]) >= 0.0 else PosNeg.NEGATIVE)
+
+    # ---- inverse, one pose (plain floats: ~10x faster than numpy on 3-vectors) -----------------
+
+    def _branches(self, pose: list[list[float]], near) -> list[tuple[list[float], int]]:
+        """All solutions of a valid pose (rows) as (q: 6 wrapped floats, index into BRANCHES)."""
+        (r00, r01, r02, x0), (r10, r11, r12, y0), (r20, r21, r22, z0), _ = pose
+        f, lat, lu, lf = self._flange, self._lateral, self._lu, self._lf
+        bx, by, bz = self._base_xyz
+        cx, cy, cz = x0 - f * r02 - bx, y0 - f * r12 - by, z0 - f * r22 - bz   # wrist centre
+        r2 = cx * cx + cy * cy
+        x2 = r2 - lat * lat
+        if x2 < -_REACH_TOL:
+            return []                                   # inside the cylinder J1 cannot reach
+        x = math.sqrt(max(x2, 0.0))
+        out = []
+        for si, wx in ((0, x), (1, -x)):
+            q1 = near[0] if r2 < SINGULAR_EPS**2 else math.atan2(cy, cx) - math.atan2(lat, wx)
+            px, pz = wx - self._shoulder_x, cz - self._shoulder_z
+            d2 = px * px + pz * pz
+            cos_bend = (d2 - lu * lu - lf * lf) / (2.0 * lu * lf)
+            if abs(cos_bend) > 1.0 + _REACH_TOL:
+                continue                                # too far from (or too near) J2
+            bend = math.acos(min(1.0, max(-1.0, cos_bend)))
+            q1 = _wrap(q1)
+            c1, s1 = math.cos(q1), math.sin(q1)
+            # Rows a0, a1 of Rz(q1)^T R (its row 2 is R's).
+            a00, a01, a02 = c1 * r00 + s1 * r10, c1 * r01 + s1 * r11, c1 * r02 + s1 * r12
+            a10, a11, a12 = c1 * r10 - s1 * r00, c1 * r11 - s1 * r01, c1 * r12 - s1 * r02
+            for ei, delta in ((0, bend), (1, -bend)):
+                if d2 < SINGULAR_EPS**2:
+                    phi2 = near[1] + self._au           # wrist centre on J2: q2 is free
+                else:
+                    phi2 = math.atan2(px, pz) - math.atan2(lf * math.sin(delta),
+                                                           lu + lf * math.cos(delta))
+                q2 = _wrap(phi2 - self._au)
+                q3 = _wrap(delta - self._af + self._au)
+                ct, st = math.cos(q2 + q3), math.sin(q2 + q3)
+                # M = Ry(q2 + q3)^T Rz(q1)^T R = Rz(q4) Ry(q5) Rz(q6): rows m0, a1, m2.
+                m00, m01, m02 = ct * a00 - st * r20, ct * a01 - st * r21, ct * a02 - st * r22
+                m22 = st * a02 + ct * r22
+                sw = math.hypot(m02, a12)               # |sin q5|
+                for wi, w in ((0, 1.0), (1, -1.0)):
+                    q4 = near[3] if sw < SINGULAR_EPS else math.atan2(w * a12, w * m02)
+                    c4, s4 = math.cos(q4), math.sin(q4)
+                    q5 = math.atan2(w * sw, m22)
+                    # Row 1 of Rz(q4)^T M is (sin q6, cos q6, 0) whatever q5.
+                    q6 = math.atan2(c4 * a10 - s4 * m00, c4 * a11 - s4 * m01)
+                    out.append(([q1, q2, q3, _wrap(q4), _wrap(q5), _wrap(q6)],
+                                4 * si + 2 * ei + wi))
+        return out
+
+    def solutions(self, pose, q_near=None) -> list[tuple[np.ndarray, Config]]:
+        """All closed-form solutions (up to 8) of a pose (4, 4), ignoring joint ranges.
+
+        Returns (q (6,) wrapped to (-pi, pi], branch Config) pairs in BRANCHES order; [] when
+        the pose is out of reach. q_near (6,) only picks the free joints at singularities
+        (default zeros). Raises ValueError for a pose that is not a proper rigid transform.
+        """
+        rows = _pose_rows(pose)
+        if not _is_rigid(rows):
+            raise ValueError("pose is not a rigid transform (rotation not proper, or not finite)")
+        near = [0.0] * 6 if q_near is None else _vector6(q_near, "q_near")
+        return [(np.array(q), BRANCHES[b]) for q, b in self._branches(rows, near)]
+
+    def reverse(self, pose, q_near, config: Config = Config(), joint_min=None, joint_max=None
+                ) -> tuple[np.ndarray | None, ReversingResult]:
+        """LLI_reverseKin: the joints (6,) reaching `pose` (4, 4) in `config`, within the range.
+
+        SAME fields take q_near's configuration, FREE any. Each joint is moved by whole turns
+        to the value closest to q_near inside [joint_min, joint_max] (default: the arm's), which
+        matters for J4 and J6 (+-270 deg); among the solutions left, the one closest to q_near
+        (Euclidean, rad) wins. Failures return None with: OUT_OF_WORKSPACE (no solution at all),
+        OUT_OF_JNT_RANGE (solutions, none in range), INVALID_CONFIG (in range only in other
+        configurations), INVALID_ORIENTATION (not a proper rigid transform, NaN or inf).
+        Raises ValueError for wrong shapes, non-finite q_near or range, or an unknown config.
+        """
+        near = _vector6(q_near, "q_near")
+        lower = self._lower if joint_min is None else _vector6(joint_min, "joint_min")
+        upper = self._upper if joint_max is None else _vector6(joint_max, "joint_max")
+        if any(lo > hi for lo, hi in zip(lower, upper)):
+            raise ValueError("every joint_min must be at most its joint_max")
+        rows = _pose_rows(pose)
+        if not _is_rigid(rows):
+            return None, ReversingResult.INVALID_ORIENTATION
+        branches = self._branches(rows, near)
+        if not branches:
+            return None, ReversingResult.OUT_OF_WORKSPACE
+        allowed = _ALLOWED.get(self._requested(config, near))
+        if allowed is None:
+            raise ValueError(f"not an LLI configuration: {config!r}")
+        # Fit the likeliest branches first and stop once a bound shows the rest are farther:
+        # q3 and q5 (the elbow and wrist signs) alone, free to turn, underestimate the distance.
+        n3, n5 = near[2], near[4]
+        ranked = sorted((_wrap(q[2] - n3) ** 2 + _wrap(q[4] - n5) ** 2, b, q)
+                        for q, b in branches if b in allowed)
+        best, best_dist = None, math.inf
+        for bound, _, q in ranked:
+            if bound >= best_dist:
+                break
+            fitted = _fit_range(q, near, lower, upper)
+            if fitted is not None and fitted[1] < best_dist:
+                best, best_dist = fitted
+        if best is not None:
+            return np.array(best), ReversingResult.OK
+        if any(_fit_range(q, near, lower, upper) for q, _ in branches):
+            return None, ReversingResult.INVALID_CONFIG
+        return None, ReversingResult.OUT_OF_JNT_RANGE
+
+    def _requested(self, config: Config, near) -> Config:
+        """The request with SAME resolved against q_near (FREE stays FREE)."""
+        if config.shoulder != Shoulder.SAME and PosNeg.SAME not in (config.elbow, config.wrist):
+            return config
+        now = self.configuration(near)
+        return Config(now.shoulder if config.shoulder == Shoulder.SAME else config.shoulder,
+                      now.elbow if config.elbow == PosNeg.SAME else config.elbow,
+                      now.wrist if config.wrist == PosNeg.SAME else config.wrist)
+
+    # ---- inverse, many poses (numpy) ----------------------------------------------------------
+
+    def solve_batch(self, poses, q_near=None) -> np.ndarray:
+        """All solutions of many poses: (N, 4, 4) -> (N, 8, 6), branches in BRANCHES order.
+
+        Angles wrapped to (-pi, pi], joint ranges ignored; NaN where a branch has no solution
+        (out of reach) and in whole rows for poses that are not proper rigid transforms.
+        q_near, (6,) or (N, 6), picks the free joints at singularities (default zeros).
+        """
+        P = np.asarray(poses, dtype=float)
+        if P.ndim != 3 or P.shape[1:] != (4, 4):
+            raise ValueError(f"poses must have shape (N, 4, 4), got {P.shape}")
+        n = len(P)
+        near = np.zeros((n, 6)) if q_near is None else np.broadcast_to(
+            np.asarray(q_near, dtype=float), (n, 6))
+        ok = _pose_ok(P)
+        P = np.where(ok[:, None, None], P, np.eye(4))   # keep bad rows from raising warnings
+        R, p = P[:, :3, :3], P[:, :3, 3]
+        lat, lu, lf = self._lateral, self._lu, self._lf
+
+        # Shoulder: axis 1 of the (N, 2) arrays is RIGHTY, LEFTY.
+        c = p - self._flange * R[:, :, 2] - self._base
+        r2 = c[:, 0] ** 2 + c[:, 1] ** 2
+        x = np.sqrt(np.maximum(r2 - lat * lat, 0.0))
+        wx = np.stack([x, -x], axis=1)
+        q1 = np.arctan2(c[:, 1], c[:, 0])[:, None] - np.arctan2(lat, wx)
+        q1 = np.where((r2 < SINGULAR_EPS**2)[:, None], near[:, :1], q1)
+        px, pz = wx - self._shoulder_x, (c[:, 2] - self._shoulder_z)[:, None]
+        d2 = px**2 + pz**2
+        cos_bend = (d2 - lu * lu - lf * lf) / (2.0 * lu * lf)
+        reach = ((ok & (r2 - lat * lat >= -_REACH_TOL))[:, None]
+                 & (np.abs(cos_bend) <= 1.0 + _REACH_TOL))
+
+        # Elbow: (N, 2, 2), last axis POSITIVE, NEGATIVE.
+        bend = np.arccos(np.clip(cos_bend, -1.0, 1.0))
+        delta = np.stack([bend, -bend], axis=-1)
+        phi2 = np.arctan2(px, pz)[..., None] - np.arctan2(lf * np.sin(delta),
+                                                          lu + lf * np.cos(delta))
+        phi2 = np.where((d2 < SINGULAR_EPS**2)[..., None], near[:, 1, None, None] + self._au, phi2)
+        q2 = phi2 - self._au
+        q3 = delta - self._af + self._au
+        q1 = np.broadcast_to(q1[..., None], q2.shape)
+
+        # Wrist: M = Ry(q2 + q3)^T Rz(q1)^T R, rows m0, a1, m2 of shape (N, 2, 2, 3).
+        c1, s1 = np.cos(q1)[..., None], np.sin(q1)[..., None]
+        ct, st = np.cos(q2 + q3)[..., None], np.sin(q2 + q3)[..., None]
+        r0, r1, r2_ = (R[:, None, None, k, :] for k in range(3))
+        a0 = c1 * r0 + s1 * r1
+        a1 = c1 * r1 - s1 * r0
+        m0 = ct * a0 - st * r2_
+        m22 = (st * a0 + ct * r2_)[..., 2]
+        sw = np.hypot(m0[..., 2], a1[..., 2])[..., None]            # (N, 2, 2, 1)
+        w = np.array([1.0, -1.0])                                   # wrist POSITIVE, NEGATIVE
+        q4 = np.arctan2(w * a1[..., 2, None], w * m0[..., 2, None])
+        q4 = np.where(sw < SINGULAR_EPS, near[:, 3, None, None, None], q4)
+        q5 = np.arctan2(w * sw, m22[..., None])
+        c4, s4 = np.cos(q4), np.sin(q4)
+        q6 = np.arctan2(c4 * a1[..., 0, None] - s4 * m0[..., 0, None],
+                        c4 * a1[..., 1, None] - s4 * m0[..., 1, None])
+
+        shape = q4.shape                                            # (N, 2, 2, 2)
+        q = np.stack([np.broadcast_to(v, shape) for v in
+                      (q1[..., None], q2[..., None], q3[..., None], q4, q5, q6)], axis=-1)
+        q = wrap_angle(q)
+        q[~np.broadcast_to(reach[:, :, None, None], shape)] = np.nan
+        return q.reshape(n, 8, 6)
+
+
+def _fit_range(q, near, lower, upper) -> tuple[list[float], float] | None:
+    """Each joint moved by whole turns to the value closest to near within [lower, upper].
+
+    Returns (joints, squared distance to near), or None if a joint has no value in range.
+    """
+    out, dist = [], 0.0
+    for a, n, lo, hi in zip(q, near, lower, upper):
+        if not (lo <= a <= hi and abs(a - n) <= math.pi):   # else: in range and nearest already
+            k_min = math.ceil((lo - _RANGE_TOL - a) / _TWO_PI)
+            k_max = math.floor((hi + _RANGE_TOL - a) / _TWO_PI)
+            if k_min > k_max:
+                return None
+            # |a + 2 pi k - n| is convex in k: clamp the unconstrained best turn into the range.
+            k = min(max(round((n - a) / _TWO_PI), k_min), k_max)
+            a = min(max(a + _TWO_PI * k, lo), hi)
+        out.append(a)
+        dist += (a - n) ** 2
+    return out, dist
+
+
+class PinocchioModel:
+    """The same arm in pinocchio, built from `urdf(arm)`: cross-checks, Jacobian, numeric IK.
+
+    The joint vector q (6,) is pinocchio's configuration (all joints revolute, nq = 6).
+    """
+
+    def __init__(self, arm: ArmModel):
+        import pinocchio as pin   # heavy; only the users of this class pay for it
+
+        self._pin = pin
+        self.model = pin.buildModelFromXML(urdf(arm))
+        self.data = self.model.createData()
+        self.flange = self.model.getFrameId("tool0")
+
+    def forward(self, q) -> np.ndarray:
+        """Flange (tool0) pose in base_link, (4, 4)."""
+        self._pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        return self.data.oMf[self.flange].homogeneous.copy()
+
+    def jacobian(self, q) -> np.ndarray:
+        """(6, 6) flange Jacobian, world-aligned at the flange origin: rows (vx, vy, vz) in m/rad
+        then (wx, wy, wz) in rad/rad, expressed in base_link axes; columns joints 1..6."""
+        pin = self._pin
+        return pin.computeFrameJacobian(self.model, self.data, np.asarray(q, dtype=float),
+                                        self.flange, pin.LOCAL_WORLD_ALIGNED).copy()
+
+    def ik_dls(self, pose, q0, tol: float = 1e-10, max_iter: int = 1000, step: float = 1.0,
+               damping: float = 1e-12) -> tuple[np.ndarray, bool, int]:
+        """Closed-loop damped-least-squares IK (pinocchio's documented CLIK scheme) for the flange.
+
+        Iterates q <- q + step * J^T (J J^T + damping I)^-1 e, with e = log6(oMf^-1 oMdes) the
+        flange error in its own frame and J its Jacobian, until |e| < tol. Joint ranges are
+        not enforced. Returns (q (6,), converged, iterations).
+        """
+        pin = self._pin
+        model, data, fid = self.model, self.data, self.flange
+        pose = np.asarray(pose, dtype=float)
+        target = pin.SE3(pose[:3, :3], pose[:3, 3])
+        q = np.array(q0, dtype=float)
+        eye = np.eye(6)
+        for it in range(max_iter):
+            pin.computeJointJacobians(model, data, q)   # also runs forward kinematics
+            pin.updateFramePlacement(model, data, fid)
+            error_pose = data.oMf[fid].actInv(target)
+            e = pin.log6(error_pose).vector
+            if np.linalg.norm(e) < tol:
+                return q, True, it
+            J = pin.Jlog6(error_pose.inverse()) @ pin.getFrameJacobian(model, data, fid, pin.LOCAL)
+            v = J.T @ np.linalg.solve(J @ J.T + damping * eye, e)
+            q = pin.integrate(model, q, step * v)
+        return q, False, max_iter
