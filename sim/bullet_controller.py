@@ -1,0 +1,558 @@
+"""The simulated CS8: the LLI-shaped `Controller` on pybullet (DIRECT mode, a client of its own).
+
+`step()` is the drive interrupt: it advances the physics by one cycle, then calls the cyclic
+function (which calls `get()` then `set()`). Clocks call `step()`; nothing here knows wall time.
+`time` is simulated seconds since construction.
+
+The drives (LLI 5.3.12). Each cycle runs `substeps` pybullet steps; in position/velocity mode
+the drives micro-interpolate linearly from the last command to the new one, one target per
+substep, with pybullet's constraint motor set dead-beat (position gain 1, velocity gain 1,
+target velocity 0: each substep ends on its target when the torque suffices), torque limited
+to effort_factor * max effort and speed to max velocity. The velocity command is checked and
+recorded but the intra-cycle path is the straight line (robust to commands whose velocity is
+zero or inconsistent). The torque feed-forward adds to the motor torque. In torque mode the
+motors are off and the torque command (clipped to the same limit) drives the joints.
+
+Power (LLI 5.3.3, 5.3.4, 5.3.10). DISABLED means brakes on: the joints stop (a zero-velocity
+hold, limited to brake_factor * max effort) and, once still, are held where they stopped (a
+position hold), so nothing drifts and nothing jumps. ENABLING (enable_time) and DISABLING
+(disable_time) hold the measured position with the drives; once ENABLED the held command is
+the measured position. An invalid set(), a failing cyclic function (an exception or False)
+or the e-stop disable at once, with an error event. While not ENABLED, set() is accepted and
+ignored: there is nothing to command.
+
+Feedback (`get()`): measured position, velocity, following error (command, or the held
+position, minus measured) and torque (motor plus feed-forward; the torque command in torque
+mode; 0 while DISABLED: the drives are off and the brakes carry the load).
+
+Single-threaded: call everything from the thread that steps (the cycle process).
+"""
+from __future__ import annotations
+
+import enum
+import functools
+import logging
+import math
+from typing import Any
+
+import numpy as np
+import pybullet as pb
+from pybullet_utils.bullet_client import BulletClient
+
+from landscape.sim.cell import PANEL_WIRES, Cell
+from landscape.sim.controller import (
+    CalibState, Controller, CyclicFunction, DioStatus, DoutValue, EnableState, EstopState,
+    EventFunc, InitState, IoctrlCode, IoId, IoType, JointCmd, JointFbk, SettleState, State,
+    Status)
+from landscape.sim.dio import DigitalIO
+from landscape.sim.kinematics import Config, Kinematics, ReversingResult
+from landscape.sim.panel import Panel
+from landscape.sim.sensors import SENSOR_CLASSES
+from landscape.sim.world import World
+
+log = logging.getLogger(__name__)
+
+SOFTWARE_VERSION = "landscape-sim CS8 LLI s7.4 0.1"
+SYNCHRO_TASK_PRIORITY = 10     # VxWorks-style, 0 is highest; fixed, as on a CS8
+SETTLE_SPEED = 1e-3            # rad/s: slower than this on every joint ...
+SETTLE_ERROR = 1e-4            # rad: ... and this close to the command is SETTLED
+BRAKE_LATCH_SPEED = 1e-3       # rad/s: braked joints slower than this are held in place
+_SLACK = 1e-9                  # rad, rad/s: rounding allowance of the command checks
+
+
+class _Drive(enum.Enum):
+    BRAKED = "braked"          # drives off, brakes on
+    HOLDING = "holding"        # drives on, holding a fixed position (enabling, disabling)
+    POSVEL = "posvel"          # following set() commands in position/velocity mode
+    TORQUE = "torque"          # following set() torques in torque mode
+
+
+class BulletController(Controller):
+    """The CS8 of `cell` on pybullet; `cyclic` is called at the end of every `step()`.
+
+    Besides the LLI calls: `cycle_time` (s), `time` (simulated s), `step()`, `cyclic` (the cyclic
+    function; may be replaced between cycles), `world`, `panel`
+    (e-stop, door, parts by hand), `dio` (I/O by unit and bit field), `sensor(name)` and
+    `tare(name)`, `sensor_names`, `last_record_path`.
+    """
+
+    def __init__(self, cell: Cell, cyclic: CyclicFunction | None = None):
+        self.cell = cell
+        spec, arm = cell.controller, cell.arm
+        self.cycle_time = spec.cycle_time
+        self.cycles = 0
+        self.time = 0.0
+        self.cyclic = cyclic
+        self._event_func: EventFunc | None = None
+
+        self._bc = BulletClient(pb.DIRECT)
+        self._bc.setPhysicsEngineParameter(fixedTimeStep=spec.cycle_time / spec.substeps,
+                                           deterministicOverlappingPairs=1)
+        self.world = World(self._bc, cell)
+        self.panel = Panel(self.world, self._on_estop)
+        self.dio = DigitalIO(cell.io, self._read_wire, self.world.set_output)
+        self._sensors = {s.name: SENSOR_CLASSES[s.kind](self.world, s) for s in cell.sensors}
+        self._kin = Kinematics(arm)
+        self._recorder = None
+        self.last_record_path: str | None = None
+
+        # Limits, (6,) arrays.
+        self._lower, self._upper = arm.lower, arm.upper
+        self._vmax = np.array(arm.max_velocity)
+        self._max_step = self._vmax * self.cycle_time
+        self._max_dvel = spec.acceleration_factor * np.array(arm.max_acceleration) * self.cycle_time
+        # The per-joint limits of the command checks, as plain lists (numpy is slow on 6
+        # values): (min, max, max |vel|, max |pos step|, max |vel step|, max |torque|), with the
+        # rounding allowance the checks grant.
+        self._effort = spec.effort_factor * np.array(arm.max_effort)
+        self._effort_list = self._effort.tolist()
+        self._limits = list(zip(self._lower.tolist(), self._upper.tolist(),
+                                (self._vmax + _SLACK).tolist(), (self._max_step + _SLACK).tolist(),
+                                (self._max_dvel + _SLACK).tolist(), self._effort_list))
+        self._brake_list = (spec.brake_factor * np.array(arm.max_effort)).tolist()
+        self._enable_cycles = max(1, round(spec.enable_time / self.cycle_time))
+        self._disable_cycles = max(1, round(spec.disable_time / self.cycle_time))
+        self._user_marks = np.array(spec.user_marks)
+
+        # The per-cycle pybullet calls, bound once to this client, arm and joints.
+        cid, body, joints = self._bc._client, self.world.arm, self.world.joints
+        self._physics_step = functools.partial(pb.stepSimulation, physicsClientId=cid)
+        self._motors = functools.partial(pb.setJointMotorControlArray, body, joints,
+                                         physicsClientId=cid)
+        self._joint_states = functools.partial(pb.getJointStates, body, joints,
+                                               physicsClientId=cid)
+        self._fractions = [(k + 1) / spec.substeps for k in range(spec.substeps)]
+        self._zeros, self._ones = [0.0] * 6, [1.0] * 6
+
+        # LLI state.
+        self._init = InitState.NOT_INITIALIZED
+        self._calib = CalibState.NOT_CALIBRATED
+        self._enable = EnableState.DISABLED
+        self._settle = SettleState.NOT_SETTLED
+        self._countdown = 0
+        self._torque_mode = False
+        self._cyclic_failing = False
+        self._destroyed = False
+
+        # Commands: the last accepted one (arrays for the checks, lists for the per-cycle path)
+        # and where this cycle's interpolation starts; the held position when not following.
+        self._drive = _Drive.BRAKED
+        self._braking = False
+        self._hold = [s[0] for s in self._joint_states()]
+        self._fbk = JointFbk(np.array(self._hold), np.zeros(6), np.zeros(6), np.zeros(6))
+        self._command(self._hold, self._zeros, self._zeros)
+        self._brake()
+
+    def _command(self, pos: list, vel: list, tau: list) -> None:
+        """Take a command (rad, rad/s, N*m; lists of 6 floats) as the one to follow."""
+        self._cmd_list, self._vel_list, self._tau_list = pos, vel, tau
+        self._ffw = any(tau)
+
+    # ---- the cycle ----------------------------------------------------------------------------
+
+    def step(self) -> None:
+        """One cycle: power procedures, cycle_time of physics, feedback, world, recorder, then
+        the cyclic function."""
+        if self._destroyed:
+            raise RuntimeError("the controller was destroyed")
+        if self._countdown:
+            self._procedure()
+        drive, motors, physics = self._drive, self._motors, self._physics_step
+        following = drive is _Drive.POSVEL or drive is _Drive.TORQUE
+        if drive is _Drive.POSVEL:
+            start = self._start
+            delta = [e - s for s, e in zip(start, self._cmd_list)]
+            tau = self._tau_list if self._ffw else None
+            for f in self._fractions:
+                target = [s + f * d for s, d in zip(start, delta)]
+                motors(pb.POSITION_CONTROL, targetPositions=target, targetVelocities=self._zeros,
+                       positionGains=self._ones, velocityGains=self._ones,
+                       forces=self._effort_list)
+                if tau is not None:
+                    motors(pb.TORQUE_CONTROL, forces=tau)
+                physics()
+            self._start = self._cmd_list
+        elif drive is _Drive.TORQUE:
+            for _ in self._fractions:
+                motors(pb.TORQUE_CONTROL, forces=self._tau_list)
+                physics()
+        else:
+            for _ in self._fractions:
+                physics()
+
+        # Feedback, in plain lists until the arrays are built: numpy is slow on 6 values.
+        states = self._joint_states()
+        pos = [s[0] for s in states]
+        vel = [s[1] for s in states]
+        speed = max(map(abs, vel))
+        if drive is _Drive.POSVEL:
+            torque = ([s[3] + t for s, t in zip(states, self._tau_list)] if self._ffw
+                      else [s[3] for s in states])
+        elif drive is _Drive.TORQUE:
+            torque = self._tau_list
+        elif drive is _Drive.HOLDING:
+            torque = [s[3] for s in states]
+        else:
+            torque = self._zeros
+            if self._braking and speed < BRAKE_LATCH_SPEED:
+                self._hold_position(pos, self._brake_list)
+                self._braking = False
+        reference = self._cmd_list if following else self._hold
+        err = [c - p for c, p in zip(reference, pos)]
+        self._settle = (SettleState.SETTLED
+                        if speed < SETTLE_SPEED and max(map(abs, err)) < SETTLE_ERROR
+                        else SettleState.NOT_SETTLED)
+        fbk = self._fbk = JointFbk(np.array(pos), np.array(vel), np.array(err), np.array(torque))
+
+        self.world.update()
+        self.cycles += 1
+        self.time = self.cycles * self.cycle_time
+        if self._recorder is not None:
+            self._recorder.append(self.time, reference, self._vel_list if following else self._zeros,
+                                  fbk.pos, fbk.vel, fbk.torque)
+        if self.cyclic is not None:
+            self._run_cyclic()
+
+    def _run_cyclic(self) -> None:
+        try:
+            ok = self.cyclic(self)
+            why = "the cyclic function returned an error"
+        except Exception as exc:  # noqa: BLE001 - any failure of user code disables the drives
+            ok = False
+            why = f"the cyclic function raised {type(exc).__name__}: {exc}"
+        if ok is False:
+            if self._enable is not EnableState.DISABLED or not self._cyclic_failing:
+                self._event(f"{why}; drives disabled")
+            self._cyclic_failing = True
+            self._power_off()
+        else:
+            self._cyclic_failing = False
+
+    def _procedure(self) -> None:
+        """Advance enabling or disabling by one cycle."""
+        self._countdown -= 1
+        if self._countdown:
+            return
+        if self._enable is EnableState.ENABLING:
+            self._enable = EnableState.ENABLED
+            self._command(self._fbk.pos.tolist(), self._zeros, self._zeros)
+            self._engage()
+        elif self._enable is EnableState.DISABLING:
+            self._power_off()
+
+    # ---- drive modes --------------------------------------------------------------------------
+
+    def _clamp_velocity(self) -> None:
+        # setJointMotorControlArray cannot pass maxVelocity; the motors keep it once set.
+        for j, q, vmax in zip(self.world.joints, self._fbk.pos.tolist(), self._vmax.tolist()):
+            self._bc.setJointMotorControl2(self.world.arm, j, pb.POSITION_CONTROL,
+                                           targetPosition=q, force=0.0, maxVelocity=vmax)
+
+    def _hold_position(self, pos, forces) -> None:
+        """Dead-beat position hold at `pos` (rad, 6 values) with torques up to `forces`."""
+        self._hold = [float(q) for q in pos]
+        self._motors(pb.POSITION_CONTROL, targetPositions=self._hold,
+                     targetVelocities=self._zeros, positionGains=self._ones,
+                     velocityGains=self._ones, forces=forces)
+
+    def _brake(self) -> None:
+        """Brakes on: stop the joints (zero velocity, brake torque); once they are still, hold
+        them there (step() switches; at once if they are still already)."""
+        self._drive = _Drive.BRAKED
+        if float(np.max(np.abs(self._fbk.vel))) < BRAKE_LATCH_SPEED:
+            self._hold_position(self._fbk.pos, self._brake_list)
+            self._braking = False
+        else:
+            self._hold = self._fbk.pos.tolist()
+            self._motors(pb.VELOCITY_CONTROL, targetVelocities=self._zeros,
+                         forces=self._brake_list)
+            self._braking = True
+
+    def _power_off(self) -> None:
+        self._countdown = 0
+        self._enable = EnableState.DISABLED
+        if self._drive is not _Drive.BRAKED:
+            self._brake()
+
+    def _engage(self) -> None:
+        """Drives follow the commands in the current control mode, from the last command."""
+        self._start = self._cmd_list
+        if self._torque_mode:
+            self._motors(pb.VELOCITY_CONTROL, targetVelocities=self._zeros, forces=self._zeros)
+            self._drive = _Drive.TORQUE
+        else:
+            self._clamp_velocity()
+            self._hold_position(self._cmd_list, self._effort_list)
+            self._drive = _Drive.POSVEL
+
+    # ---- LLI: life cycle and power ------------------------------------------------------------
+
+    def _event(self, text: str) -> None:
+        log.warning("%s", text)
+        if self._event_func is not None:
+            try:
+                self._event_func(text)
+            except Exception:  # noqa: BLE001 - a broken listener must not break the controller
+                log.exception("the event function raised")
+
+    def _refuse(self, text: str) -> Status:
+        self._event(text)
+        return Status.ERROR
+
+    def plug_event_func(self, func: EventFunc | None) -> Status:
+        self._event_func = func
+        return Status.OK
+
+    def init(self) -> Status:
+        if self._destroyed:
+            return Status.ERROR
+        if self._init is InitState.INITIALIZED:
+            return self._refuse("init refused: already initialised (once per construction)")
+        self._init = InitState.INITIALIZED
+        return self.home()
+
+    def home(self) -> Status:
+        if self._init is not InitState.INITIALIZED:
+            return self._refuse("home refused: not initialised")
+        self._calib = CalibState.CALIBRATED
+        return Status.OK
+
+    def destroy(self) -> Status:
+        if not self._destroyed:
+            self._power_off()
+            self._bc.disconnect()
+            self._destroyed = True
+            self._init = InitState.NOT_INITIALIZED
+            self._recorder = None
+        return Status.OK
+
+    def __enter__(self) -> "BulletController":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.destroy()
+
+    def enable(self) -> Status:
+        if self._init is not InitState.INITIALIZED or self._calib is not CalibState.CALIBRATED:
+            return self._refuse("enable refused: the controller is not initialised")
+        if self.panel.estop_pressed:
+            return self._refuse("enable refused: the emergency stop is pressed; release it first")
+        if self._enable is EnableState.DISABLING:
+            return self._refuse("enable refused: the drives are disabling")
+        if self._enable is EnableState.DISABLED:
+            self._enable = EnableState.ENABLING
+            self._countdown = self._enable_cycles
+            self._clamp_velocity()
+            self._hold_position(self._fbk.pos, self._effort_list)
+            self._drive = _Drive.HOLDING
+            self._braking = False
+        return Status.OK
+
+    def disable(self) -> Status:
+        if self._init is not InitState.INITIALIZED:
+            return self._refuse("disable refused: the controller is not initialised")
+        if self._enable in (EnableState.ENABLED, EnableState.ENABLING):
+            self._enable = EnableState.DISABLING
+            self._countdown = self._disable_cycles
+            self._hold_position(self._fbk.pos, self._effort_list)
+            self._drive = _Drive.HOLDING
+        return Status.OK
+
+    def _on_estop(self, pressed: bool) -> None:
+        if not pressed:
+            self._event("emergency stop released")
+        elif self._enable is EnableState.DISABLED:
+            self._event("emergency stop pressed")
+        else:
+            self._power_off()
+            self._event("emergency stop pressed: drives disabled")
+
+    def state(self) -> State:
+        return State(self._init, self._enable, self._calib, self._settle,
+                     EstopState.ESTOP if self.panel.estop_pressed else EstopState.NO_ESTOP)
+
+    # ---- LLI: the synchronous calls -----------------------------------------------------------
+
+    def get(self) -> JointFbk:
+        f = self._fbk
+        return JointFbk(f.pos.copy(), f.vel.copy(), f.pos_err.copy(), f.torque.copy())
+
+    def set(self, cmd: JointCmd) -> Status:
+        if self._enable is not EnableState.ENABLED:
+            return Status.OK
+        pos, vel, tau = cmd.pos, cmd.vel, cmd.torque_ffw
+        if pos.shape != (6,) or vel.shape != (6,) or tau.shape != (6,):
+            return self._reject(f"a command needs 6 values per field, got {pos.shape}, "
+                                f"{vel.shape}, {tau.shape}")
+        pos, vel, tau = pos.tolist(), vel.tolist(), tau.tolist()
+        last_pos, last_vel = self._cmd_list, self._vel_list
+        clipped = []
+        # NaN fails every comparison, so these checks reject it too.
+        for i, (lo, hi, vmax, step, dvel, effort) in enumerate(self._limits):
+            p, v, t = pos[i], vel[i], tau[i]
+            if not (lo <= p <= hi and -vmax <= v <= vmax and -step <= p - last_pos[i] <= step
+                    and -dvel <= v - last_vel[i] <= dvel and -math.inf < t < math.inf):
+                return self._reject(self._explain(i, p, v, t))
+            clipped.append(-effort if t < -effort else effort if t > effort else t)
+        self._command(pos, vel, clipped)
+        return Status.OK
+
+    def _reject(self, problem: str) -> Status:
+        """LLI 5.3.6: an invalid command is never applied; the drives are disabled."""
+        self._power_off()
+        self._event(f"set refused: {problem}; drives disabled")
+        return Status.ERROR
+
+    def _explain(self, i: int, p: float, v: float, t: float) -> str:
+        """What is wrong with joint i's command (position p, velocity v, torque t)."""
+        j, lo, hi = i + 1, self._lower[i], self._upper[i]
+        if not (math.isfinite(p) and math.isfinite(v) and math.isfinite(t)):
+            return f"joint {j} command holds NaN or infinite values"
+        if not lo <= p <= hi:
+            return f"joint {j} position {p:.6f} rad is outside its range [{lo:.6f}, {hi:.6f}] rad"
+        if abs(v) > self._vmax[i] + _SLACK:
+            return (f"joint {j} velocity {v:.6f} rad/s exceeds its maximum "
+                    f"{self._vmax[i]:.6f} rad/s")
+        step = abs(p - self._cmd_list[i])
+        if step > self._max_step[i] + _SLACK:
+            return (f"joint {j} position changes by {step:.6f} rad in one cycle, more than its "
+                    f"maximum velocity allows ({self._max_step[i]:.6f} rad)")
+        return (f"joint {j} velocity changes by {abs(v - self._vel_list[i]):.6f} rad/s in one "
+                f"cycle, more than a drive can follow ({self._max_dvel[i]:.6f} rad/s)")
+
+    # ---- LLI: ioctrl --------------------------------------------------------------------------
+
+    def ioctrl(self, code: IoctrlCode, data: Any = None) -> Any:
+        """GET_* return their value (str, int, float s, user marks (6,) rad, joint range as
+        (min (6,), max (6,)) rad); SET_* return a Status."""
+        try:
+            code = IoctrlCode(code)
+        except ValueError:
+            return self._refuse(f"ioctrl refused: unknown code {code!r}")
+        arm = self.cell.arm
+        if code is IoctrlCode.GET_SOFTWARE_VERSION:
+            return SOFTWARE_VERSION
+        if code is IoctrlCode.GET_ROBOT_TYPE:
+            return arm.name
+        if code is IoctrlCode.GET_JNT_NUMBER:
+            return 6
+        if code is IoctrlCode.GET_CYCLE_TIME:
+            return self.cycle_time
+        if code is IoctrlCode.GET_SYNCHRO_TASK_PRIORITY:
+            return SYNCHRO_TASK_PRIORITY
+        if code is IoctrlCode.GET_JNT_RANGE:
+            return self._lower.copy(), self._upper.copy()
+        if code is IoctrlCode.GET_USER_MARKS:
+            return self._user_marks.copy()
+        if code is IoctrlCode.SET_USER_MARKS:
+            marks = np.asarray(data, dtype=float) if data is not None else np.empty(0)
+            if marks.shape != (6,) or not np.all(np.isfinite(marks)):
+                return self._refuse("ioctrl SET_USER_MARKS refused: needs 6 finite values (rad)")
+            self._user_marks = marks.copy()
+            return Status.OK
+        if code is IoctrlCode.SET_TORQUE_MODE or code is IoctrlCode.SET_POS_VEL_MODE:
+            torque = code is IoctrlCode.SET_TORQUE_MODE
+            if torque != self._torque_mode:
+                self._torque_mode = torque
+                if self._enable is EnableState.ENABLED:
+                    # A bumpless switch: carry on from where the arm is, and into torque mode
+                    # with the torque the drives spend now, until the next set().
+                    fbk = self._fbk
+                    self._command(fbk.pos.tolist(), fbk.vel.tolist() if torque else self._zeros,
+                                  fbk.torque.tolist() if torque else self._zeros)
+                    self._engage()
+            return Status.OK
+        # SET_ABS_JNT_POS, RECOVER_ABS_JNT_POS: a simulated arm never loses its calibration.
+        return self._refuse(f"ioctrl {code.name} refused: not supported by the simulated CS8")
+
+    # ---- LLI: digital I/O by name -------------------------------------------------------------
+
+    def _read_wire(self, wire: str) -> bool:
+        return self.panel.read(wire) if wire in PANEL_WIRES else self.world.read_input(wire)
+
+    def get_din_id(self, name: str) -> IoId:
+        s = self.dio.lookup(name)
+        found = s is not None and s.direction == "input"
+        return IoId(IoType.D_INPUT, name) if found else IoId(IoType.UNDEFINED)
+
+    def get_dout_id(self, name: str) -> IoId:
+        s = self.dio.lookup(name)
+        found = s is not None and s.direction == "output"
+        return IoId(IoType.D_OUTPUT, name) if found else IoId(IoType.UNDEFINED)
+
+    def read_dio(self, io: IoId) -> DioStatus:
+        if io.type not in (IoType.D_INPUT, IoType.D_OUTPUT) or self.dio.lookup(io.name) is None:
+            return DioStatus.UNDEFINED
+        return DioStatus.ONE if self.dio.read(io.name) else DioStatus.ZERO
+
+    def write_dout(self, io: IoId, value: DoutValue) -> Status:
+        s = self.dio.lookup(io.name) if io.type is IoType.D_OUTPUT else None
+        if s is None or s.direction != "output":
+            return self._refuse(f"write_dout refused: {io.name!r} is not a digital output")
+        self.dio.write(io.name, value == DoutValue.ONE)
+        return Status.OK
+
+    # ---- sensors ------------------------------------------------------------------------------
+
+    @property
+    def sensor_names(self) -> list[str]:
+        return list(self._sensors)
+
+    def _sensor(self, name: str):
+        try:
+            return self._sensors[name]
+        except KeyError:
+            raise KeyError(f"no sensor {name!r} (sensors: {', '.join(self._sensors)})") from None
+
+    def sensor(self, name: str) -> np.ndarray:
+        """The present reading of a sensor of the cell (shape and units: sim/sensors.py)."""
+        return self._sensor(name).read()
+
+    def tare(self, name: str) -> None:
+        """Zero a sensor at its present reading."""
+        self._sensor(name).tare()
+
+    # ---- LLI: kinematics (flange in the base_link frame) --------------------------------------
+
+    def forward_kin(self, joints: np.ndarray) -> tuple[np.ndarray, Config]:
+        """LLI_forwardKin: the flange pose (4, 4) in base_link and the configuration of q (6,)."""
+        return self._kin.forward(joints), self._kin.configuration(joints)
+
+    def reverse_kin(self, joints_in: np.ndarray, target: np.ndarray, config: Config,
+                    joint_range: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> tuple[np.ndarray | None, ReversingResult]:
+        """LLI_reverseKin: joints reaching `target` (flange (4, 4) in base_link) in `config`,
+        nearest `joints_in`, within `joint_range` (min (6,), max (6,); default: the cell's)."""
+        lower, upper = joint_range if joint_range is not None else (None, None)
+        return self._kin.reverse(target, joints_in, config, lower, upper)
+
+    # ---- LLI: recorder ------------------------------------------------------------------------
+
+    def rec_init(self) -> Status:
+        from landscape.sim.recorder import Recorder   # the recorder and mcap load on first use
+
+        spec = self.cell.recorder
+        self._recorder = Recorder(spec.path, spec.every_nth, spec.max_seconds, 6,
+                                  cycle_time=self.cycle_time)
+        return Status.OK
+
+    def rec_start(self) -> Status:
+        if self._recorder is None:
+            return self._refuse("rec_start refused: call rec_init first")
+        self._recorder.start()
+        return Status.OK
+
+    def rec_stop(self) -> Status:
+        if self._recorder is None:
+            return self._refuse("rec_stop refused: call rec_init first")
+        self._recorder.stop()
+        return Status.OK
+
+    def rec_store(self) -> Status:
+        if self._recorder is None:
+            return self._refuse("rec_store refused: call rec_init first")
+        try:
+            self.last_record_path = self._recorder.store()
+        except OSError as exc:
+            return self._refuse(f"rec_store failed: {exc}")
+        return Status.OK

@@ -1,0 +1,390 @@
+"""The cycle process: a controller stepped on absolute deadlines, serving its parent between cycles.
+
+`RealTimeClock` (clock.py) starts `child_main` in a process of its own (spawn), so that the
+server's Python threads never hold a GIL the cycle needs (DESIGN.md section 7).
+
+Each cycle: wait for the deadline (sleep, then spin the last `spin` seconds, because a sleep
+alone wakes up tens to hundreds of microseconds late), step the controller (physics, then its
+cyclic function), send what the cyclic function posted, then read and serve the parent's
+requests, in order, for as long as the time budget before the next deadline allows. Calls that
+take long (SLOW_CALLS: storing a recording) run on a thread of their own, the LLI's
+asynchronous task, and the calls after them wait; the cycle never does.
+
+Wire protocol over one duplex multiprocessing Pipe; every item is a tuple whose first element
+is its tag:
+
+  parent -> child   (CALL, call_id, method, args)   an asynchronous LLI call (CONTROLLER_CALLS)
+                                                    or one of the cycle process's own
+                    (MSG, payload)                  for the cyclic function's Mailbox.poll()
+                    (STOP,)                         leave the loop, disable, destroy, exit
+  child -> parent   (READY, info)                   once, after the factory built the controller
+                    (REPLY, call_id, ok, value)     the result, or the exception if not ok
+                    (MSG, payload)                  posted by the cyclic function (Mailbox.post)
+                    (EVENT, text)                   from the controller's event function
+                    (FATAL, traceback_text)         the factory or a cycle raised; child exits
+
+The child exits when told to, on SIGTERM, and when its parent is gone: the pipe reports EOF
+once the parent's end is closed (the kernel closes it when the parent dies), and the parent pid
+is checked as well, so no orphan keeps stepping a robot.
+"""
+from __future__ import annotations
+
+import gc
+import os
+import queue
+import select
+import signal
+import sys
+import threading
+import time
+import traceback
+from collections import deque
+from typing import Any, Callable, Protocol
+
+from landscape.sim.cycle_stats import StatsRing
+
+CALL, MSG, STOP, READY, REPLY, EVENT, FATAL = (
+    "call", "msg", "stop", "ready", "reply", "event", "fatal")
+
+# The asynchronous LLI calls the parent may make (LLI 5.3.1); get/set belong to the cycle.
+CONTROLLER_CALLS = frozenset({
+    "init", "home", "enable", "disable", "state", "ioctrl",
+    "get_din_id", "get_dout_id", "read_dio", "write_dout",
+    "forward_kin", "reverse_kin", "rec_init", "rec_start", "rec_stop", "rec_store",
+})
+# Calls that may take long (they write files): served on the cycle process's asynchronous
+# thread. They must be safe while step() runs: rec_store only reads samples already recorded.
+SLOW_CALLS = frozenset({"rec_store"})
+# Calls the cycle process answers itself. RUN: (func, args) -> func(controller, *args), for
+# what the LLI has no call for (the simulator's panel, its sensors); func must pickle.
+PLUG_EVENT_FUNC, RESET_STATS, SIM_TIME, RUN = (
+    "plug_event_func", "_reset_stats", "_sim_time", "_run")
+
+
+class Steppable(Protocol):
+    """What a clock drives: `step()` advances one cycle of `cycle_time` seconds."""
+
+    cycle_time: float
+
+    def step(self) -> Any: ...
+
+
+def check_cycle_time(cycle_time: float) -> float:
+    """The LLI's rule (3.5.1): a positive multiple of 0.2 ms. Returns it as float, in s."""
+    ticks = round(cycle_time / 0.0002)
+    if ticks < 1 or abs(ticks * 0.0002 - cycle_time) > 1e-9:
+        raise ValueError(f"cycle time {cycle_time!r} s is not a positive multiple of 0.2 ms")
+    return float(cycle_time)
+
+
+class Mailbox:
+    """The cycle's end of the message channel to the parent; nothing here ever blocks.
+
+    `poll()` returns the oldest message the parent sent, or None. `post(msg)` queues a message
+    for the parent; it leaves at the end of this cycle. If the parent stops reading, the oldest
+    queued items are dropped beyond `max_queued` and counted in `dropped`.
+    """
+
+    def __init__(self, max_queued: int = 10_000):
+        self.inbox: deque = deque()
+        self.outbox: deque = deque()
+        self.max_queued = max_queued
+        self.dropped = 0
+
+    def poll(self) -> Any | None:
+        return self.inbox.popleft() if self.inbox else None
+
+    def post(self, msg: Any) -> None:
+        self._queue((MSG, msg))
+
+    def event(self, text: str) -> None:
+        """An LLI event function: forwards the controller's event text to the parent."""
+        self._queue((EVENT, str(text)))
+
+    def _queue(self, item: tuple) -> None:
+        if len(self.outbox) >= self.max_queued:
+            self.outbox.popleft()
+            self.dropped += 1
+        self.outbox.append(item)
+
+
+class CycleLoop:
+    """Calls `step()` every `cycle_time` seconds on an absolute deadline grid.
+
+    After each step it calls `between(next_deadline)` (perf_counter seconds); that returns
+    False to end the loop. A cycle that starts more than one period late is an overrun: the
+    loop skips the deadlines it missed (it does not run cycles back to back to catch up), so
+    simulated time falls behind wall time by what was skipped. A step that always takes longer
+    than the period leaves no pause between cycles (as the LLI's synchronous task would); under
+    SCHED_FIFO the kernel's real-time throttling still leaves other tasks 5 % of that core.
+    Used by the cycle process and, for comparison, by the benchmark's thread baseline.
+    """
+
+    def __init__(self, step: Callable[[], Any], cycle_time: float, stats: StatsRing,
+                 spin: float = 0.0005):
+        self.step = step
+        self.cycle_time = check_cycle_time(cycle_time)
+        self.stats = stats
+        self.spin = min(spin, self.cycle_time / 2)
+
+    def run(self, between: Callable[[float], bool]) -> None:
+        step, period, spin, stats = self.step, self.cycle_time, self.spin, self.stats
+        clock, sleep = time.perf_counter, time.sleep
+        deadline = clock() + period
+        previous = float("nan")
+        while True:
+            remaining = deadline - clock()
+            if remaining > spin:
+                sleep(remaining - spin)
+            while clock() < deadline:
+                pass
+            start = clock()
+            late = start - deadline
+            if late > period:
+                missed = int(late // period)
+                stats.overrun(missed)
+                deadline += missed * period
+            step()
+            stats.record(start - previous, late, clock() - start)
+            previous = start
+            deadline += period
+            if not between(deadline):
+                return
+
+
+class _AsyncTask:
+    """The LLI's asynchronous task, for calls that take long (file I/O): one thread at normal
+    priority, one call at a time. The loop thread only hands calls over and collects results,
+    so a slow call delays no cycle (the short GIL switch interval set by `child_main` bounds
+    how long this thread can keep the loop waiting)."""
+
+    def __init__(self):
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self.busy = False
+        self.result: tuple | None = None   # (call_id, ok, value), set by the thread
+        threading.Thread(target=self._run, name="lli-async", daemon=True).start()
+
+    def submit(self, call_id: int, func: Callable, args: tuple) -> None:
+        self.busy = True
+        self._jobs.put((call_id, func, args))
+
+    def take(self) -> tuple | None:
+        """The finished call's (call_id, ok, value), once; None while running or idle."""
+        result, self.result = self.result, None
+        if result is not None:
+            self.busy = False
+        return result
+
+    def wait(self, timeout: float) -> None:
+        end = time.monotonic() + timeout
+        while self.busy and self.result is None and time.monotonic() < end:
+            time.sleep(0.01)
+
+    def _run(self) -> None:
+        try:  # threads inherit the policy of their creator; this one must not compete
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except (OSError, AttributeError):
+            pass
+        while True:
+            call_id, func, args = self._jobs.get()
+            try:
+                self.result = (call_id, True, func(*args))
+            except Exception as exc:
+                self.result = (call_id, False, exc)
+
+
+class _Server:
+    """The child's side of the pipe, between cycles: sends what the cyclic function posted,
+    reads what the parent sent, and serves calls in order within the time budget."""
+
+    def __init__(self, conn, controller, mailbox: Mailbox, stats: StatsRing, parent_pid: int,
+                 guard: float):
+        self.conn = conn
+        self.fd = conn.fileno()
+        self.controller = controller
+        self.mailbox = mailbox
+        self.stats = stats
+        self.parent_pid = parent_pid
+        self.guard = guard
+        self.calls: deque = deque()   # (call_id, method, args) not served yet
+        self.async_task = _AsyncTask()
+        self.running = True
+        self.cycles = 0
+
+    def between(self, deadline: float) -> bool:
+        self.cycles += 1
+        self._flush()
+        done = self.async_task.take()
+        if done is not None:
+            self._reply(*done)
+        self._read(deadline)
+        self._serve(deadline)
+        if self.cycles % 64 == 0 and os.getppid() != self.parent_pid:
+            self.running = False  # reparented: the parent died without closing the pipe
+        return self.running
+
+    def _read(self, deadline: float) -> None:
+        # At least one item per cycle, so even an overloaded loop still hears STOP.
+        clock, count = time.perf_counter, 0
+        while self.running and self.conn.poll(0):
+            if count and clock() > deadline - self.guard:
+                return
+            try:
+                item = self.conn.recv()
+            except (EOFError, OSError):
+                self.running = False  # the parent closed its end or died
+                return
+            count += 1
+            tag = item[0]
+            if tag == MSG:
+                self.mailbox.inbox.append(item[1])
+            elif tag == CALL:
+                self.calls.append(item[1:])
+            elif tag == STOP:
+                self.running = False
+
+    def _serve(self, deadline: float) -> None:
+        # In order; a slow call goes to the asynchronous task and holds the later ones back.
+        clock, count = time.perf_counter, 0
+        while self.calls and not self.async_task.busy:
+            if count and clock() > deadline - self.guard:
+                return
+            call_id, method, args = self.calls.popleft()
+            count += 1
+            if method in SLOW_CALLS:
+                self.async_task.submit(call_id, getattr(self.controller, method), args)
+                return
+            try:
+                value = self._call(method, args)
+            except Exception as exc:  # the parent re-raises it
+                self._reply(call_id, False, exc)
+            else:
+                self._reply(call_id, True, value)
+
+    def _flush(self) -> None:
+        outbox = self.mailbox.outbox
+        while outbox:
+            # A full pipe (parent not reading) would block send(): keep the rest for later.
+            if not select.select((), (self.fd,), (), 0)[1]:
+                return
+            self._send(outbox.popleft())
+
+    def _send(self, item: tuple) -> None:
+        try:
+            self.conn.send(item)
+        except (BrokenPipeError, ConnectionError, EOFError):
+            self.running = False
+
+    def _call(self, method: str, args: tuple) -> Any:
+        if method in CONTROLLER_CALLS:
+            return getattr(self.controller, method)(*args)
+        if method == PLUG_EVENT_FUNC:
+            (plug,) = args
+            return self.controller.plug_event_func(self.mailbox.event if plug else None)
+        if method == RESET_STATS:
+            return self.stats.reset()
+        if method == SIM_TIME:
+            return getattr(self.controller, "time", None)
+        if method == RUN:
+            func, func_args = args
+            return func(self.controller, *func_args)
+        raise AttributeError(f"{method!r} is not a call the cycle process serves")
+
+    def _reply(self, call_id: int, ok: bool, value: Any) -> None:
+        try:
+            self.conn.send((REPLY, call_id, ok, value))
+        except (BrokenPipeError, ConnectionError, EOFError):
+            self.running = False
+        except Exception as exc:  # the value did not pickle; nothing was written yet
+            error = RuntimeError(f"a {type(value).__name__} did not pickle: {exc!r}")
+            self._send((REPLY, call_id, False, error))
+
+
+def tune_for_latency(rt_priority: int | None = None) -> list[str]:
+    """Best effort, Linux: 1 ns timer slack (sleeps end closer to when asked), and optionally
+    the SCHED_FIFO real-time policy at `rt_priority` (1..99; needs the privilege). Returns what
+    could not be done, for the caller to report."""
+    problems = []
+    try:
+        import ctypes
+        if ctypes.CDLL(None, use_errno=True).prctl(29, 1, 0, 0, 0) != 0:  # PR_SET_TIMERSLACK
+            problems.append("timer slack unchanged")
+    except (OSError, AttributeError):
+        problems.append("timer slack unchanged")
+    if rt_priority is not None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+        except (OSError, AttributeError) as exc:
+            problems.append(f"SCHED_FIFO refused: {exc}")
+    return problems
+
+
+def _shutdown(controller) -> None:
+    """Leave the robot safe: disable, then destroy, whatever state we are in."""
+    for name in ("disable", "destroy"):
+        method = getattr(controller, name, None)
+        if method is not None:
+            try:
+                method()
+            except Exception:
+                traceback.print_exc()
+
+
+def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
+               cycle_time: float | None, parent_pid: int, spin: float, guard: float,
+               rt_priority: int | None) -> None:
+    """Entry point of the cycle process (see the module docstring)."""
+    server: _Server | None = None
+
+    def on_sigterm(*_):
+        if server is None:
+            raise SystemExit(1)  # still building: clean up on the way out
+        server.running = False  # the loop ends after this cycle
+
+    # Ctrl-C in a terminal reaches the whole process group; the parent decides when we stop.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, on_sigterm)
+    controller = None
+    try:
+        mailbox = Mailbox()
+        controller = factory(mailbox)
+        own = getattr(controller, "cycle_time", None)
+        if cycle_time is None:
+            cycle_time = own if own is not None else 0.004
+        elif own is not None and abs(own - cycle_time) > 1e-12:
+            raise ValueError(f"the clock's cycle time {cycle_time} s differs from the "
+                             f"controller's {own} s")
+        loop = CycleLoop(controller.step, cycle_time, stats, spin)
+        server = _Server(conn, controller, mailbox, stats, parent_pid, guard)
+        problems = tune_for_latency(rt_priority)
+        conn.send((READY, {"pid": os.getpid(), "cycle_time": loop.cycle_time,
+                           "tuning_problems": problems}))
+    except BaseException:
+        _fatal(conn, traceback.format_exc())
+        if controller is not None:
+            _shutdown(controller)
+        raise SystemExit(1)
+    # Move everything built so far out of the collector's sight: later collections stay short.
+    gc.collect()
+    gc.freeze()
+    # The asynchronous thread must hand the GIL back quickly when the loop wakes up.
+    sys.setswitchinterval(0.0001)
+    code = 0
+    try:
+        loop.run(server.between)
+    except BaseException:
+        _fatal(conn, traceback.format_exc())
+        code = 1
+    finally:
+        server.async_task.wait(30.0)  # let a file being stored be finished
+        _shutdown(controller)
+        server._flush()
+        conn.close()
+    raise SystemExit(code)
+
+
+def _fatal(conn, text: str) -> None:
+    try:
+        conn.send((FATAL, text))
+    except Exception:
+        pass

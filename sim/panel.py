@@ -1,0 +1,48 @@
+"""What a person does in the cell: the e-stop button, the door, parts moved by hand.
+
+These inputs are not outputs anyone could write; tests and the dashboard operate them here
+(`BulletController.panel`). The e-stop acts at once: `on_estop(pressed)` lets the controller
+cut the drives in the same call, not a cycle later. The door is only an input (door_closed):
+what an open door means is the supervisor's policy.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+from landscape.sim.world import World
+
+
+class Panel:
+    def __init__(self, world: World, on_estop: Callable[[bool], None]):
+        self._world = world
+        self._on_estop = on_estop
+        self.estop_pressed = False
+        self.door_closed = True
+
+    def press_estop(self) -> None:
+        if not self.estop_pressed:
+            self.estop_pressed = True
+            self._on_estop(True)
+
+    def release_estop(self) -> None:
+        if self.estop_pressed:
+            self.estop_pressed = False
+            self._on_estop(False)
+
+    def open_door(self) -> None:
+        self.door_closed = False
+
+    def close_door(self) -> None:
+        self.door_closed = True
+
+    def read(self, wire: str) -> bool:
+        """The panel's wires: "estop" (1 while pressed), "door_closed"."""
+        return self.estop_pressed if wire == "estop" else self.door_closed
+
+    def place_part(self, name: str, xyz, rpy=(0.0, 0.0, 0.0)) -> None:
+        """Put part `name` down at xyz (m), fixed-axis angles rpy (rad)."""
+        self._world.place_part(name, xyz, rpy)
+
+    def remove_part(self, name: str) -> None:
+        """Take part `name` out of the cell (down on the floor, out of reach)."""
+        self._world.remove_part(name)

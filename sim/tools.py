@@ -1,0 +1,341 @@
+"""The tools of the cell as pybullet bodies, and their mechanics: a parallel gripper and a cup.
+
+A tool's frame is its mounting plate (z along the tool axis, away from the flange; the tip is
+`length` along z). Each tool is a URDF (simple shapes) loaded into the world's physics client.
+Holding a part is a fixed constraint at the part's present pose relative to the tool, with the
+part's collisions against the tool switched off: a supervisory-control simulator, not a grasp
+study. Only the mounted tool acts on its outputs (air and signals pass through the changer).
+
+Frames are (position (3,), quaternion xyzw (4,)) pairs in the world, as pybullet uses them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as pb
+
+from landscape.sim.cell import ToolSpec
+
+_PLATE_T = 0.015          # m, plate thickness
+_GRIPPER_BODY = 0.06      # m, gripper housing height below the plate
+_FINGER = (0.01, 0.02)    # m, finger thickness (along the stroke) and width
+_FINGER_MASS = 0.1        # kg, each
+_FINGER_FORCE = 200.0     # N, finger drive
+_ARRIVED = 5e-4           # m, a finger this close to its target has arrived
+_SUCTION_REACH = 0.002    # m, a part this close to the cup face is sucked on
+_HOLD_FORCE = 500.0       # N, limit of the holding constraints
+
+
+@dataclass(frozen=True)
+class Part:
+    """A part body: its name, pybullet body id and box size (full extents, m)."""
+
+    name: str
+    body: int
+    size: tuple[float, float, float]
+
+
+# ---- URDF -------------------------------------------------------------------------------------
+
+def _box(size, xyz, rgba) -> str:
+    geo = f'<geometry><box size="{size[0]} {size[1]} {size[2]}"/></geometry>'
+    org = f'<origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/>'
+    return (f'<visual>{org}{geo}<material name="m"><color rgba="{rgba}"/></material></visual>'
+            f'<collision>{org}{geo}</collision>')
+
+
+def _cyl(radius, length, z, rgba) -> str:
+    geo = f'<geometry><cylinder radius="{radius}" length="{length}"/></geometry>'
+    org = f'<origin xyz="0 0 {z}"/>'
+    return (f'<visual>{org}{geo}<material name="m"><color rgba="{rgba}"/></material></visual>'
+            f'<collision>{org}{geo}</collision>')
+
+
+def _inertial(mass, xyz, r) -> str:
+    i = mass * r * r / 2.0   # a rough, well-conditioned inertia: the tool is not a study object
+    return (f'<inertial><origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/><mass value="{mass}"/>'
+            f'<inertia ixx="{i}" iyy="{i}" izz="{i}" ixy="0" ixz="0" iyz="0"/></inertial>')
+
+
+_GREY, _DARK, _BLACK = "0.7 0.7 0.72 1", "0.25 0.25 0.28 1", "0.1 0.1 0.1 1"
+
+
+def tool_urdf(spec: ToolSpec) -> str:
+    """The tool as URDF; its root link `plate` is the tool frame."""
+    if spec.kind == "parallel_gripper":
+        return _gripper_urdf(spec)
+    return _cup_urdf(spec)
+
+
+def _gripper_urdf(s: ToolSpec) -> str:
+    body_end = _PLATE_T + _GRIPPER_BODY
+    if s.length <= body_end + 0.01:
+        raise ValueError(f"tool {s.name!r}: a gripper needs length > {body_end + 0.01} m")
+    finger_len = s.length - body_end
+    width = s.stroke + 2 * _FINGER[0] + 0.02
+    plate = (_cyl(0.045, _PLATE_T, _PLATE_T / 2, _GREY)
+             + _box((width, 0.05, _GRIPPER_BODY), (0, 0, _PLATE_T + _GRIPPER_BODY / 2), _DARK)
+             + _inertial(max(s.mass - 2 * _FINGER_MASS, 0.05), (0, 0, body_end / 2), 0.05))
+    parts = [f'<?xml version="1.0"?>\n<robot name="{s.name}">\n<link name="plate">{plate}</link>\n']
+    for side, sign in (("left", -1), ("right", 1)):
+        # Joint value d = half the finger gap: 0 closed, stroke / 2 open.
+        x = sign * _FINGER[0] / 2
+        finger = (_box((_FINGER[0], _FINGER[1], finger_len), (x, 0, 0), _BLACK)
+                  + _inertial(_FINGER_MASS, (x, 0, 0), 0.01))
+        parts.append(
+            f'<link name="finger_{side}">{finger}</link>\n'
+            f'<joint name="finger_{side}" type="prismatic"><parent link="plate"/>'
+            f'<child link="finger_{side}"/><origin xyz="0 0 {body_end + finger_len / 2}"/>'
+            f'<axis xyz="{sign} 0 0"/><limit lower="0" upper="{s.stroke / 2}" '
+            f'effort="{_FINGER_FORCE}" velocity="{s.finger_speed}"/></joint>\n')
+    parts.append("</robot>\n")
+    return "".join(parts)
+
+
+def _cup_urdf(s: ToolSpec) -> str:
+    cup_h = 0.02
+    stem = s.length - _PLATE_T - cup_h
+    if stem <= 0:
+        raise ValueError(f"tool {s.name!r}: a vacuum cup needs length > {_PLATE_T + cup_h} m")
+    plate = (_cyl(0.04, _PLATE_T, _PLATE_T / 2, _GREY)
+             + _cyl(0.012, stem, _PLATE_T + stem / 2, _DARK)
+             + _cyl(s.cup_radius, cup_h, s.length - cup_h / 2, _BLACK)
+             + _inertial(s.mass, (0, 0, s.length / 3), 0.04))
+    return (f'<?xml version="1.0"?>\n<robot name="{s.name}">\n<link name="plate">{plate}</link>\n'
+            '</robot>\n')
+
+
+# ---- frames -----------------------------------------------------------------------------------
+
+def rotation(orn) -> np.ndarray:
+    """3x3 rotation matrix of a quaternion xyzw."""
+    return np.array(pb.getMatrixFromQuaternion(orn)).reshape(3, 3)
+
+
+def set_sleeping(bc, body: int, allowed: bool) -> None:
+    """Let a resting body sleep (the solver skips it: parts on the table and tools in the rack
+    cost nothing), or keep it awake and wake it (a mounted tool, a held part)."""
+    if allowed:
+        bc.changeDynamics(body, -1, activationState=pb.ACTIVATION_STATE_ENABLE_SLEEPING)
+    else:
+        bc.changeDynamics(body, -1, activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING)
+        bc.changeDynamics(body, -1, activationState=pb.ACTIVATION_STATE_WAKE_UP)
+
+
+def angle_between(orn_a, orn_b) -> float:
+    """Angle (rad) of the rotation taking frame a to frame b."""
+    r = rotation(orn_a).T @ rotation(orn_b)
+    return float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+# ---- mechanics --------------------------------------------------------------------------------
+
+class Tool:
+    """A tool body in a physics client `bc` (a BulletClient): where it is, holding parts."""
+
+    def __init__(self, bc, spec: ToolSpec, body: int, parts: dict[str, Part]):
+        self.bc, self.spec, self.body, self.parts = bc, spec, body, parts
+        self.name = spec.name
+        self.links = [-1] + list(range(bc.getNumJoints(body)))
+        info = bc.getDynamicsInfo(body, -1)
+        # pybullet places bodies by their centre of mass; these convert to the plate frame.
+        self.com_in_plate = (info[3], info[4])
+        self.plate_in_com = bc.invertTransform(info[3], info[4])
+        self.held: int | None = None     # body id of the part held
+        self._hold: int | None = None    # its constraint
+        for link in self.links:
+            bc.changeDynamics(body, link, contactStiffness=spec.contact_stiffness,
+                              contactDamping=spec.contact_damping)
+
+    def plate_pose(self):
+        pos, orn = self.bc.getBasePositionAndOrientation(self.body)
+        return self.bc.multiplyTransforms(pos, orn, *self.plate_in_com)
+
+    def tip_pose(self):
+        return self.bc.multiplyTransforms(*self.plate_pose(), (0, 0, self.spec.length),
+                                          (0, 0, 0, 1))
+
+    def place(self, pos, orn) -> None:
+        """Put the plate frame at (pos, orn), at rest."""
+        self.bc.resetBasePositionAndOrientation(
+            self.body, *self.bc.multiplyTransforms(pos, orn, *self.com_in_plate))
+        self.bc.resetBaseVelocity(self.body, (0, 0, 0), (0, 0, 0))
+
+    def to_tool(self, point) -> np.ndarray:
+        """A world point in the plate frame."""
+        pos, orn = self.plate_pose()
+        return rotation(orn).T @ (np.asarray(point) - pos)
+
+    # -- holding parts
+    def grab(self, part: int) -> None:
+        """Hold `part` where it is now relative to the tool."""
+        if self.held is not None:
+            return
+        tpos, torn = self.bc.getBasePositionAndOrientation(self.body)
+        ppos, porn = self.bc.getBasePositionAndOrientation(part)
+        rel = self.bc.multiplyTransforms(*self.bc.invertTransform(tpos, torn), ppos, porn)
+        self._hold = self.bc.createConstraint(self.body, -1, part, -1, pb.JOINT_FIXED, (0, 0, 0),
+                                              rel[0], (0, 0, 0), rel[1], (0, 0, 0, 1))
+        self.bc.changeConstraint(self._hold, maxForce=_HOLD_FORCE)
+        self._collide(part, False)
+        set_sleeping(self.bc, part, False)
+        self.held = part
+
+    def drop(self, *, restore_collisions: bool = True) -> None:
+        if self.held is None:
+            return
+        self.bc.removeConstraint(self._hold)
+        if restore_collisions:
+            self._collide(self.held, True)
+        set_sleeping(self.bc, self.held, True)
+        self.held, self._hold = None, None
+
+    def _collide(self, part: int, enable: bool) -> None:
+        for link in self.links:
+            self.bc.setCollisionFilterPair(self.body, part, link, -1, int(enable))
+
+    # -- per tool kind
+    def actuate(self, wire: str, value: bool) -> None:
+        """An output of the cell changed (only called while mounted)."""
+
+    def unmounted(self) -> None:
+        """The changer let go: air and signals are cut."""
+
+    def update(self) -> None:
+        """Once per cycle while mounted; cheap when nothing happens."""
+
+    def input(self, wire: str) -> bool:
+        return False
+
+
+class ParallelGripper(Tool):
+    """Two fingers closing symmetrically along the tool x axis (output gripper_close).
+
+    Closing, the fingers take a part whose centre lies between them (centring it across the
+    fingers) and stop on it; `gripper_closed` reads 1 once the fingers have arrived, on the
+    part or fully closed. Opening drops the part at once.
+    """
+
+    def __init__(self, bc, spec, body, parts):
+        super().__init__(bc, spec, body, parts)
+        self._fingers = [0, 1]
+        self._target = spec.stroke / 2
+        self._closing = False
+        self._moving = False
+        self._closed = False
+        self._candidate: int | None = None
+        self._released: int | None = None
+        self._drive(self._target)
+        for j in self._fingers:
+            bc.resetJointState(body, j, self._target)
+
+    def _drive(self, d: float) -> None:
+        for j in self._fingers:
+            self.bc.setJointMotorControl2(self.body, j, pb.POSITION_CONTROL, targetPosition=d,
+                                          force=_FINGER_FORCE, maxVelocity=self.spec.finger_speed)
+
+    def _between_fingers(self) -> tuple[int | None, float]:
+        """The part between the fingers, and its width across them (m)."""
+        gap = 2 * self.bc.getJointState(self.body, 0)[0]
+        top = _PLATE_T + _GRIPPER_BODY
+        _, torn = self.plate_pose()
+        for part in self.parts.values():
+            ppos, porn = self.bc.getBasePositionAndOrientation(part.body)
+            c = self.to_tool(ppos)
+            if abs(c[0]) < gap / 2 and abs(c[1]) < _FINGER[1] and top < c[2] < self.spec.length:
+                across = rotation(torn)[:, 0] @ rotation(porn)
+                width = float(np.abs(across) @ np.asarray(part.size))
+                if width < gap:
+                    return part.body, width
+        return None, 0.0
+
+    def actuate(self, wire, value):
+        if wire != "gripper_close" or value == self._closing:
+            return
+        self._closing, self._closed, self._moving = value, False, True
+        if value:
+            self._candidate, width = self._between_fingers()
+            if self._released is not None and self._released != self._candidate:
+                self._collide(self._released, True)     # closed again before fully open
+            self._released = None
+            if self._candidate is not None:
+                self._collide(self._candidate, False)
+            self._target = width / 2
+        else:
+            # Collisions with the part come back once the fingers are open again.
+            self._released = self.held if self.held is not None else self._candidate
+            self._candidate = None
+            self.drop(restore_collisions=False)
+            self._target = self.spec.stroke / 2
+        self._drive(self._target)
+
+    def update(self):
+        if not self._moving:
+            return
+        d = [s[0] for s in self.bc.getJointStates(self.body, self._fingers)]
+        if max(abs(x - self._target) for x in d) > _ARRIVED:
+            return
+        self._moving = False
+        if self._closing:
+            self._closed = True
+            if self._candidate is not None:
+                self._centre(self._candidate)
+                self.grab(self._candidate)
+                self._candidate = None
+        elif self._released is not None:
+            self._collide(self._released, True)
+            self._released = None
+
+    def _centre(self, part: int) -> None:
+        """Slide the part across the fingers onto the tool axis, as closing fingers do."""
+        ppos, porn = self.bc.getBasePositionAndOrientation(part)
+        _, torn = self.plate_pose()
+        x_axis = rotation(torn)[:, 0]
+        shift = -float(self.to_tool(ppos)[0]) * x_axis
+        self.bc.resetBasePositionAndOrientation(part, np.asarray(ppos) + shift, porn)
+
+    def input(self, wire):
+        return wire == "gripper_closed" and self._closed
+
+
+class VacuumCup(Tool):
+    """A suction cup at the tip (output vacuum_on): with suction on, a part touching the cup
+    face is held; `vacuum_ok` reads 1 while a part is held. Suction off drops it."""
+
+    def __init__(self, bc, spec, body, parts):
+        super().__init__(bc, spec, body, parts)
+        self._on = False
+
+    def actuate(self, wire, value):
+        if wire != "vacuum_on":
+            return
+        self._on = value
+        if not value:
+            self.drop()
+
+    def unmounted(self):
+        self.actuate("vacuum_on", False)
+
+    def update(self):
+        if not self._on or self.held is not None:
+            return
+        tip, _ = self.tip_pose()
+        for part in self.parts.values():
+            body = part.body
+            ppos, _ = self.bc.getBasePositionAndOrientation(body)
+            # Cheap pre-filter: only parts whose centre is near the cup.
+            if np.sum((np.asarray(ppos) - tip) ** 2) > 0.04:
+                continue
+            for point in self.bc.getClosestPoints(self.body, body, _SUCTION_REACH, -1, -1):
+                c = self.to_tool(point[5])
+                if (c[2] > self.spec.length - _SUCTION_REACH
+                        and np.hypot(c[0], c[1]) <= self.spec.cup_radius + _SUCTION_REACH):
+                    self.grab(body)
+                    return
+
+    def input(self, wire):
+        return wire == "vacuum_ok" and self._on and self.held is not None
+
+
+TOOL_CLASSES = {"parallel_gripper": ParallelGripper, "vacuum_cup": VacuumCup}
