@@ -8,6 +8,7 @@ import threading
 
 from landscape.server.app import serve
 from landscape.server.config import DEFAULT_ADDRESS, DEFAULT_PORT, ServerConfig
+from landscape.server.controller_link import CLOCKS
 
 
 def parse_args(argv=None) -> ServerConfig:
@@ -16,8 +17,16 @@ def parse_args(argv=None) -> ServerConfig:
                         help="address to listen on (default %(default)s: loopback only)")
     parser.add_argument("--port", type=int, default=DEFAULT_PORT,
                         help="port to listen on, 0 for any free one (default %(default)s)")
+    parser.add_argument("--cell", default=None,
+                        help="cell file (TOML) describing arm, world and I/O (default: built-in)")
+    parser.add_argument("--clock", choices=CLOCKS, default="realtime",
+                        help="realtime: 4 ms cycle process; lockstep: as fast as possible")
+    parser.add_argument("--paths", default="var/paths.sqlite3",
+                        help="SQLite file keeping the named paths across restarts "
+                             "(default %(default)s)")
     args = parser.parse_args(argv)
-    return ServerConfig(address=args.address, port=args.port)
+    return ServerConfig(address=args.address, port=args.port, cell=args.cell, clock=args.clock,
+                        paths_file=args.paths)
 
 
 def main(argv=None) -> None:

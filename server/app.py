@@ -11,9 +11,17 @@ from grpc_reflection.v1alpha import reflection
 
 from landscape.server import services
 from landscape.server.config import ServerConfig
+from landscape.server.controller_link import open_link
+from landscape.server.device import Device
+from landscape.server.errors import ErrorMappingInterceptor
+from landscape.server.events import EventBus
+from landscape.server.paths import PathStore
 from landscape.server.reflection_pool import MethodResolvingPool
 from landscape.server.servicers.device import DeviceServicer
-from landscape.server.servicers.others import DigitalIOServicer, EventServicer, SessionServicer
+from landscape.server.servicers.digital_io import DigitalIOServicer
+from landscape.server.servicers.events import EventServicer
+from landscape.server.servicers.session import SessionServicer
+from landscape.sim.cell import load_cell
 
 log = logging.getLogger(__name__)
 
@@ -24,6 +32,9 @@ class RunningServer:
     health: health.HealthServicer
     port: int
     address: str
+    bus: EventBus
+    device: Device
+    link: object
 
     @property
     def target(self) -> str:
@@ -31,21 +42,36 @@ class RunningServer:
 
     def stop(self, grace: float | None = 1.0) -> None:
         self.health.enter_graceful_shutdown()
+        self.device.close()  # sessions end: the disconnect handler leaves the arm safe
+        self.bus.close()     # ends the event streams cleanly within the grace period
         self.server.stop(grace).wait()
+        self.link.stop()
 
     def wait(self) -> None:
         self.server.wait_for_termination()
 
 
 def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
-    """Start a device server; returns once it listens (config.port 0 picks a free port)."""
+    """Start a device server with its controller; returns once it listens (config.port 0 picks
+    a free port) and, if config.start_device, once the controller is initialised."""
+    bus = EventBus()
+    cell = load_cell(config.cell)
+    device: Device | None = None
+    link = open_link(config.clock, config.cell, lambda msg: device and device.on_cycle_message(msg),
+                     config.lockstep_pace)
+    outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
+    device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs)
+    if config.start_device:
+        device.start()
+
     server = grpc.server(
         futures.ThreadPoolExecutor(max_workers=config.max_workers, thread_name_prefix="rpc"),
+        interceptors=[ErrorMappingInterceptor()],
         options=[("grpc.max_receive_message_length", config.max_message_bytes),
                  ("grpc.so_reuseport", 0)],
     )
-    servicers = {services.DEVICE: DeviceServicer(), services.DIGITAL_IO: DigitalIOServicer(),
-                 services.EVENTS: EventServicer(), services.SESSIONS: SessionServicer()}
+    servicers = {services.DEVICE: DeviceServicer(device), services.DIGITAL_IO: DigitalIOServicer(device),
+                 services.EVENTS: EventServicer(bus), services.SESSIONS: SessionServicer(device)}
     for spec, servicer in servicers.items():
         spec.add_to_server(servicer, server)
 
@@ -63,4 +89,4 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         raise OSError(f"cannot listen on {config.address}:{config.port}")
     server.start()
     log.info("device server listening on %s:%d", config.address, port)
-    return RunningServer(server, health_servicer, port, config.address)
+    return RunningServer(server, health_servicer, port, config.address, bus, device, link)

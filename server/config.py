@@ -16,3 +16,13 @@ class ServerConfig:
     # Largest request accepted; larger ones fail with RESOURCE_EXHAUSTED. Paths stream in
     # chunks, so no single message needs to be big.
     max_message_bytes: int = 4 * 1024 * 1024
+    # The cell file (None: the default cell) and the controller's clock: "realtime" (its own
+    # cycle process) or "lockstep" (a thread here, as fast as it goes; for tests).
+    cell: str | None = None
+    clock: str = "realtime"
+    # Lock-step only: at most this many simulated seconds per wall second (None: flat out).
+    lockstep_pace: float | None = None
+    # SQLite file of the named paths (None: kept in memory only, lost at exit).
+    paths_file: str | None = None
+    # Initialise the controller at start-up (False leaves the device Idle, for tests).
+    start_device: bool = True

@@ -4,13 +4,12 @@ from __future__ import annotations
 import grpc
 import pytest
 
-from landscape.server.app import serve
-from landscape.server.config import ServerConfig
+from support import start_server
 
 
 @pytest.fixture
 def server():
-    running = serve(ServerConfig(port=0))
+    running = start_server()
     yield running
     running.stop(grace=None)
 

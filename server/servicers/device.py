@@ -1,23 +1,209 @@
-"""DeviceService: the LandScape server IDL (seed section 3). Thin: convert, call the device, wrap."""
+"""DeviceService: the LandScape server IDL (seed section 3). Thin: convert, call the device, wrap.
+
+Every RPC is guarded by the state table (guard.py); the ones not defined here answer
+UNIMPLEMENTED after that check.
+"""
 from __future__ import annotations
 
-from landscape.server import services
-from landscape.server.servicers.unimplemented import complete
-from landscape.sim.arm import arm_model, urdf
-from landscape.v1 import control_pb2, types_pb2
+from landscape.server import convert, services
+from landscape.server.device import Device
+from landscape.server.servicers.guard import guarded
+from landscape.sim.arm import urdf
+from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
 
+@guarded(services.DEVICE)
 class DeviceServicer(services.DEVICE.servicer_base):
-    def __init__(self, arm=None):
-        self._arm = arm or arm_model()
+    def __init__(self, device: Device):
+        self.device = device
+
+    # ---- 3.1 ----
+    def Lock(self, request, context):
+        return control_pb2.LockResponse(ret_val=convert.ok(), lease=self.device.lock(request.session_id))
+
+    def Release(self, request, context):
+        self.device.release()
+        return control_pb2.ReleaseResponse(ret_val=convert.ok())
+
+    def Activate(self, request, context):
+        self.device.activate()
+        return control_pb2.ActivateResponse(ret_val=convert.ok())
+
+    def Deactivate(self, request, context):
+        self.device.deactivate()
+        return control_pb2.DeactivateResponse(ret_val=convert.ok())
+
+    # ---- 3.2 ----
+    def SetSpeed(self, request, context):
+        units = self.device.settings.units
+        change = {
+            types_pb2.SPEED_TYPE_PERCENT_SPEED: lambda s: s.with_speed_percent(request.speed),
+            types_pb2.SPEED_TYPE_LINEAR_SPEED:
+                lambda s: s.with_linear_speed(float(units.length_to_si(request.speed))),
+            types_pb2.SPEED_TYPE_ANGULAR_SPEED:
+                lambda s: s.with_angular_speed(float(units.angle_to_si(request.speed))),
+        }
+        self.device.update_settings(convert.enum_value(change, request.attribute, "attribute"))
+        return settings_pb2.SetSpeedResponse(ret_val=convert.ok())
+
+    def SetAcceleration(self, request, context):
+        units = self.device.settings.units
+        change = {
+            types_pb2.ACCEL_TYPE_PERCENT_ACCEL: lambda s: s.with_accel_percent(request.accel),
+            types_pb2.ACCEL_TYPE_LINEAR_ACCEL:
+                lambda s: s.with_linear_accel(float(units.length_to_si(request.accel))),
+            types_pb2.ACCEL_TYPE_ANGULAR_ACCEL:
+                lambda s: s.with_angular_accel(float(units.angle_to_si(request.accel))),
+        }
+        self.device.update_settings(convert.enum_value(change, request.attribute, "attribute"))
+        return settings_pb2.SetAccelerationResponse(ret_val=convert.ok())
+
+    def SetToolOffset(self, request, context):
+        offset = convert.pose_to_matrix(request.offset, self.device.settings.units)
+        self.device.update_settings(lambda s: s.with_tool_offset(offset))
+        return settings_pb2.SetToolOffsetResponse(ret_val=convert.ok())
+
+    def SetWorldCartesianFrame(self, request, context):
+        frame = convert.pose_to_matrix(request.frame, self.device.settings.units)
+        self.device.update_settings(lambda s: s.with_world_frame(frame))
+        return settings_pb2.SetWorldCartesianFrameResponse(ret_val=convert.ok())
+
+    def SetUnits(self, request, context):
+        units = convert.units_from_pb(request.linear_units, request.angular_units)
+        self.device.update_settings(lambda s: s.with_units(units))
+        return settings_pb2.SetUnitsResponse(ret_val=convert.ok())
+
+    # ---- 3.3 ----
+    def GetUnits(self, request, context):
+        units = self.device.settings.units
+        return settings_pb2.GetUnitsResponse(ret_val=convert.ok(),
+                                             linear_units=convert.LINEAR_PB[units.linear],
+                                             angular_units=convert.ANGULAR_PB[units.angular])
+
+    def GetVelocities(self, request, context):
+        s = self.device.settings
+        return settings_pb2.GetVelocitiesResponse(
+            ret_val=convert.ok(), percent_velocity=s.speed_percent,
+            world_linear_velocity=float(s.units.length_from_si(s.linear_speed)),
+            world_angular_velocity=float(s.units.angle_from_si(s.angular_speed)),
+            joint_velocities=s.units.angle_from_si(s.joint_velocities).tolist())
+
+    def GetAccelerations(self, request, context):
+        s = self.device.settings
+        return settings_pb2.GetAccelerationsResponse(
+            ret_val=convert.ok(), percent_accel=s.accel_percent,
+            world_linear_accel=float(s.units.length_from_si(s.linear_accel)),
+            world_angular_accel=float(s.units.angle_from_si(s.angular_accel)),
+            joint_accels=s.units.angle_from_si(s.joint_accelerations).tolist())
+
+    def GetMaxVelocities(self, request, context):
+        arm, units = self.device.arm, self.device.settings.units
+        return settings_pb2.GetMaxVelocitiesResponse(
+            ret_val=convert.ok(),
+            max_world_linear_velocity=float(units.length_from_si(arm.max_linear_velocity)),
+            max_world_angular_velocity=float(units.angle_from_si(arm.max_angular_velocity)),
+            max_joint_velocities=units.angle_from_si(arm.max_velocity).tolist())
+
+    def GetMaxAccelerations(self, request, context):
+        arm, units = self.device.arm, self.device.settings.units
+        return settings_pb2.GetMaxAccelerationsResponse(
+            ret_val=convert.ok(),
+            max_world_linear_accel=float(units.length_from_si(arm.max_linear_acceleration)),
+            max_world_angular_accel=float(units.angle_from_si(arm.max_angular_acceleration)),
+            max_joint_accels=units.angle_from_si(arm.max_acceleration).tolist())
+
+    def GetToolOffsets(self, request, context):
+        s = self.device.settings
+        return settings_pb2.GetToolOffsetsResponse(
+            ret_val=convert.ok(), offset=convert.matrix_to_pose(s.tool_offset, s.units))
+
+    def GetRobotPosition(self, request, context):
+        joints = self.device.feedback().position
+        units = self.device.settings.units
+        return settings_pb2.GetRobotPositionResponse(
+            ret_val=convert.ok(), joint_position=units.angle_from_si(joints).tolist(),
+            world_position=convert.matrix_to_pose(self.device.tool_in_world(joints), units))
+
+    def GetMotionControlState(self, request, context):
+        motion, mode = self.device.motion_control_state()
+        return settings_pb2.GetMotionControlStateResponse(
+            ret_val=convert.ok(), motion_control_state=motion, control_mode=mode)
+
+    # ---- 3.4 single motions ----
+    def MoveAbsolute(self, request, context):
+        return motion_pb2.MoveAbsoluteResponse(ret_val=self._move("MoveAbsolute", request, False))
+
+    def MoveRelative(self, request, context):
+        return motion_pb2.MoveRelativeResponse(ret_val=self._move("MoveRelative", request, True))
+
+    def _move(self, command: str, request, relative: bool) -> types_pb2.RetVal:
+        frame = convert.enum_value(convert.FRAMES, request.frame, "frame")
+        values = convert.move_values(frame, request.values, self.device.settings.units)
+        command_id = self.device.move(command, request.point_name, frame, values, relative,
+                                      convert.motion_type(request), convert.optional_speed(request))
+        return convert.started(command_id)
+
+    def MoveArc(self, request, context):
+        units = self.device.settings.units
+        frame = convert.enum_value(convert.FRAMES, request.frame, "frame")
+        command_id = self.device.move_arc(
+            request.point_name, frame, convert.move_values(frame, request.arc_value, units),
+            convert.move_values(frame, request.goal_value, units),
+            convert.enum_value(convert.OFFSETS, request.offset_type, "offset_type"),
+            convert.optional_speed(request))
+        return motion_pb2.MoveArcResponse(ret_val=convert.started(command_id))
+
+    # ---- 3.5 paths ----
+    def PathLoad(self, request_iterator, context):
+        header, frame, specs = convert.path_load_stream(request_iterator, self.device.settings.units)
+        loaded, length = self.device.path_load(
+            header.path_name, frame, convert.enum_value(convert.STRAIGHT, header.motion_type,
+                                                        "motion_type (JOINT or STRAIGHT)"),
+            convert.enum_value(convert.OFFSETS, header.offset_type, "offset_type"), specs,
+            header.number_of_points or None)
+        return motion_pb2.PathLoadResponse(ret_val=convert.ok(), points_loaded=loaded,
+                                           path_length=length)
+
+    def PathClearPath(self, request, context):
+        self.device.path_clear(request.path_name)
+        return motion_pb2.PathClearPathResponse(ret_val=convert.ok())
+
+    def PathMove(self, request, context):
+        cycles = request.number_of_cycles if request.HasField("number_of_cycles") else 1
+        return motion_pb2.PathMoveResponse(
+            ret_val=convert.started(self.device.path_move(request.path_name, cycles)))
+
+    # ---- 3.6 interruptions ----
+    def StopMotion(self, request, context):
+        self.device.stop_motion()
+        return motion_pb2.StopMotionResponse(ret_val=convert.ok())
+
+    def ResumeMotion(self, request, context):
+        self.device.resume_motion()
+        return motion_pb2.ResumeMotionResponse(ret_val=convert.ok())
+
+    def AbortMotion(self, request, context):
+        self.device.abort_motion()
+        return motion_pb2.AbortMotionResponse(ret_val=convert.ok())
+
+    def GetTagId(self, request, context):
+        path_name, tag = self.device.last_tag
+        return settings_pb2.GetTagIdResponse(ret_val=convert.ok(), path_name=path_name, tag_id=tag)
+
+    # ---- extensions ----
+    def Reset(self, request, context):
+        state = self.device.reset()
+        return control_pb2.ResetResponse(ret_val=convert.ok(), state=convert.DEVICE_STATE_PB[state])
+
+    def GetDeviceState(self, request, context):
+        s = self.device.status()
+        return control_pb2.GetDeviceStateResponse(
+            ret_val=convert.ok(), state=convert.DEVICE_STATE_PB[s.state], locked=s.locked,
+            lock_holder=s.lock_holder, error=s.error, estop=s.estop,
+            manual_control=s.manual_control, command_id=s.command_id)
 
     def GetRobotDescription(self, request, context):
+        arm = self.device.arm
         return control_pb2.GetRobotDescriptionResponse(
-            ret_val=types_pb2.RetVal(ret_code=types_pb2.RETURN_CODE_CMD_EXEC_OK),
-            robot_type=self._arm.name,
-            urdf=urdf(self._arm),
-            joint_names=[f"joint_{i}" for i in range(1, 7)],
-        )
-
-
-complete(DeviceServicer, services.DEVICE)
+            ret_val=convert.ok(), robot_type=arm.name, urdf=urdf(arm),
+            joint_names=[f"joint_{i}" for i in range(1, 7)])

@@ -24,8 +24,12 @@ def target():
     proc = subprocess.Popen([sys.executable, "-m", "landscape.server", "--port", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
-        line = proc.stdout.readline()
-        assert "listening on" in line, line
+        # pybullet prints its own banner on stdout first; wait for ours.
+        for line in proc.stdout:
+            if "listening on" in line:
+                break
+        else:
+            raise AssertionError("the server exited without listening")
         yield line.rsplit(" ", 1)[-1].strip()
     finally:
         proc.terminate()

@@ -7,7 +7,8 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection_pb2, reflection_pb2_grpc
 
 from landscape.server import services
-from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, types_pb2)
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, end_effector_pb2, motion_pb2,
+                          types_pb2)
 
 
 def test_health_reports_serving_for_the_server_and_each_service(channel):
@@ -29,9 +30,9 @@ def test_reflection_lists_every_service(channel):
 def test_an_rpc_not_built_yet_is_unimplemented_and_names_the_command(channel):
     stub = device_service_pb2_grpc.DeviceServiceStub(channel)
     with pytest.raises(grpc.RpcError) as err:
-        stub.MoveArc(motion_pb2.MoveArcRequest(point_name="p"), timeout=5)
+        stub.GetEndEffectorState(end_effector_pb2.GetEndEffectorStateRequest(), timeout=5)
     assert err.value.code() == grpc.StatusCode.UNIMPLEMENTED
-    assert "landscape.v1.DeviceService.MoveArc" in err.value.details()
+    assert "landscape.v1.DeviceService.GetEndEffectorState" in err.value.details()
 
 
 def test_robot_description_is_the_arm_urdf(channel):

@@ -1,0 +1,132 @@
+"""All proto <-> domain conversion, units included: the only place user units meet SI.
+
+Servicers call these; the device never sees a proto message. Requests are checked here for
+what only the wire can get wrong (unset enums, wrong array lengths); value ranges are the
+device's business.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from landscape.server.errors import CommandError, ParamError
+from landscape.server.path_planning import PointSpec, at_point
+from landscape.server.targets import Frame
+from landscape.server.states import State
+from landscape.server.units import AngularUnit, LinearUnit, Units
+from landscape.v1 import types_pb2
+
+LINEAR = {types_pb2.LINEAR_UNIT_INCHES: LinearUnit.INCHES, types_pb2.LINEAR_UNIT_FEET: LinearUnit.FEET,
+          types_pb2.LINEAR_UNIT_METERS: LinearUnit.METERS,
+          types_pb2.LINEAR_UNIT_CENTIMETERS: LinearUnit.CENTIMETERS,
+          types_pb2.LINEAR_UNIT_MILLIMETERS: LinearUnit.MILLIMETERS}
+ANGULAR = {types_pb2.ANGULAR_UNIT_DEGREES: AngularUnit.DEGREES,
+           types_pb2.ANGULAR_UNIT_RADIANS: AngularUnit.RADIANS}
+LINEAR_PB = {v: k for k, v in LINEAR.items()}
+ANGULAR_PB = {v: k for k, v in ANGULAR.items()}
+
+DEVICE_STATE_PB = {state: types_pb2.DeviceState.Value(f"DEVICE_STATE_{state.name}") for state in State}
+
+
+def ok() -> types_pb2.RetVal:
+    return types_pb2.RetVal(ret_code=types_pb2.RETURN_CODE_CMD_EXEC_OK)
+
+
+def started(command_id: str) -> types_pb2.RetVal:
+    return types_pb2.RetVal(ret_code=types_pb2.RETURN_CODE_CMD_STARTED_OK, command_id=command_id)
+
+
+def enum_value(table: dict, value: int, name: str):
+    try:
+        return table[value]
+    except KeyError:
+        raise ParamError(f"{name} must be one of {', '.join(_names(table))}, got {value}") from None
+
+
+def _names(table: dict) -> list[str]:
+    return [getattr(v, "name", str(v)) for v in table.values()]
+
+
+def units_from_pb(linear: int, angular: int) -> Units:
+    return Units(enum_value(LINEAR, linear, "linear_units"), enum_value(ANGULAR, angular, "angular_units"))
+
+
+def pose_values(pose: types_pb2.Pose) -> list[float]:
+    return [pose.x, pose.y, pose.z, pose.roll, pose.pitch, pose.yaw]
+
+
+def pose_to_matrix(pose: types_pb2.Pose, units: Units) -> np.ndarray:
+    values = pose_values(pose)
+    if not np.all(np.isfinite(values)):
+        raise ParamError(f"pose values must be finite, got {values}")
+    return units.pose_to_matrix(values)
+
+
+def matrix_to_pose(matrix: np.ndarray, units: Units) -> types_pb2.Pose:
+    x, y, z, roll, pitch, yaw = (float(v) for v in units.matrix_to_pose(matrix))
+    return types_pb2.Pose(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw)
+
+
+FRAMES = {types_pb2.REFERENCE_FRAME_JOINT_FRAME: Frame.JOINT,
+          types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME: Frame.BASE,
+          types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME: Frame.WORLD,
+          types_pb2.REFERENCE_FRAME_TOOL_FRAME: Frame.TOOL}
+STRAIGHT = {types_pb2.MOTION_TYPE_JOINT_MOTION: False, types_pb2.MOTION_TYPE_STRAIGHT_MOTION: True}
+
+
+def move_values(frame: Frame, values, units: Units) -> np.ndarray:
+    """A move's values in SI: joints all angles; Cartesian x, y, z lengths then roll, pitch, yaw."""
+    values = np.asarray(values, dtype=float)
+    if values.shape != (6,):
+        raise ParamError(f"a move needs 6 values, got {len(values)}")
+    if not np.all(np.isfinite(values)):
+        raise ParamError(f"move values must be finite, got {values.tolist()}")
+    if frame is Frame.JOINT:
+        return units.angle_to_si(values)
+    return np.concatenate([units.length_to_si(values[:3]), units.angle_to_si(values[3:])])
+
+
+def motion_type(request) -> bool:
+    """True for STRAIGHT_MOTION; an unset motion type is JOINT_MOTION (the seed names none)."""
+    if not request.HasField("motion_type"):
+        return False
+    return enum_value(STRAIGHT, request.motion_type, "motion_type (JOINT_MOTION or STRAIGHT_MOTION)")
+
+
+def optional_speed(request) -> float | None:
+    return request.speed if request.HasField("speed") else None
+
+
+OFFSETS = {types_pb2.OFFSET_TYPE_ABSOLUTE_DATA: False, types_pb2.OFFSET_TYPE_RELATIVE_DATA: True}
+PATH_FRAMES = {k: v for k, v in FRAMES.items() if v is not Frame.TOOL}
+
+
+def point_spec(tag: types_pb2.TagStruct, frame: Frame, units: Units) -> PointSpec:
+    """A tag_struct in SI: joint_values for JOINT_FRAME, else x, y, z, roll, pitch, yaw."""
+    if frame is Frame.JOINT:
+        values = np.asarray(tag.joint_values, dtype=float)
+    else:
+        values = np.array([tag.x, tag.y, tag.z, tag.roll, tag.pitch, tag.yaw])
+    return PointSpec(move_values(frame, values, units), tag.tag_name, tag.tag_index,
+                     tag.time_delay, tag.transition_speed, tag.speed, tag.accel,
+                     tuple(tag.aux_commands))
+
+
+def path_load_stream(requests, units: Units):
+    """The PathLoad stream: its header (from the first message) and every point, in SI."""
+    header, specs, frame = None, [], None
+    for index, request in enumerate(requests):
+        if index == 0:
+            if not request.HasField("header"):
+                raise ParamError("the first PathLoad message must carry the header")
+            header = request.header
+            frame = enum_value(PATH_FRAMES, header.frame, "frame (JOINT, BASE or WORLD)")
+        elif request.HasField("header"):
+            raise ParamError(f"message {index} of the PathLoad stream carries a second header")
+        for tag in request.tags:
+            try:
+                specs.append(point_spec(tag, frame, units))
+            except CommandError as error:
+                raise at_point(len(specs), error) from None
+    if header is None:
+        raise ParamError("the PathLoad stream was empty")
+    return header, frame, specs

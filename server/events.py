@@ -1,0 +1,395 @@
+"""The device's event bus: one ordered stream of events and alarms (seed section 2, DESIGN 8).
+
+The device core publishes through the helpers of `EventBus` (`command`, `alarm`,
+`state_change`, `digital_io`, `rsvp_request`, `rsvp_answer`) from any thread; every
+subscriber sees the same events in the same order, each numbered by `sequence` (1, 2, 3, ...
+per bus). Pure Python: the gRPC servicer converts these records to and from the wire.
+
+Guarantees:
+- Publishing never waits for a subscriber and costs O(subscribers).
+- The last `history` events are kept; `subscribe(after_sequence=n)` first yields the kept
+  events after n, then live ones, with nothing duplicated or skipped at the seam. Events it
+  asks for that are no longer kept are announced first by one `EventsLost(first, last)`.
+- Each subscriber has a buffer of `buffer` events. When a publish finds it full, the
+  subscriber's pending events are dropped and replaced by one `EventsLost` naming exactly
+  the sequences dropped; it then continues live. A slow reader costs itself events, never
+  the device or the other readers their time.
+
+An `EventsLost` is delivered as an `Event` whose `sequence` is the last lost one, so a client
+that resumes "after the last sequence I saw" resumes correctly after a loss too.
+"""
+from __future__ import annotations
+
+import enum
+import itertools
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+
+DEFAULT_HISTORY = 10_000   # events kept for resuming subscribers
+DEFAULT_BUFFER = 1_024     # events a subscriber may fall behind before it loses some
+
+_INT32 = range(-2**31, 2**31)
+_UINT32 = range(2**32)
+
+
+# -- Domain records, mirroring landscape.v1 event_service.proto ----------------------------
+
+class Phase(enum.Enum):
+    """The life of a non-blocking command (CommandEvent.Phase)."""
+    STARTED = 1
+    TAG_REACHED = 2
+    PAUSED = 3
+    RESUMED = 4
+    DONE = 5
+    FAILED = 6
+    ABORTED = 7
+
+
+class Severity(enum.Enum):
+    """How serious an alarm is (AlarmSeverity)."""
+    INFO = 1
+    WARNING = 2
+    ERROR = 3
+    CRITICAL = 4
+
+
+@dataclass(frozen=True, slots=True)
+class CommandEvent:
+    """A phase of a non-blocking command; `command` is the RPC name, e.g. "MoveAbsolute"."""
+    command_id: str
+    command: str
+    phase: Phase
+    point_name: str = ""      # point or path the command moves to
+    tag_name: str = ""        # for Phase.TAG_REACHED
+    tag_index: int = 0        # int32, for Phase.TAG_REACHED
+    message: str = ""         # why, for Phase.FAILED
+
+    def __post_init__(self):
+        _check(isinstance(self.phase, Phase), "phase must be a Phase")
+        _check(self.tag_index in _INT32, "tag_index must fit an int32")
+
+
+@dataclass(frozen=True, slots=True)
+class Alarm:
+    """Seed clientAlarm; `code` is a seed return code (negative) or a device alarm code."""
+    severity: Severity
+    code: int                 # int32
+    message: str
+    command_id: str = ""      # the command the alarm is about, if any
+
+    def __post_init__(self):
+        _check(isinstance(self.severity, Severity), "severity must be a Severity")
+        _check(self.code in _INT32, "code must fit an int32")
+
+
+@dataclass(frozen=True, slots=True)
+class StateChange:
+    """The device moved in the state diagram; states are DeviceState names."""
+    from_state: str
+    to_state: str
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class DigitalIOSignal:
+    """A signalDigitalIO watch fired; `bits_on` is the unit's bits when it fired."""
+    command_id: str
+    type: str
+    unit_id: int              # int32
+    bit_string: int           # uint32, the watched bits
+    bits_on: int              # uint32
+
+    def __post_init__(self):
+        _check(self.unit_id in _INT32, "unit_id must fit an int32")
+        _check(self.bit_string in _UINT32 and self.bits_on in _UINT32,
+               "bit_string and bits_on must fit a uint32")
+
+
+@dataclass(frozen=True, slots=True)
+class RsvpRequest:
+    """Seed clientEventRSVP / clientAlarmRSVP: the device asks the lock holder and waits."""
+    rsvp_id: str
+    alarm: bool               # True for clientAlarmRSVP
+    event_id: str             # the seed's eventID of the question
+    data: tuple[str, ...]
+    choices: tuple[str, ...]
+    default_choice: str       # taken when no answer arrives within timeout_s
+    timeout_s: float          # seconds the device waits
+
+    def __post_init__(self):
+        _check(0 <= self.timeout_s * 1000 < 2**31, "timeout_s must be 0 .. 2**31 ms")
+
+
+@dataclass(frozen=True, slots=True)
+class RsvpAnswer:
+    """The answer to an RsvpRequest, or its default when `timed_out`."""
+    rsvp_id: str
+    choice: str
+    data: tuple[str, ...] = ()
+    timed_out: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class EventsLost:
+    """Events first_sequence..last_sequence (inclusive) that this subscriber will not get."""
+    first_sequence: int
+    last_sequence: int
+
+
+Detail = (CommandEvent | Alarm | StateChange | DigitalIOSignal | RsvpRequest | RsvpAnswer
+          | EventsLost)
+# What the device publishes; EventsLost is made by the bus for one subscriber only.
+_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer)
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """One event of the stream: the seed's (event_id, data) plus the typed detail.
+
+    `sequence` counts from 1 per bus; `time` is when it was published, unix seconds.
+    """
+    sequence: int
+    time: float
+    event_id: str
+    data: tuple[str, ...]
+    detail: Detail
+
+
+def _check(ok: bool, message: str) -> None:
+    # Checked at publish time so a bad value fails in the caller, not in every subscriber.
+    if not ok:
+        raise ValueError(message)
+
+
+# The seed's eventID for each phase of a command.
+PHASE_EVENT_IDS = {
+    Phase.STARTED: "command_started", Phase.TAG_REACHED: "tag_reached",
+    Phase.PAUSED: "command_paused", Phase.RESUMED: "command_resumed",
+    Phase.DONE: "command_done", Phase.FAILED: "command_failed",
+    Phase.ABORTED: "command_aborted",
+}
+
+
+class SequenceOutOfRange(ValueError):
+    """A subscriber asked to resume after a sequence this bus has not reached.
+
+    Typically the client saw an earlier run of the device server (sequences restart at 1).
+    """
+
+
+# -- Subscriptions ---------------------------------------------------------------------------
+
+class Subscription:
+    """One reader of the bus: `get()` or iterate; `close()` (or leave the `with`) to stop.
+
+    Made by `EventBus.subscribe`. Thread-safe; closing it from another thread wakes a
+    waiting `get`.
+    """
+
+    def __init__(self, bus: EventBus, capacity: int, replay: Sequence[Event]):
+        self._bus = bus
+        self._capacity = capacity
+        self._cond = threading.Condition(threading.Lock())
+        self._replay = deque(replay)   # resumed events; not bounded, the history bounds it
+        self._live: deque[Event] = deque()
+        self._closed = False
+
+    def get(self, timeout: float | None = None) -> Event | None:
+        """The next event, waiting up to `timeout` seconds (None: forever).
+
+        Returns None on timeout or once the subscription is closed.
+        """
+        with self._cond:
+            if not self._cond.wait_for(self._ready, timeout):
+                return None
+            if self._closed:
+                return None
+            return (self._replay or self._live).popleft()
+
+    def __iter__(self) -> Iterator[Event]:
+        while (event := self.get()) is not None:
+            yield event
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self) -> None:
+        """Stop receiving; pending events are discarded. Idempotent."""
+        self._bus._unsubscribe(self)
+        self._end()
+
+    def __enter__(self) -> Subscription:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # Called by the bus with its lock held (lock order: bus, then subscription).
+
+    def _offer(self, event: Event, clock: Callable[[], float]) -> None:
+        with self._cond:
+            live = self._live
+            if len(live) >= self._capacity:
+                # Full: drop what is pending (merging an unread loss notice) and say so once.
+                head = live[0]
+                first = (head.detail.first_sequence if isinstance(head.detail, EventsLost)
+                         else head.sequence)
+                live.clear()
+                live.append(_lost(first, event.sequence - 1, clock()))
+            live.append(event)
+            self._cond.notify()
+
+    def _end(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._replay.clear()
+            self._live.clear()
+            self._cond.notify_all()
+
+    def _ready(self) -> bool:
+        return self._closed or bool(self._replay) or bool(self._live)
+
+
+def _lost(first: int, last: int, now: float) -> Event:
+    return Event(last, now, "events_lost", (str(first), str(last)), EventsLost(first, last))
+
+
+# -- The bus ---------------------------------------------------------------------------------
+
+class EventBus:
+    """The device's ordered event stream; see the module docstring for its guarantees.
+
+    history: events kept for resuming subscribers. buffer: events one subscriber may fall
+    behind before it loses some (at least 2: the loss notice and the newest event).
+    clock: the publish time source, unix seconds (time.time by default; tests inject one).
+    """
+
+    def __init__(self, history: int = DEFAULT_HISTORY, buffer: int = DEFAULT_BUFFER,
+                 clock: Callable[[], float] = time.time):
+        if history < 0 or buffer < 2:
+            raise ValueError("history must be >= 0 and buffer >= 2")
+        self.history_size = history
+        self.buffer_size = buffer
+        self._clock = clock
+        self._lock = threading.Lock()   # guards everything below; held for O(subscribers)
+        self._history: deque[Event] = deque(maxlen=history)
+        self._last_sequence = 0
+        self._subscribers: set[Subscription] = set()
+        self._closed = False
+
+    @property
+    def last_sequence(self) -> int:
+        """The sequence of the latest event published, 0 before the first."""
+        return self._last_sequence
+
+    @property
+    def subscriber_count(self) -> int:
+        return len(self._subscribers)
+
+    # Publishing helpers for the device core; each returns the Event it published.
+
+    def command(self, command_id: str, command: str, phase: Phase, point_name: str = "",
+                tag_name: str = "", tag_index: int = 0, message: str = "") -> Event:
+        """A non-blocking command's phase, e.g. (id, "MoveAbsolute", Phase.DONE, "p1").
+
+        data: [command_id, tag_name] for TAG_REACHED, [command_id, message] for FAILED,
+        [command_id, point_name] otherwise.
+        """
+        detail = CommandEvent(command_id, command, phase, point_name, tag_name, tag_index,
+                              message)
+        second = {Phase.TAG_REACHED: tag_name, Phase.FAILED: message}.get(phase, point_name)
+        return self.publish(PHASE_EVENT_IDS[phase], (command_id, second), detail)
+
+    def alarm(self, severity: Severity, code: int, message: str, command_id: str = "") -> Event:
+        """Seed clientAlarm; data: [code, message, command_id]."""
+        detail = Alarm(severity, code, message, command_id)
+        return self.publish("alarm", (str(code), message, command_id), detail)
+
+    def state_change(self, from_state: str, to_state: str, reason: str = "") -> Event:
+        """The device state moved; data: [from_state, to_state, reason]."""
+        detail = StateChange(from_state, to_state, reason)
+        return self.publish("state_changed", (from_state, to_state, reason), detail)
+
+    def digital_io(self, command_id: str, type: str, unit_id: int, bit_string: int,
+                   bits_on: int) -> Event:
+        """A signalDigitalIO watch fired; data: [command_id, type, unit_id, bit_string, bits_on]."""
+        detail = DigitalIOSignal(command_id, type, unit_id, bit_string, bits_on)
+        data = (command_id, type, str(unit_id), str(bit_string), str(bits_on))
+        return self.publish("digital_io", data, detail)
+
+    def rsvp_request(self, rsvp_id: str, event_id: str, data: Sequence[str] = (),
+                     choices: Sequence[str] = (), default_choice: str = "",
+                     timeout_s: float = 0.0, alarm: bool = False) -> Event:
+        """An RSVP the device asks (timeout_s in seconds); data: [rsvp_id, event_id, *data]."""
+        detail = RsvpRequest(rsvp_id, alarm, event_id, tuple(data), tuple(choices),
+                             default_choice, timeout_s)
+        return self.publish("rsvp_request", (rsvp_id, event_id, *data), detail)
+
+    def rsvp_answer(self, rsvp_id: str, choice: str, data: Sequence[str] = (),
+                    timed_out: bool = False) -> Event:
+        """How an RSVP was answered; data: [rsvp_id, choice, *data]."""
+        detail = RsvpAnswer(rsvp_id, choice, tuple(data), timed_out)
+        return self.publish("rsvp_answer", (rsvp_id, choice, *data), detail)
+
+    def publish(self, event_id: str, data: Sequence[str], detail: Detail) -> Event:
+        """Number, stamp, keep and fan out one event. Prefer the typed helpers above."""
+        _check(isinstance(detail, _PUBLISHED), f"cannot publish a {type(detail).__name__}")
+        data = tuple(data)
+        with self._lock:
+            # Numbered and stamped under the lock, so sequence order is time order.
+            self._last_sequence += 1
+            event = Event(self._last_sequence, self._clock(), event_id, data, detail)
+            self._history.append(event)
+            for subscriber in self._subscribers:
+                subscriber._offer(event, self._clock)
+        return event
+
+    # Subscribing.
+
+    def subscribe(self, after_sequence: int | None = None) -> Subscription:
+        """A new subscription: live events only, or the kept events after `after_sequence`
+        first (preceded by an EventsLost for those no longer kept), then live ones.
+
+        Raises SequenceOutOfRange if after_sequence is beyond the last published event.
+        """
+        with self._lock:
+            replay = [] if after_sequence is None else self._replay_after(after_sequence)
+            subscription = Subscription(self, self.buffer_size, replay)
+            if self._closed:
+                subscription._end()
+            else:
+                self._subscribers.add(subscription)
+            return subscription
+
+    def close(self) -> None:
+        """End every subscription (their get returns None); later ones start closed.
+
+        Publishing still works, so a device core shutting down need not check.
+        """
+        with self._lock:
+            self._closed = True
+            subscribers, self._subscribers = self._subscribers, set()
+            for subscription in subscribers:
+                subscription._end()
+
+    def _replay_after(self, after: int) -> list[Event]:
+        # Called with the lock held; kept sequences are contiguous, oldest first.
+        if after < 0 or after > self._last_sequence:
+            raise SequenceOutOfRange(
+                f"after_sequence {after} is not in 0..{self._last_sequence}, the events of "
+                f"this device so far (did it restart?)")
+        oldest = self._history[0].sequence if self._history else self._last_sequence + 1
+        replay = []
+        if after + 1 < oldest:
+            replay.append(_lost(after + 1, oldest - 1, self._clock()))
+        start = max(after + 1, oldest) - oldest
+        replay.extend(itertools.islice(self._history, start, None))
+        return replay
+
+    def _unsubscribe(self, subscription: Subscription) -> None:
+        with self._lock:
+            self._subscribers.discard(subscription)

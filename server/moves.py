@@ -1,0 +1,81 @@
+"""From a move request to a timed trajectory: the device's use of the motion library."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from landscape.server.errors import OutOfRange, Unreachable
+from landscape.server.motion.cartesian import arc, straight_line, tool_pose
+from landscape.server.motion.timing import time_path
+from landscape.server.motion.trajectory import Limits, PlanningError, Trajectory
+from landscape.server.settings import MotionSettings
+from landscape.server.targets import check_joints
+from landscape.sim.kinematics import Config, Kinematics, PosNeg, Shoulder
+
+SAME_CONFIG = Config(Shoulder.SAME, PosNeg.SAME, PosNeg.SAME)
+
+
+class Planner:
+    """Plans the device's moves; stateless apart from the arm and the cycle time."""
+
+    def __init__(self, kinematics: Kinematics, cycle_time: float):
+        self.kinematics = kinematics
+        self.arm = kinematics.arm
+        self.dt = cycle_time
+
+    def limits(self, settings: MotionSettings, speed_percent: float | None) -> Limits:
+        speed = settings.speed_percent if speed_percent is None else speed_percent
+        if not (math.isfinite(speed) and 0 < speed <= 100):
+            raise OutOfRange(f"move speed must be above 0 and at most 100 %, got {speed}")
+        return Limits.scaled(self.arm, speed, settings.accel_percent,
+                             settings.linear_speed * speed / 100.0,
+                             settings.angular_speed * speed / 100.0)
+
+    def checked_joints(self, joints) -> np.ndarray:
+        return check_joints(self.arm, joints)
+
+    def joint_move(self, q_now, q_goal, limits: Limits) -> Trajectory:
+        return self.timed(np.array([q_now, check_joints(self.arm, q_goal)]), limits)
+
+    def pose_goal_joints(self, q_now, flange_goal: np.ndarray) -> np.ndarray:
+        """Joints reaching `flange_goal` in q_now's configuration, nearest q_now."""
+        q, result = self.kinematics.reverse(flange_goal, q_now, SAME_CONFIG)
+        if q is None:
+            raise Unreachable(f"the target pose is not reachable: {result.name}",
+                              reason_code=result.name)
+        return q
+
+    def straight_move(self, q_now, tip_goal: np.ndarray, limits: Limits,
+                      tool_offset: np.ndarray) -> Trajectory:
+        """The tool tip (flange @ tool_offset) on a straight line to `tip_goal`."""
+        try:
+            path = straight_line(self.kinematics, q_now, tip_goal, tcp=tool_offset)
+        except PlanningError as error:
+            raise _unreachable(error) from None
+        return self.timed(path, limits, tool_pose(self.kinematics, tool_offset))
+
+    def arc_move(self, q_now, tip_via: np.ndarray, tip_goal: np.ndarray, limits: Limits,
+                 tool_offset: np.ndarray) -> Trajectory:
+        """The tool tip on the circle through its position, `tip_via` and `tip_goal`."""
+        try:
+            path = arc(self.kinematics, q_now, tip_via, tip_goal, tcp=tool_offset)
+        except PlanningError as error:
+            raise _unreachable(error) from None
+        return self.timed(path, limits, tool_pose(self.kinematics, tool_offset))
+
+    def timed(self, waypoints: np.ndarray, limits: Limits, tool_path=None) -> Trajectory:
+        try:
+            return time_path(waypoints, limits, self.dt, tool_path=tool_path)
+        except PlanningError as error:
+            raise _unreachable(error) from None
+
+
+def _unreachable(error: PlanningError) -> Unreachable:
+    where = {}
+    if error.index is not None:
+        where["index"] = str(error.index)
+    if error.fraction is not None:
+        where["fraction"] = f"{error.fraction:.4f}"
+    return Unreachable(str(error), reason_code=error.reason, **where)
+

@@ -1,0 +1,168 @@
+"""Paths from load to run (seed 3.5): resolve loaded points to joints, plan a pathMove.
+
+Loading resolves each point to a joint target, in order, starting from the path's last point
+(or, for a new path, from where the arm is): Cartesian points by inverse kinematics in the
+configuration of the point before, straight segments checked along their whole length. RELATIVE
+data are offsets from the point before, resolved at load time. A point that fails names its
+index in the load.
+
+Running plans, for each cycle, a joint move from where the arm is to the first point (the
+approach; from the last point for later cycles), then the points. The arm stops at the last
+point and at every point whose transition speed is 0 or that has a dwell; it passes through the
+others on a blended path. A point's speed and acceleration (percent; 0 keeps the set one) apply
+to the stretch that ends at the next stop (the lowest there wins). Dwells are held setpoints.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from landscape.server import aux_commands
+from landscape.server.errors import CommandError, OutOfRange, ParamError, Unreachable
+from landscape.server.motion.cartesian import straight_path, tool_pose
+from landscape.server.motion.timing import time_path
+from landscape.server.motion.trajectory import PlanningError, Trajectory
+from landscape.server.moves import Planner
+from landscape.server.paths import PathPoint, StoredPath
+from landscape.server.settings import MotionSettings
+from landscape.server.targets import Frame, check_joints, check_pose_values, goal_tip
+
+MAX_CYCLES = 10_000
+
+
+@dataclass(frozen=True)
+class PointSpec:
+    """A loaded tag_struct in SI: values are joints (rad) or x, y, z (m), roll, pitch, yaw (rad)."""
+
+    values: np.ndarray
+    tag_name: str = ""
+    tag_index: int = 0
+    time_delay: float = 0.0
+    transition_speed: float = 0.0
+    speed: float = 0.0
+    accel: float = 0.0
+    aux_commands: tuple[str, ...] = ()
+
+
+def at_point(index: int, error: CommandError) -> CommandError:
+    """The same error, naming the point it is about."""
+    error.message = f"point {index}: {error.message}"
+    error.args = (error.message,)
+    error.metadata["index"] = str(index)
+    return error
+
+
+def _check_numbers(spec: PointSpec) -> None:
+    if not np.all(np.isfinite([spec.time_delay, spec.transition_speed, spec.speed, spec.accel])):
+        raise ParamError("time delay and speeds must be finite")
+    if spec.time_delay < 0:
+        raise OutOfRange(f"time delay {spec.time_delay:g} s is negative")
+    for name in ("transition_speed", "speed", "accel"):
+        if not 0 <= getattr(spec, name) <= 100:
+            raise OutOfRange(f"{name} {getattr(spec, name):g} is not a percent (0 to 100)")
+
+
+def resolve(planner: Planner, path: StoredPath, q_prev: np.ndarray, frame: Frame, relative: bool,
+            specs: list[PointSpec], settings: MotionSettings, outputs: set[str],
+            first_index: int = 0) -> list[PathPoint]:
+    """Joint targets for `specs`, appended after `q_prev` (rad); raises naming the bad index."""
+    kin, tcp = planner.kinematics, path.tcp_matrix
+    points = []
+    for index, spec in enumerate(specs, start=first_index):
+        try:
+            _check_numbers(spec)
+            for command in spec.aux_commands:
+                aux_commands.parse(command, outputs)
+            if frame is Frame.JOINT:
+                q = check_joints(planner.arm, q_prev + spec.values if relative else spec.values)
+                tip = kin.forward(q) @ tcp
+            else:
+                tip = goal_tip(frame, check_pose_values(spec.values), relative,
+                               kin.forward(q_prev) @ tcp, settings)
+                q = planner.pose_goal_joints(q_prev, tip @ np.linalg.inv(tcp))
+            if path.straight and (points or path.points):   # the approach is a joint move
+                try:
+                    q = straight_path(kin, q_prev, [tip], tcp=tcp)[0][-1]
+                except PlanningError as error:
+                    raise Unreachable(str(error), reason_code=str(error.reason),
+                                      fraction=f"{error.fraction or 0:.4f}") from None
+        except CommandError as error:
+            raise at_point(index, error) from None
+        points.append(PathPoint(tuple(float(v) for v in q), spec.tag_name, spec.tag_index,
+                                spec.time_delay, spec.transition_speed, spec.speed, spec.accel,
+                                tuple(spec.aux_commands)))
+        q_prev = q
+    return points
+
+
+def plan_run(planner: Planner, path: StoredPath, q_start: np.ndarray, settings: MotionSettings,
+             cycles: int) -> list[Trajectory]:
+    """Trajectories for `cycles` passes of the path (0: one dry pass); their marks are labelled
+    with point indices. Later cycles reuse the first cycle's arrays."""
+    if not path.points:
+        raise ParamError(f"path {path.name!r} has no points")
+    if not 0 <= cycles <= MAX_CYCLES:
+        raise OutOfRange(f"number of cycles must be 0 to {MAX_CYCLES}, got {cycles}")
+    first = np.array(path.points[0].joints)
+    body = _plan_points(planner, path, settings)
+    run = [*_approach(planner, q_start, first, settings), *body]
+    if cycles > 1:
+        back = _approach(planner, np.array(path.points[-1].joints), first, settings)
+        run += [*back, *body] * (cycles - 1)
+    return run
+
+
+def _approach(planner: Planner, q_from: np.ndarray, q_to: np.ndarray, settings) -> list[Trajectory]:
+    if np.max(np.abs(q_from - q_to)) < 1e-9:
+        return []
+    move = planner.joint_move(q_from, q_to, planner.limits(settings, None))
+    return [Trajectory(move.dt, move.positions, move.velocities)]   # no marks: no points here
+
+
+def _plan_points(planner: Planner, path: StoredPath, settings: MotionSettings) -> list[Trajectory]:
+    """From point 0 through the last point, dwells included; marks labelled by point index."""
+    points = path.points
+    # Point 0 is reached by the approach: its mark sits on a hold there (with its dwell, if any).
+    pieces = [_hold(planner.dt, points[0].joints, points[0].time_delay, mark=0)]
+    start = 0
+    for end in range(1, len(points)):
+        if not (points[end].stops or end == len(points) - 1):
+            continue
+        stretch = points[start:end + 1]
+        speeds = [p.speed for p in stretch[1:] if p.speed > 0]
+        accels = [p.accel for p in stretch[1:] if p.accel > 0]
+        limits = planner.limits(settings.with_accel_percent(min(accels)) if accels else settings,
+                                min(speeds) if speeds else None)
+        pieces.append(_time_stretch(planner, path, stretch, limits, first_label=start))
+        if points[end].time_delay > 0:
+            pieces.append(_hold(planner.dt, points[end].joints, points[end].time_delay))
+        start = end
+    return pieces
+
+
+def _time_stretch(planner: Planner, path: StoredPath, stretch, limits, first_label: int) -> Trajectory:
+    joints = np.array([p.joints for p in stretch])
+    try:
+        if path.straight:
+            kin, tcp = planner.kinematics, path.tcp_matrix
+            dense, rows = straight_path(kin, joints[0], [kin.forward(q) @ tcp for q in joints[1:]],
+                                        tcp=tcp)
+            timed = time_path(dense, limits, planner.dt, tool_path=tool_pose(kin, tcp))
+            label_of = {int(row): first_label + 1 + i for i, row in enumerate(rows)}
+        else:
+            timed = time_path(joints, limits, planner.dt)
+            label_of = {i: first_label + i for i in range(1, len(joints))}
+    except PlanningError as error:
+        raise Unreachable(f"path {path.name!r}: {error}", reason_code=str(error.reason)) from None
+    # The first point of a stretch was marked by the stretch before; dense rows carry no mark.
+    marks = tuple((sample, label_of[w]) for sample, w in timed.marks if w in label_of)
+    return Trajectory(timed.dt, timed.positions, timed.velocities, marks)
+
+
+def _hold(dt: float, joints, seconds: float, mark: int | None = None) -> Trajectory:
+    """A held setpoint: `seconds` of dwell (at least one sample)."""
+    samples = max(1, round(seconds / dt)) + (1 if seconds > 0 else 0)
+    positions = np.repeat(np.array(joints)[None], samples, axis=0)
+    return Trajectory(dt, positions, np.zeros_like(positions),
+                      () if mark is None else ((0, mark),))

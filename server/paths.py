@@ -1,0 +1,90 @@
+"""Named paths (seed 3.5): points resolved to joints when loaded, kept in SQLite.
+
+A path is checked whole when it is loaded (every point reachable in the arm's configuration,
+every straight segment followable) and stored resolved, so pathMove runs what was checked.
+Paths live in one SQLite file; every change is one transaction, so a crash leaves either the
+old or the new path, never half of one, and paths survive a restart of the device server.
+"""
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+from dataclasses import asdict, dataclass, field
+from pathlib import Path as FilePath
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PathPoint:
+    """One point: joint target (rad, (6,)) and the tag_struct's other fields (seed 3.5.1)."""
+
+    joints: tuple[float, ...]
+    tag_name: str = ""
+    tag_index: int = 0
+    time_delay: float = 0.0          # s of dwell at the point
+    transition_speed: float = 0.0    # percent; > 0: pass through without stopping
+    speed: float = 0.0               # percent towards the point; 0: the set speed
+    accel: float = 0.0               # percent; 0: the set acceleration
+    aux_commands: tuple[str, ...] = ()
+
+    @property
+    def stops(self) -> bool:
+        return self.transition_speed <= 0.0 or self.time_delay > 0.0
+
+
+@dataclass(frozen=True)
+class StoredPath:
+    name: str
+    straight: bool                   # STRAIGHT_MOTION between points (else JOINT_MOTION)
+    tcp: tuple[float, ...]           # tool offset (4x4, row-major) the points were resolved with
+    points: tuple[PathPoint, ...] = field(default=())
+
+    @property
+    def tcp_matrix(self) -> np.ndarray:
+        return np.array(self.tcp).reshape(4, 4)
+
+    def appended(self, points) -> "StoredPath":
+        return StoredPath(self.name, self.straight, self.tcp, self.points + tuple(points))
+
+
+class PathStore:
+    """Paths by name in an SQLite file (None: in memory, gone with the process)."""
+
+    def __init__(self, file: str | FilePath | None = None):
+        if file is not None:
+            FilePath(file).parent.mkdir(parents=True, exist_ok=True)
+        self._db = sqlite3.connect(":memory:" if file is None else str(file),
+                                   check_same_thread=False)
+        self._lock = threading.Lock()
+        with self._lock, self._db:
+            self._db.execute("CREATE TABLE IF NOT EXISTS paths (name TEXT PRIMARY KEY, body TEXT NOT NULL)")
+
+    def load_all(self) -> dict[str, StoredPath]:
+        with self._lock:
+            rows = self._db.execute("SELECT name, body FROM paths").fetchall()
+        return {name: _decode(name, body) for name, body in rows}
+
+    def put(self, path: StoredPath) -> None:
+        body = json.dumps({"straight": path.straight, "tcp": list(path.tcp),
+                           "points": [asdict(p) for p in path.points]})
+        with self._lock, self._db:
+            self._db.execute("INSERT OR REPLACE INTO paths (name, body) VALUES (?, ?)",
+                             (path.name, body))
+
+    def delete(self, name: str) -> None:
+        with self._lock, self._db:
+            self._db.execute("DELETE FROM paths WHERE name = ?", (name,))
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+
+def _decode(name: str, body: str) -> StoredPath:
+    data = json.loads(body)
+    points = tuple(PathPoint(**{**p, "joints": tuple(p["joints"]),
+                                "aux_commands": tuple(p["aux_commands"])})
+                   for p in data["points"])
+    return StoredPath(name, data["straight"], tuple(data["tcp"]), points)

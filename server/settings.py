@@ -1,0 +1,105 @@
+"""Motion settings of seed section 3.2 (speed, acceleration, tool offset, world frame, units),
+validated, in SI. Immutable: a Set command builds a new value or changes nothing."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from landscape.server.errors import OutOfRange, ParamError
+from landscape.server.units import Units
+from landscape.sim.arm import ArmModel
+
+DEFAULT_SPEED_PERCENT = 25.0    # a cautious default for an arm nobody has configured yet
+DEFAULT_ACCEL_PERCENT = 50.0
+MAX_TOOL_OFFSET = 2.0           # m; no real tool for this class of arm is longer
+MAX_WORLD_OFFSET = 100.0        # m
+
+
+def finite(name: str, *values: float) -> None:
+    if not all(math.isfinite(v) for v in values):
+        raise ParamError(f"{name} must be a finite number, got {', '.join(map(repr, values))}")
+
+
+def positive_at_most(name: str, value: float, maximum: float, unit: str = "") -> float:
+    finite(name, value)
+    if not 0.0 < value <= maximum * (1 + 1e-12):
+        raise OutOfRange(f"{name} must be above 0 and at most {maximum:g}{unit}, got {value:g}{unit}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """What the set commands set; lengths m, angles rad, times s."""
+
+    arm: ArmModel
+    speed_percent: float = DEFAULT_SPEED_PERCENT
+    accel_percent: float = DEFAULT_ACCEL_PERCENT
+    linear_speed: float = math.nan      # m/s for Cartesian moves; nan: the arm's maximum
+    angular_speed: float = math.nan     # rad/s
+    linear_accel: float = math.nan      # m/s^2
+    angular_accel: float = math.nan     # rad/s^2
+    tool_offset: np.ndarray = field(default_factory=lambda: np.eye(4))   # tool tip in flange
+    world_frame: np.ndarray = field(default_factory=lambda: np.eye(4))   # world in base
+    units: Units = Units()
+
+    def __post_init__(self):
+        for name, default in (("linear_speed", self.arm.max_linear_velocity),
+                              ("angular_speed", self.arm.max_angular_velocity),
+                              ("linear_accel", self.arm.max_linear_acceleration),
+                              ("angular_accel", self.arm.max_angular_acceleration)):
+            if math.isnan(getattr(self, name)):
+                object.__setattr__(self, name, default)
+
+    # -- seed 3.2.1, values already in SI
+    def with_speed_percent(self, value: float) -> "MotionSettings":
+        return replace(self, speed_percent=positive_at_most("percent speed", value, 100.0, " %"))
+
+    def with_linear_speed(self, value: float) -> "MotionSettings":
+        return replace(self, linear_speed=positive_at_most(
+            "linear speed", value, self.arm.max_linear_velocity, " m/s"))
+
+    def with_angular_speed(self, value: float) -> "MotionSettings":
+        return replace(self, angular_speed=positive_at_most(
+            "angular speed", value, self.arm.max_angular_velocity, " rad/s"))
+
+    def with_accel_percent(self, value: float) -> "MotionSettings":
+        return replace(self, accel_percent=positive_at_most("percent accel", value, 100.0, " %"))
+
+    def with_linear_accel(self, value: float) -> "MotionSettings":
+        return replace(self, linear_accel=positive_at_most(
+            "linear accel", value, self.arm.max_linear_acceleration, " m/s^2"))
+
+    def with_angular_accel(self, value: float) -> "MotionSettings":
+        return replace(self, angular_accel=positive_at_most(
+            "angular accel", value, self.arm.max_angular_acceleration, " rad/s^2"))
+
+    def with_tool_offset(self, matrix: np.ndarray) -> "MotionSettings":
+        return replace(self, tool_offset=_checked_frame("tool offset", matrix, MAX_TOOL_OFFSET))
+
+    def with_world_frame(self, matrix: np.ndarray) -> "MotionSettings":
+        return replace(self, world_frame=_checked_frame("world frame", matrix, MAX_WORLD_OFFSET))
+
+    def with_units(self, units: Units) -> "MotionSettings":
+        return replace(self, units=units)
+
+    # -- what the get commands report (seed 3.3.1)
+    @property
+    def joint_velocities(self) -> np.ndarray:
+        return np.array(self.arm.max_velocity) * self.speed_percent / 100.0
+
+    @property
+    def joint_accelerations(self) -> np.ndarray:
+        return np.array(self.arm.max_acceleration) * self.accel_percent / 100.0
+
+
+def _checked_frame(name: str, matrix: np.ndarray, max_offset: float) -> np.ndarray:
+    m = np.asarray(matrix, dtype=float)
+    finite(name, *m.ravel())
+    distance = float(np.linalg.norm(m[:3, 3]))
+    if distance > max_offset:
+        raise OutOfRange(f"{name} is {distance:g} m from its origin; at most {max_offset:g} m")
+    m = m.copy()
+    m.flags.writeable = False
+    return m

@@ -1,0 +1,155 @@
+"""Single moves, stop / resume / abort, through gRPC on the simulated arm (lock-step clock).
+
+Accuracy is measured on the recorder's per-cycle joint feedback (LLI recorder, MCAP), turned
+into tool-tip positions with the forward kinematics.
+"""
+from __future__ import annotations
+
+import math
+
+import grpc
+import numpy as np
+import pytest
+
+from landscape.server.states import State
+from landscape.v1 import motion_pb2, settings_pb2, types_pb2
+
+from support import Arm, error_info, wait_until
+
+JOINT, BASE = types_pb2.REFERENCE_FRAME_JOINT_FRAME, types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
+STRAIGHT = types_pb2.MOTION_TYPE_STRAIGHT_MOTION
+
+
+@pytest.fixture
+def arm(tmp_path):
+    a = Arm(tmp_path)
+    yield a
+    a.close()
+
+
+def distance_to_line(points, a, b) -> np.ndarray:
+    direction = (b - a) / np.linalg.norm(b - a)
+    rel = points - a
+    return np.linalg.norm(rel - np.outer(rel @ direction, direction), axis=1)
+
+
+def test_a_joint_move_reaches_its_goal_and_reports_started_then_done(arm):
+    goal = [0.3, -0.2, 1.8, 0.1, 1.2, -0.4]
+    reply = arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        point_name="p1", frame=JOINT, values=goal))
+    assert reply.ret_val.ret_code == types_pb2.RETURN_CODE_CMD_STARTED_OK
+    events = arm.wait_command(reply.ret_val.command_id)
+    assert [e.event_id for e in events] == ["command_started", "command_done"]
+    assert events[-1].command.point_name == "p1"
+    wait_until(lambda: arm.server.device.state is State.RESTING)
+    assert np.max(np.abs(arm.joints() - goal)) < 1e-3
+
+
+def test_a_straight_move_keeps_the_tool_tip_on_the_line(arm):
+    start = arm.tip()
+    arm.record_start()
+    reply = arm.device.MoveRelative(motion_pb2.MoveRelativeRequest(
+        point_name="line", frame=BASE, values=[0.0, 0.5, 0.0, 0, 0, 0], motion_type=STRAIGHT,
+        speed=100))
+    assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+    wait_until(lambda: np.linalg.norm(arm.server.device.feedback().velocity) < 1e-4)
+    tips, _ = arm.recorded_tips()
+    goal = start[:3, 3] + [0.0, 0.5, 0.0]
+    deviation = distance_to_line(tips, start[:3, 3], goal).max()
+    final = arm.tip()
+    position_error = np.linalg.norm(final[:3, 3] - goal)
+    angle_error = math.degrees(np.arccos(np.clip((np.trace(start[:3, :3].T @ final[:3, :3]) - 1) / 2,
+                                                 -1, 1)))
+    print(f"straight 0.5 m: max deviation {deviation * 1000:.3f} mm, final error "
+          f"{position_error * 1000:.4f} mm, {angle_error:.5f} deg")
+    assert deviation < 0.5e-3
+    assert position_error < 0.1e-3 and angle_error < 0.01
+
+
+def test_an_out_of_range_joint_target_is_refused_and_nothing_moves(arm):
+    before = arm.joints().copy()
+    with pytest.raises(grpc.RpcError) as refused:
+        arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=JOINT, values=[0, 0, 2.6, 0, 0, 0]))  # J3 is limited to 145 deg
+    assert refused.value.code() is grpc.StatusCode.OUT_OF_RANGE
+    assert error_info(refused.value).metadata["ret_code"] == "-3"
+    assert arm.server.device.state is State.RESTING
+    assert np.max(np.abs(arm.joints() - before)) < 1e-6
+
+
+@pytest.mark.parametrize("values, code", [
+    ([math.nan, 0, 0, 0, 0, 0], grpc.StatusCode.INVALID_ARGUMENT),
+    ([0, 0, 0], grpc.StatusCode.INVALID_ARGUMENT),
+    ([5.0, 0, 0, 0, 0, 0], grpc.StatusCode.OUT_OF_RANGE),       # 5 m away: unreachable
+])
+def test_bad_cartesian_targets_are_refused(arm, values, code):
+    with pytest.raises(grpc.RpcError) as refused:
+        arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=BASE, values=values))
+    assert refused.value.code() is code
+    assert arm.server.device.state is State.RESTING
+
+
+def test_stop_mid_line_holds_on_the_path_and_resume_reaches_the_end(tmp_path):
+    arm = Arm(tmp_path, pace=2.0)
+    try:
+        start = arm.tip()
+        goal = start[:3, 3] + [0.0, 0.5, 0.0]
+        arm.record_start()
+        reply = arm.device.MoveRelative(motion_pb2.MoveRelativeRequest(
+            frame=BASE, values=[0.0, 0.5, 0.0, 0, 0, 0], motion_type=STRAIGHT, speed=20))
+        wait_until(lambda: np.linalg.norm(arm.tip()[:3, 3] - start[:3, 3]) > 0.2, timeout=20)
+        arm.device.StopMotion(motion_pb2.StopMotionRequest())
+        assert arm.server.device.state is State.PAUSED
+        state = arm.device.GetMotionControlState(settings_pb2.GetMotionControlStateRequest())
+        assert state.motion_control_state == "robot_paused"
+        held = arm.tip()[:3, 3]
+        assert np.linalg.norm(arm.server.device.feedback().velocity) < 1e-3
+        assert distance_to_line(held[None], start[:3, 3], goal)[0] < 0.5e-3
+
+        arm.device.ResumeMotion(motion_pb2.ResumeMotionRequest())
+        events = arm.wait_command(reply.ret_val.command_id)
+        assert [e.event_id for e in events] == ["command_started", "command_paused",
+                                                "command_resumed", "command_done"]
+        tips, _ = arm.recorded_tips()
+        assert distance_to_line(tips, start[:3, 3], goal).max() < 0.5e-3
+        assert np.linalg.norm(arm.tip()[:3, 3] - goal) < 0.1e-3
+    finally:
+        arm.close()
+
+
+def test_abort_after_stop_drops_the_motion(tmp_path):
+    arm = Arm(tmp_path, pace=2.0)
+    try:
+        reply = arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=JOINT, values=[1.5, 0, 1.5, 0, 1.5, 0], speed=10))
+        wait_until(lambda: abs(arm.joints()[0]) > 0.2, timeout=20)
+        arm.device.StopMotion(motion_pb2.StopMotionRequest())
+        arm.device.AbortMotion(motion_pb2.AbortMotionRequest())
+        assert arm.server.device.state is State.RESTING
+        phases = [e.event_id for e in arm.wait_command(reply.ret_val.command_id,
+                                                       ("command_aborted",))]
+        assert phases[-1] == "command_aborted"
+        state = arm.device.GetMotionControlState(settings_pb2.GetMotionControlStateRequest())
+        assert state.motion_control_state == "robot_stopped_on_command"
+        assert abs(arm.joints()[0] - 1.5) > 0.1  # it did not go on to the goal
+    finally:
+        arm.close()
+
+
+def test_an_arc_keeps_its_radius_and_ends_at_the_goal(arm):
+    start = arm.tip()
+    p0 = start[:3, 3]
+    # A half circle of radius 0.15 m in the horizontal plane, through p0 + (0.15, 0.15, 0).
+    via, goal = p0 + [0.15, 0.15, 0.0], p0 + [0.30, 0.0, 0.0]
+    rpy = [math.pi, 0.0, math.pi]   # the start orientation: the tool points down
+    arm.record_start()
+    reply = arm.device.MoveArc(motion_pb2.MoveArcRequest(
+        point_name="arc", frame=BASE, offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA,
+        arc_value=[*via, *rpy], goal_value=[*goal, *rpy], speed=50))
+    assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+    tips, _ = arm.recorded_tips()
+    centre = p0 + [0.15, 0.0, 0.0]
+    radius_error = np.abs(np.linalg.norm(tips - centre, axis=1) - 0.15).max()
+    final_error = np.linalg.norm(arm.tip()[:3, 3] - goal)
+    print(f"arc r = 0.15 m: radius error {radius_error * 1000:.3f} mm, final {final_error * 1000:.4f} mm")
+    assert radius_error < 0.5e-3 and final_error < 0.1e-3

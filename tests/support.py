@@ -1,0 +1,116 @@
+"""Helpers shared by the tests: servers, sessions, stubs, waiting."""
+from __future__ import annotations
+
+import time
+
+import grpc
+from google.rpc import error_details_pb2
+from grpc_status import rpc_status
+
+import numpy as np
+
+from landscape.client import Session
+from landscape.sim.kinematics import Kinematics
+from landscape.sim.recorder import read_recording
+from landscape.server.app import RunningServer, serve
+from landscape.server.config import ServerConfig
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
+                          event_service_pb2, event_service_pb2_grpc)
+
+
+def start_server(**config) -> RunningServer:
+    """A device server on a free loopback port, its simulated arm on the lock-step clock."""
+    return serve(ServerConfig(port=0, clock="lockstep", **config))
+
+
+def cell_file(directory, replacements: dict[str, str]) -> str:
+    """A copy of the default cell file with some of its text replaced; returns its path."""
+    from importlib import resources
+    text = resources.files("landscape.sim").joinpath("cells/default.toml").read_text()
+    for old, new in replacements.items():
+        assert old in text, old
+        text = text.replace(old, new)
+    path = directory / "cell.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def stubs(channel):
+    return (device_service_pb2_grpc.DeviceServiceStub(channel),
+            digital_io_service_pb2_grpc.DigitalIOServiceStub(channel),
+            event_service_pb2_grpc.EventServiceStub(channel))
+
+
+def error_info(error: grpc.RpcError) -> error_details_pb2.ErrorInfo:
+    status = rpc_status.from_call(error)
+    info = error_details_pb2.ErrorInfo()
+    assert status.details[0].Unpack(info)
+    return info
+
+
+def wait_until(predicate, timeout: float = 5.0, period: float = 0.005) -> float:
+    """Seconds it took for predicate() to hold; AssertionError after `timeout`."""
+    start = time.monotonic()
+    while not predicate():
+        if time.monotonic() - start > timeout:
+            raise AssertionError(f"not true within {timeout} s")
+        time.sleep(period)
+    return time.monotonic() - start
+
+
+def locked_session(server, name: str = "supervisor") -> Session:
+    channel = grpc.insecure_channel(server.target)
+    session = Session(channel, name).open()
+    session.lock()
+    return session
+
+
+def activate(session: Session) -> None:
+    device_service_pb2_grpc.DeviceServiceStub(session.channel).Activate(
+        control_pb2.ActivateRequest(), timeout=10)
+
+
+class Arm:
+    """An active arm: server (lock-step, `pace` as in ServerConfig), lock holder, stubs, an
+    event subscription from the first event, and the recorder writing into tmp_path."""
+
+    def __init__(self, tmp_path, pace=None):
+        self.record = tmp_path / "record.mcap"
+        cell = cell_file(tmp_path, {'path = "var/records/cs8.mcap"': f'path = "{self.record}"'})
+        self.server = start_server(cell=cell, lockstep_pace=pace)
+        self.session = locked_session(self.server)
+        activate(self.session)
+        self.device, _, events = stubs(self.session.channel)
+        self.events = events.Subscribe(event_service_pb2.SubscribeRequest(after_sequence=0))
+        self.kin = Kinematics(self.server.device.arm)
+        self.link = self.server.link
+        self.link.between_cycles(lambda c: c.rec_init())
+
+    def close(self):
+        self.events.cancel()
+        self.session.close()
+        self.server.stop(grace=None)
+
+    def wait_command(self, command_id, phases=("command_done", "command_failed")) -> list:
+        seen = []
+        for reply in self.events:
+            event = reply.event
+            if event.HasField("command") and event.command.command_id == command_id:
+                seen.append(event)
+                if event.event_id in phases:
+                    return seen
+        raise AssertionError("event stream ended")
+
+    def record_start(self):
+        self.link.between_cycles(lambda c: c.rec_start())
+
+    def recorded_tips(self) -> np.ndarray:
+        self.link.between_cycles(lambda c: (c.rec_stop(), c.rec_store()))
+        data = read_recording(str(self.record))
+        return self.kin.forward(data["fbk_pos"])[:, :3, 3], data
+
+    def joints(self) -> np.ndarray:
+        return self.server.device.feedback().position
+
+    def tip(self) -> np.ndarray:
+        return self.kin.forward(self.joints())
