@@ -13,7 +13,10 @@ from landscape.server.path_planning import PointSpec, at_point
 from landscape.server.targets import Frame
 from landscape.server.states import State
 from landscape.server.units import AngularUnit, LinearUnit, Units
-from landscape.v1 import types_pb2
+from google.protobuf import timestamp_pb2
+
+from landscape.server import events
+from landscape.v1 import event_service_pb2, types_pb2
 
 LINEAR = {types_pb2.LINEAR_UNIT_INCHES: LinearUnit.INCHES, types_pb2.LINEAR_UNIT_FEET: LinearUnit.FEET,
           types_pb2.LINEAR_UNIT_METERS: LinearUnit.METERS,
@@ -130,3 +133,75 @@ def path_load_stream(requests, units: Units):
     if header is None:
         raise ParamError("the PathLoad stream was empty")
     return header, frame, specs
+
+
+# ---- events (event_service.proto) ------------------------------------------------------------
+
+_PHASES = {phase: event_service_pb2.CommandEvent.Phase.Value(f"PHASE_{phase.name}")
+           for phase in events.Phase}
+_SEVERITIES = {severity: event_service_pb2.AlarmSeverity.Value(f"ALARM_SEVERITY_{severity.name}")
+               for severity in events.Severity}
+
+
+def event_to_proto(event: events.Event) -> event_service_pb2.Event:
+    """The landscape.v1 Event for a domain event (time: unix seconds -> Timestamp)."""
+    field, detail = _DETAILS[type(event.detail)](event.detail)
+    return event_service_pb2.Event(sequence=event.sequence, time=_timestamp(event.time),
+                    event_id=event.event_id, data=event.data, **{field: detail})
+
+
+def detail_to_proto(detail: events.Detail):
+    """The landscape.v1 message for one detail record, e.g. an RsvpRequest for a session."""
+    return _DETAILS[type(detail)](detail)[1]
+
+
+def _timestamp(unix_s: float) -> timestamp_pb2.Timestamp:
+    stamp = timestamp_pb2.Timestamp()
+    stamp.FromNanoseconds(round(unix_s * 1e9))
+    return stamp
+
+
+def _command(d: events.CommandEvent):
+    return "command", event_service_pb2.CommandEvent(
+        command_id=d.command_id, command=d.command, phase=_PHASES[d.phase],
+        point_name=d.point_name, tag_name=d.tag_name, tag_index=d.tag_index, message=d.message)
+
+
+def _alarm(d: events.Alarm):
+    return "alarm", event_service_pb2.Alarm(severity=_SEVERITIES[d.severity], code=d.code, message=d.message,
+                             command_id=d.command_id)
+
+
+def _state_change(d: events.StateChange):
+    return "state_change", event_service_pb2.StateChange(from_state=d.from_state, to_state=d.to_state,
+                                          reason=d.reason)
+
+
+def _digital_io(d: events.DigitalIOSignal):
+    return "digital_io", event_service_pb2.DigitalIOSignal(command_id=d.command_id, type=d.type,
+                                            unit_id=d.unit_id, bit_string=d.bit_string,
+                                            bits_on=d.bits_on)
+
+
+def _rsvp_request(d: events.RsvpRequest):
+    return "rsvp_request", event_service_pb2.RsvpRequest(
+        rsvp_id=d.rsvp_id, alarm=d.alarm, event_id=d.event_id, data=d.data, choices=d.choices,
+        default_choice=d.default_choice, timeout_ms=round(d.timeout_s * 1000))
+
+
+def _rsvp_answer(d: events.RsvpAnswer):
+    return "rsvp_answer", event_service_pb2.RsvpAnswer(rsvp_id=d.rsvp_id, choice=d.choice, data=d.data,
+                                        timed_out=d.timed_out)
+
+
+def _events_lost(d: events.EventsLost):
+    return "events_lost", event_service_pb2.EventsLost(first_sequence=d.first_sequence,
+                                        last_sequence=d.last_sequence)
+
+
+# One converter per detail type: (the Event oneof field, its message).
+_DETAILS = {
+    events.CommandEvent: _command, events.Alarm: _alarm, events.StateChange: _state_change,
+    events.DigitalIOSignal: _digital_io, events.RsvpRequest: _rsvp_request,
+    events.RsvpAnswer: _rsvp_answer, events.EventsLost: _events_lost,
+}

@@ -5,12 +5,12 @@ import logging
 import queue
 import threading
 
-from landscape.server import services
+from landscape.server import convert, services
 from landscape.server.device import Device
 from landscape.server.errors import ParamError
 from landscape.server.events import RsvpRequest
 from landscape.server.servicers.guard import guarded
-from landscape.v1 import event_service_pb2, session_service_pb2 as pb
+from landscape.v1 import session_service_pb2 as pb
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +40,7 @@ class SessionServicer(services.SESSIONS.servicer_base):
             except queue.Empty:
                 continue
             if isinstance(item, RsvpRequest):
-                item = pb.ConnectResponse(rsvp_request=_rsvp_request_pb(item))
+                item = pb.ConnectResponse(rsvp_request=convert.detail_to_proto(item))
             yield item
 
     def _read(self, request_iterator, session) -> None:
@@ -61,9 +61,3 @@ class SessionServicer(services.SESSIONS.servicer_base):
             reason = f"stream failed: {type(exc).__name__}"
         registry.end(session, reason)
 
-
-def _rsvp_request_pb(request: RsvpRequest) -> event_service_pb2.RsvpRequest:
-    return event_service_pb2.RsvpRequest(
-        rsvp_id=request.rsvp_id, alarm=request.alarm, event_id=request.event_id,
-        data=request.data, choices=request.choices, default_choice=request.default_choice,
-        timeout_ms=round(request.timeout_s * 1000))
