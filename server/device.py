@@ -43,6 +43,7 @@ log = logging.getLogger(__name__)
 ALARM_LOCK_HOLDER_LOST = 101
 ALARM_ESTOP = 102
 ALARM_CONTROLLER = 103
+ALARM_MOTION = 104
 
 ESTOP_RELEASED_QUESTION = "estop_released"   # RSVP to the lock holder: reset now?
 RESET, STAY = "reset", "stay"
@@ -350,8 +351,9 @@ class Device:
             self._motion_state = states.RUNNING_TRAJECTORY
             self._move_to(State.MOVING, f"{command} {point_name}".strip())
         self.bus.command(command_id, command, Phase.STARTED, point_name)
+        # Stop and resume ramps keep to the set acceleration, like the planned motion.
         self.link.send({"op": "run", "id": command_id, "segments": segments,
-                        "acceleration": np.array(self.arm.max_acceleration)})
+                        "acceleration": self._settings.joint_accelerations})
         return command_id
 
     def stop_motion(self, timeout: float = 10.0) -> None:
@@ -417,6 +419,10 @@ class Device:
         if phase is not None:
             self.bus.command(motion.command_id, motion.command, phase, motion.point_name,
                              message=msg.get("message", ""))
+        if op == "failed" or msg.get("message"):  # seed 3.4.1: an error alarm names the command
+            self.bus.alarm(Severity.ERROR if op == "failed" else Severity.WARNING,
+                           ALARM_MOTION, f"{motion.command} {motion.point_name}: "
+                           f"{msg.get('message', op)}".strip(), motion.command_id)
         with self._motion_changed:
             self._motion_changed.notify_all()
 

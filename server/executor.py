@@ -7,8 +7,11 @@ that enabling starts from where the arm is and never jumps (LLI 5.3.3).
 A motion is a timed trajectory sampled at the cycle time (motion/trajectory.py), played one
 sample per cycle. Stopping and resuming scale time, not space: a play rate r in [0, 1] advances
 the sample index by r per cycle, so the arm slows down and speeds up along the planned path and
-never leaves it (seed 3.6). The rate follows a smoothstep ramp whose length comes from the
-joint speeds and acceleration limits where the ramp starts.
+never leaves it (seed 3.6). Played at rate r, joint j moves at v_j r and accelerates at
+a_j r^2 + v_j dr/dt (v, a: the trajectory's at rate 1); each cycle the rate changes as fast as
+keeping every |a_j r^2 + v_j dr/dt| within the acceleration limit allows. dr/dt = 0 always
+qualifies (the trajectory is within the limits at r = 1, so at any r <= 1), so a stop or a
+restart never asks more of a joint than its limit.
 
 Messages, plain dicts (picklable, so they cross the process boundary):
   server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2, "segments": [
@@ -26,9 +29,6 @@ import numpy as np
 
 from landscape.sim.controller import Controller, EnableState, EstopState, JointCmd
 
-# Ramps take this much longer than the acceleration limits strictly need, leaving room for the
-# path's own acceleration during the ramp.
-RAMP_MARGIN = 1.5
 # At rest means: every joint this close to its command (rad) and this slow (rad/s); an arm that
 # is not there after SETTLE_TIMEOUT (s) is reported anyway, with its following error.
 SETTLE_POSITION = 1e-5
@@ -41,12 +41,12 @@ class _Motion:
 
     def __init__(self, msg: dict, dt: float):
         self.id = msg["id"]
+        self.dt = dt
         self.segments = list(msg["segments"])
         self._load(0)
-        self.acceleration = np.asarray(msg["acceleration"], dtype=float)
-        self.dt = dt
+        self.limit = np.asarray(msg["acceleration"], dtype=float)   # rad/s^2, per joint
         self.rate = 1.0         # samples per cycle
-        self.ramp = None        # (from_rate, to_rate, cycles, cycles_done) while ramping
+        self.target_rate = 1.0  # 0 while stopping, 1 while running or resuming
         self.paused = False
         self.abort_when_paused = False
         self.settling: str | None = None   # what to report once the arm has settled
@@ -57,6 +57,8 @@ class _Motion:
         segment = self.segments[index]
         self.positions = np.asarray(segment["positions"], dtype=float)
         self.velocities = np.asarray(segment["velocities"], dtype=float)
+        # The trajectory's acceleration at rate 1, sample i to i + 1 (rad/s^2).
+        self.accelerations = np.diff(self.velocities, axis=0, append=self.velocities[-1:]) / self.dt
         self.marks = list(segment.get("marks", ()))
         self.s = 0.0
 
@@ -78,19 +80,29 @@ class _Motion:
             return table[i]
         return table[i] + frac * (table[i + 1] - table[i])
 
-    def start_ramp(self, to_rate: float) -> None:
-        speed = np.abs(self.sample(self.velocities))   # at rate 1, rad/s
-        seconds = RAMP_MARGIN * float(np.max(speed / self.acceleration)) + 2 * self.dt
-        self.ramp = (self.rate, to_rate, max(2, round(seconds / self.dt)), 0)
+    @property
+    def ramping(self) -> bool:
+        return self.rate != self.target_rate
 
     def advance(self) -> None:
-        if self.ramp:
-            start, end, cycles, done = self.ramp
-            done += 1
-            x = done / cycles
-            self.rate = start + (end - start) * x * x * (3 - 2 * x)   # smoothstep
-            self.ramp = None if done >= cycles else (start, end, cycles, done)
+        if self.ramping:
+            self.rate = self._next_rate()
         self.s = min(self.s + self.rate, float(self.last))
+
+    def _next_rate(self) -> float:
+        """The rate one cycle on, moving towards the target as fast as the limits allow."""
+        i = min(int(self.s), self.last)
+        v, a, r = self.velocities[i], self.accelerations[i], self.rate
+        moving = np.abs(v) > 1e-9
+        if not np.any(moving):   # nothing moves here: the rate can jump
+            return self.target_rate
+        v, a, limit = v[moving], a[moving] * r * r, self.limit[moving]
+        # Per joint, dr/dt must keep a r^2 + v dr/dt within [-limit, limit].
+        bounds = np.sort(np.stack([(-limit - a) / v, (limit - a) / v]), axis=0)
+        lowest, highest = float(np.max(bounds[0])), float(np.min(bounds[1]))
+        if self.target_rate < r:   # stopping: the steepest fall every joint allows
+            return max(r + min(lowest, 0.0) * self.dt, self.target_rate)
+        return min(r + max(highest, 0.0) * self.dt, self.target_rate)
 
 
 class Executor:
@@ -143,7 +155,7 @@ class Executor:
                                       "label": motion.marks.pop(0)[1]})
             if motion.s >= motion.last and not motion.next_segment():
                 motion.settling = "done"
-            elif motion.ramp is None and motion.rate == 0.0 and not motion.paused:
+            elif motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused:
                 motion.settling = "aborted" if motion.abort_when_paused else "paused"
             else:
                 self._hold = motion.sample(motion.positions)
@@ -171,17 +183,17 @@ class Executor:
                 self._end("aborted")
             self._motion = _Motion(msg, self.cycle_time)
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
-            motion.start_ramp(0.0)
+            motion.target_rate = 0.0
         elif op == "resume" and motion is not None and motion.paused:
             motion.paused = False
-            motion.start_ramp(1.0)
+            motion.target_rate = 1.0
             self._reports.append({"op": "resumed", "id": motion.id})
         elif op == "abort" and motion is not None:
             if motion.paused:
                 self._end("aborted")
             elif motion.settling is None:  # never drop a moving arm: stop along the path first
                 motion.abort_when_paused = True
-                motion.start_ramp(0.0)
+                motion.target_rate = 0.0
 
     def _end(self, how: str, **details) -> None:
         self._reports.append({"op": how, "id": self._motion.id, **details})

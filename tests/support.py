@@ -35,6 +35,12 @@ def cell_file(directory, replacements: dict[str, str]) -> str:
     return str(path)
 
 
+def distance_to_line(points, a, b) -> np.ndarray:
+    direction = (b - a) / np.linalg.norm(b - a)
+    rel = points - a
+    return np.linalg.norm(rel - np.outer(rel @ direction, direction), axis=1)
+
+
 def stubs(channel):
     return (device_service_pb2_grpc.DeviceServiceStub(channel),
             digital_io_service_pb2_grpc.DigitalIOServiceStub(channel),

@@ -14,7 +14,7 @@ import pytest
 from landscape.server.states import State
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
-from support import Arm, error_info, wait_until
+from support import Arm, distance_to_line, error_info, wait_until
 
 JOINT, BASE = types_pb2.REFERENCE_FRAME_JOINT_FRAME, types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
 STRAIGHT = types_pb2.MOTION_TYPE_STRAIGHT_MOTION
@@ -25,12 +25,6 @@ def arm(tmp_path):
     a = Arm(tmp_path)
     yield a
     a.close()
-
-
-def distance_to_line(points, a, b) -> np.ndarray:
-    direction = (b - a) / np.linalg.norm(b - a)
-    rel = points - a
-    return np.linalg.norm(rel - np.outer(rel @ direction, direction), axis=1)
 
 
 def test_a_joint_move_reaches_its_goal_and_reports_started_then_done(arm):
@@ -153,3 +147,65 @@ def test_an_arc_keeps_its_radius_and_ends_at_the_goal(arm):
     final_error = np.linalg.norm(arm.tip()[:3, 3] - goal)
     print(f"arc r = 0.15 m: radius error {radius_error * 1000:.3f} mm, final {final_error * 1000:.4f} mm")
     assert radius_error < 0.5e-3 and final_error < 0.1e-3
+
+
+WORLD, TOOL = (types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
+               types_pb2.REFERENCE_FRAME_TOOL_FRAME)
+
+
+def test_moves_in_the_world_and_tool_frames_land_where_the_frames_say(arm):
+    arm.device.SetWorldCartesianFrame(settings_pb2.SetWorldCartesianFrameRequest(
+        frame=types_pb2.Pose(x=0.5, y=-0.2, yaw=math.pi / 2)))
+    arm.device.SetToolOffset(settings_pb2.SetToolOffsetRequest(offset=types_pb2.Pose(z=0.1)))
+    tcp = arm.server.device.settings.tool_offset
+    world = arm.server.device.settings.world_frame
+    # Absolute in the world frame: the tool tip to world (0.2, 0.1, 0.6), pointing down.
+    reply = arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        frame=WORLD, values=[0.2, 0.1, 0.6, math.pi, 0, 0], motion_type=STRAIGHT))
+    assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+    tip_world = np.linalg.inv(world) @ arm.tip() @ tcp
+    assert np.allclose(tip_world[:3, 3], [0.2, 0.1, 0.6], atol=1e-4)
+    assert np.allclose(tip_world[:3, 2], [0, 0, -1], atol=1e-4)
+    # Relative in the tool frame: 5 cm along the tool's own z (down, here).
+    before = arm.tip() @ tcp
+    reply = arm.device.MoveRelative(motion_pb2.MoveRelativeRequest(
+        frame=TOOL, values=[0, 0, 0.05, 0, 0, 0], motion_type=STRAIGHT))
+    arm.wait_command(reply.ret_val.command_id)
+    after = arm.tip() @ tcp
+    assert np.allclose(after[:3, 3], before[:3, 3] + 0.05 * before[:3, 2], atol=1e-4)
+    position = arm.device.GetRobotPosition(settings_pb2.GetRobotPositionRequest()).world_position
+    assert (position.x, position.y, position.z) == pytest.approx((0.2, 0.1, 0.55), abs=1e-4)
+
+
+def test_a_line_through_the_wrist_singularity_is_refused_before_anything_moves(arm):
+    arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        frame=JOINT, values=[0, 0.2, 1.2, 0, 0.4, 0]))
+    wait_until(lambda: arm.server.device.state is State.RESTING, timeout=10)
+    wait_until(lambda: abs(arm.joints()[4] - 0.4) < 1e-4, timeout=10)
+    before = arm.joints().copy()
+    # Tilting the tool back through q5 = 0 while moving: the wrist flips on the way.
+    with pytest.raises(grpc.RpcError) as refused:
+        arm.device.MoveRelative(motion_pb2.MoveRelativeRequest(
+            frame=BASE, values=[0, 0, 0, 0, -0.8, 0], motion_type=STRAIGHT))
+    assert refused.value.code() is grpc.StatusCode.OUT_OF_RANGE
+    info = error_info(refused.value)
+    assert info.reason == "UNREACHABLE" and "fraction" in info.metadata
+    assert np.max(np.abs(arm.joints() - before)) < 1e-6
+
+
+def test_stop_takes_no_longer_than_the_limits_need(tmp_path):
+    arm = Arm(tmp_path, pace=2.0)
+    try:
+        arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=JOINT, values=[2.5, 0, 1.5708, 0, 1.5708, 0], speed=60))
+        wait_until(lambda: abs(arm.server.device.feedback().velocity[0]) > 2.0, timeout=20)
+        at_request = arm.server.device.feedback()
+        arm.device.StopMotion(motion_pb2.StopMotionRequest())
+        travelled = abs(arm.joints()[0] - at_request.position[0])
+        v, a = abs(at_request.velocity[0]), arm.server.device.arm.max_acceleration[0] * 0.5
+        minimum = v * v / (2 * a)   # the shortest stop at the set acceleration (50 %)
+        print(f"stop from {v:.2f} rad/s: {travelled:.3f} rad, shortest possible {minimum:.3f} rad")
+        # Within 10 % of the shortest stop, plus what the request's latency lets it travel.
+        assert travelled < 1.1 * minimum + v * 0.05
+    finally:
+        arm.close()

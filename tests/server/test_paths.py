@@ -10,9 +10,9 @@ import pytest
 
 from landscape.server.states import State
 from landscape.sim.controller import DioStatus
-from landscape.v1 import motion_pb2, types_pb2
+from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
-from support import Arm, error_info, start_server, wait_until
+from support import Arm, distance_to_line, error_info, start_server, wait_until
 
 JOINT, BASE = types_pb2.REFERENCE_FRAME_JOINT_FRAME, types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
 ABSOLUTE = types_pb2.OFFSET_TYPE_ABSOLUTE_DATA
@@ -180,3 +180,28 @@ def test_paths_survive_a_restart(tmp_path):
         assert np.allclose(kept.points[3].joints, arm_points[3])
     finally:
         again.stop(grace=None)
+
+
+def test_a_relative_straight_path_draws_its_square_and_get_tag_id_follows(arm):
+    start = arm.tip()[:3, 3]
+    side = 0.2
+    offsets = [(side, 0), (0, side), (-side, 0), (0, -side)]
+    tags = [types_pb2.TagStruct(x=dx, y=dy, tag_name=f"c{i}") for i, (dx, dy) in enumerate(offsets)]
+    head = motion_pb2.PathHeader(path_name="square", frame=BASE,
+                                 motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION,
+                                 offset_type=types_pb2.OFFSET_TYPE_RELATIVE_DATA, number_of_points=4)
+    load(arm.device, head, tags)
+    arm.record_start()
+    run = arm.device.PathMove(motion_pb2.PathMoveRequest(path_name="square"))
+    assert tag_events(arm.wait_command(run.ret_val.command_id)) == ["c0", "c1", "c2", "c3"]
+    tips, _ = arm.recorded_tips()
+    corners = start + np.cumsum([[dx, dy, 0] for dx, dy in offsets], axis=0)
+    # From the first corner on (the approach to it is a joint move), every recorded tip lies on
+    # one of the square's sides.
+    first = np.argmax(np.linalg.norm(tips - corners[0], axis=1) < 1e-4)
+    off_square = np.min([distance_to_line(tips[first:], a, b)
+                         for a, b in zip(corners[:-1], corners[1:])], axis=0)
+    assert off_square.max() < 0.5e-3
+    assert np.linalg.norm(arm.tip()[:3, 3] - start) < 0.1e-3
+    reply = arm.device.GetTagId(settings_pb2.GetTagIdRequest())
+    assert (reply.path_name, reply.tag_id) == ("square", "c3")
