@@ -7,16 +7,18 @@ device's business.
 from __future__ import annotations
 
 import numpy as np
-
-from landscape.server.errors import CommandError, ParamError
-from landscape.server.path_planning import PointSpec, at_point
-from landscape.server.targets import Frame
-from landscape.server.states import State
-from landscape.server.units import AngularUnit, LinearUnit, Units
 from google.protobuf import timestamp_pb2
 
 from landscape.server import events
+from landscape.server.errors import CommandError, ParamError
+from landscape.server.path_planning import PointSpec, at_point
+from landscape.server.settings import Kind
+from landscape.server.states import State
+from landscape.server.targets import Frame
+from landscape.server.units import AngularUnit, LinearUnit, Units
 from landscape.v1 import event_service_pb2, types_pb2
+
+# ---- return values, states, units, settings --------------------------------------------------
 
 LINEAR = {types_pb2.LINEAR_UNIT_INCHES: LinearUnit.INCHES, types_pb2.LINEAR_UNIT_FEET: LinearUnit.FEET,
           types_pb2.LINEAR_UNIT_METERS: LinearUnit.METERS,
@@ -49,6 +51,23 @@ def _names(table: dict) -> list[str]:
     return [getattr(v, "name", str(v)) for v in table.values()]
 
 
+SPEED_KINDS = {types_pb2.SPEED_TYPE_PERCENT_SPEED: Kind.PERCENT,
+               types_pb2.SPEED_TYPE_LINEAR_SPEED: Kind.LINEAR,
+               types_pb2.SPEED_TYPE_ANGULAR_SPEED: Kind.ANGULAR}
+ACCEL_KINDS = {types_pb2.ACCEL_TYPE_PERCENT_ACCEL: Kind.PERCENT,
+               types_pb2.ACCEL_TYPE_LINEAR_ACCEL: Kind.LINEAR,
+               types_pb2.ACCEL_TYPE_ANGULAR_ACCEL: Kind.ANGULAR}
+
+
+def rate_to_si(kind: Kind, value: float, units: Units) -> float:
+    """A speed or acceleration in SI: percent stays, linear and angular scale with the units."""
+    if kind is Kind.LINEAR:
+        return float(units.length_to_si(value))
+    if kind is Kind.ANGULAR:
+        return float(units.angle_to_si(value))
+    return float(value)
+
+
 def units_from_pb(linear: int, angular: int) -> Units:
     return Units(enum_value(LINEAR, linear, "linear_units"), enum_value(ANGULAR, angular, "angular_units"))
 
@@ -68,6 +87,8 @@ def matrix_to_pose(matrix: np.ndarray, units: Units) -> types_pb2.Pose:
     x, y, z, roll, pitch, yaw = (float(v) for v in units.matrix_to_pose(matrix))
     return types_pb2.Pose(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw)
 
+
+# ---- moves and paths -------------------------------------------------------------------------
 
 FRAMES = {types_pb2.REFERENCE_FRAME_JOINT_FRAME: Frame.JOINT,
           types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME: Frame.BASE,

@@ -2,6 +2,7 @@
 validated, in SI. Immutable: a Set command builds a new value or changes nothing."""
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field, replace
 
@@ -29,6 +30,14 @@ def positive_at_most(name: str, value: float, maximum: float, unit: str = "") ->
     return float(value)
 
 
+class Kind(enum.Enum):
+    """What a speed or acceleration value means (the seed's SpeedType and AccelType)."""
+
+    PERCENT = "percent"    # of the maximum, for joint and Cartesian moves
+    LINEAR = "linear"      # m/s or m/s^2 of the tool tip, for Cartesian moves
+    ANGULAR = "angular"    # rad/s or rad/s^2 of the tool, for Cartesian moves
+
+
 @dataclass(frozen=True)
 class MotionSettings:
     """What the set commands set; lengths m, angles rad, times s."""
@@ -53,6 +62,14 @@ class MotionSettings:
                 object.__setattr__(self, name, default)
 
     # -- seed 3.2.1, values already in SI
+    def with_speed(self, kind: Kind, value: float) -> "MotionSettings":
+        return {Kind.PERCENT: self.with_speed_percent, Kind.LINEAR: self.with_linear_speed,
+                Kind.ANGULAR: self.with_angular_speed}[kind](value)
+
+    def with_accel(self, kind: Kind, value: float) -> "MotionSettings":
+        return {Kind.PERCENT: self.with_accel_percent, Kind.LINEAR: self.with_linear_accel,
+                Kind.ANGULAR: self.with_angular_accel}[kind](value)
+
     def with_speed_percent(self, value: float) -> "MotionSettings":
         return replace(self, speed_percent=positive_at_most("percent speed", value, 100.0, " %"))
 

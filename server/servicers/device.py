@@ -35,27 +35,15 @@ class DeviceServicer(services.DEVICE.servicer_base):
 
     # ---- 3.2 ----
     def SetSpeed(self, request, context):
-        units = self.device.settings.units
-        change = {
-            types_pb2.SPEED_TYPE_PERCENT_SPEED: lambda s: s.with_speed_percent(request.speed),
-            types_pb2.SPEED_TYPE_LINEAR_SPEED:
-                lambda s: s.with_linear_speed(float(units.length_to_si(request.speed))),
-            types_pb2.SPEED_TYPE_ANGULAR_SPEED:
-                lambda s: s.with_angular_speed(float(units.angle_to_si(request.speed))),
-        }
-        self.device.update_settings(convert.enum_value(change, request.attribute, "attribute"))
+        kind = convert.enum_value(convert.SPEED_KINDS, request.attribute, "attribute")
+        value = convert.rate_to_si(kind, request.speed, self.device.settings.units)
+        self.device.update_settings(lambda s: s.with_speed(kind, value))
         return settings_pb2.SetSpeedResponse(ret_val=convert.ok())
 
     def SetAcceleration(self, request, context):
-        units = self.device.settings.units
-        change = {
-            types_pb2.ACCEL_TYPE_PERCENT_ACCEL: lambda s: s.with_accel_percent(request.accel),
-            types_pb2.ACCEL_TYPE_LINEAR_ACCEL:
-                lambda s: s.with_linear_accel(float(units.length_to_si(request.accel))),
-            types_pb2.ACCEL_TYPE_ANGULAR_ACCEL:
-                lambda s: s.with_angular_accel(float(units.angle_to_si(request.accel))),
-        }
-        self.device.update_settings(convert.enum_value(change, request.attribute, "attribute"))
+        kind = convert.enum_value(convert.ACCEL_KINDS, request.attribute, "attribute")
+        value = convert.rate_to_si(kind, request.accel, self.device.settings.units)
+        self.device.update_settings(lambda s: s.with_accel(kind, value))
         return settings_pb2.SetAccelerationResponse(ret_val=convert.ok())
 
     def SetToolOffset(self, request, context):
