@@ -9,9 +9,9 @@ sample per cycle. Stopping and resuming scale time, not space: a play rate r in 
 the sample index by r per cycle, so the arm slows down and speeds up along the planned path and
 never leaves it (seed 3.6). Played at rate r, joint j moves at v_j r and accelerates at
 a_j r^2 + v_j dr/dt (v, a: the trajectory's at rate 1); each cycle the rate changes as fast as
-keeping every |a_j r^2 + v_j dr/dt| within the acceleration limit allows. dr/dt = 0 always
-qualifies (the trajectory is within the limits at r = 1, so at any r <= 1), so a stop or a
-restart never asks more of a joint than its limit.
+keeping every joint's acceleration within its limit allows. Keeping the rate always qualifies
+(the trajectory is within the limits at r = 1, so at any r <= 1), so a stop or a restart never
+asks more of a joint than its limit.
 
 Messages, plain dicts (picklable, so they cross the process boundary):
   server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2, "segments": [
@@ -90,19 +90,29 @@ class _Motion:
         self.s = min(self.s + self.rate, float(self.last))
 
     def _next_rate(self) -> float:
-        """The rate one cycle on, moving towards the target as fast as the limits allow."""
+        """The rate one cycle on, moving towards the target as fast as the limits allow.
+
+        Joint j's commanded velocity goes from v r to about v r' + a dt r'^2 (the path's own
+        change over the r' samples played), so its acceleration is A r'^2 + B (r' - r) with
+        B = |v| / dt and A = a sign(v); the next rate is the root of that equal to -limit
+        (stopping) or +limit (resuming), taken over the joints that bind.
+        """
         i = min(int(self.s), self.last)
-        v, a, r = self.velocities[i], self.accelerations[i], self.rate
+        v, r = self.sample(self.velocities), self.rate
         moving = np.abs(v) > 1e-9
         if not np.any(moving):   # nothing moves here: the rate can jump
             return self.target_rate
-        v, a, limit = v[moving], a[moving] * r * r, self.limit[moving]
-        # Per joint, dr/dt must keep a r^2 + v dr/dt within [-limit, limit].
-        bounds = np.sort(np.stack([(-limit - a) / v, (limit - a) / v]), axis=0)
-        lowest, highest = float(np.max(bounds[0])), float(np.min(bounds[1]))
-        if self.target_rate < r:   # stopping: the steepest fall every joint allows
-            return max(r + min(lowest, 0.0) * self.dt, self.target_rate)
-        return min(r + max(highest, 0.0) * self.dt, self.target_rate)
+        stopping = self.target_rate < r
+        b = np.abs(v[moving]) / self.dt
+        # The step may cross into the next sample interval: take the less favourable of the two.
+        signed = self.accelerations[i:i + 2, moving] * np.sign(v[moving])
+        a = signed.min(axis=0) if stopping else signed.max(axis=0)
+        c = b * r + (-self.limit[moving] if stopping else self.limit[moving])
+        # Root of a x^2 + b x - c = 0 in the form that stays exact as a goes to 0.
+        roots = 2 * c / (b + np.sqrt(np.maximum(b * b + 4 * a * c, 0.0)))
+        if stopping:
+            return min(max(float(np.max(roots)), self.target_rate), r)
+        return max(min(float(np.min(roots)), self.target_rate), r)
 
 
 class Executor:
