@@ -28,7 +28,7 @@ from landscape.server.events import EventBus, Phase, Severity
 from landscape.server import aux_commands, path_planning
 from landscape.server.moves import Planner
 from landscape.server.paths import PathStore, StoredPath
-from landscape.server.targets import Frame, check_pose_values, goal_tip
+from landscape.server.targets import Frame
 from landscape.server.rsvp import RsvpBroker
 from landscape.server.sessions import Session, SessionRegistry
 from landscape.server.settings import MotionSettings
@@ -298,41 +298,15 @@ class Device:
              relative: bool, straight: bool, speed_percent: float | None) -> str:
         """Seed 3.4.1 moveAbsolute / moveRelative: plan, then start; values in SI (joints rad;
         x, y, z m and roll, pitch, yaw rad). Nothing moves if planning fails."""
-        settings = self._settings
-        limits = self.planner.limits(settings, speed_percent)
-        q_now = self.planning_start()
-        tcp = settings.tool_offset
-        if frame is Frame.JOINT:
-            goal_q = self.planner.checked_joints(q_now + values if relative else values)
-            tip_goal = self.kinematics.forward(goal_q) @ tcp
-        else:
-            tip_now = self.kinematics.forward(q_now) @ tcp
-            tip_goal = goal_tip(frame, check_pose_values(values), relative, tip_now, settings)
-        if straight:
-            trajectory = self.planner.straight_move(q_now, tip_goal, limits, tcp)
-        else:
-            if frame is not Frame.JOINT:
-                goal_q = self.planner.pose_goal_joints(q_now, tip_goal @ np.linalg.inv(tcp))
-            trajectory = self.planner.joint_move(q_now, goal_q, limits)
+        trajectory = self.planner.move(self.planning_start(), self._settings, frame, values,
+                                       relative, straight, speed_percent)
         return self.start_motion(command, point_name, [trajectory])
 
     def move_arc(self, point_name: str, frame: Frame, via: np.ndarray, goal: np.ndarray,
                  relative: bool, speed_percent: float | None) -> str:
-        """Seed 3.4.1 moveArc: the tool tip on the circle through the arc point to the goal.
-        JOINT_FRAME points are taken through forward kinematics; relative points are offsets
-        from where the tip is now."""
-        settings = self._settings
-        limits = self.planner.limits(settings, speed_percent)
-        q_now = self.planning_start()
-        tcp = settings.tool_offset
-        tip_now = self.kinematics.forward(q_now) @ tcp
-        if frame is Frame.JOINT:
-            tips = [self.kinematics.forward(self.planner.checked_joints(q_now + v if relative else v))
-                    @ tcp for v in (via, goal)]
-        else:
-            tips = [goal_tip(frame, check_pose_values(v), relative, tip_now, settings)
-                    for v in (via, goal)]
-        trajectory = self.planner.arc_move(q_now, tips[0], tips[1], limits, tcp)
+        """Seed 3.4.1 moveArc: the tool tip on the circle through the arc point to the goal."""
+        trajectory = self.planner.arc(self.planning_start(), self._settings, frame, via, goal,
+                                      relative, speed_percent)
         return self.start_motion("MoveArc", point_name, [trajectory])
 
     def start_motion(self, command: str, point_name: str, trajectories: list,

@@ -10,7 +10,7 @@ from landscape.server.motion.cartesian import arc, straight_line, tool_pose
 from landscape.server.motion.timing import time_path
 from landscape.server.motion.trajectory import Limits, PlanningError, Trajectory
 from landscape.server.settings import MotionSettings
-from landscape.server.targets import check_joints
+from landscape.server.targets import Frame, check_joints, check_pose_values, goal_tip
 from landscape.sim.kinematics import Config, Kinematics, PosNeg, Shoulder
 
 SAME_CONFIG = Config(Shoulder.SAME, PosNeg.SAME, PosNeg.SAME)
@@ -32,8 +32,39 @@ class Planner:
                              settings.linear_speed * speed / 100.0,
                              settings.angular_speed * speed / 100.0)
 
-    def checked_joints(self, joints) -> np.ndarray:
-        return check_joints(self.arm, joints)
+    def move(self, q_now, settings: MotionSettings, frame: Frame, values: np.ndarray,
+             relative: bool, straight: bool, speed_percent: float | None) -> Trajectory:
+        """Seed 3.4.1 moveAbsolute / moveRelative from q_now (rad); values in SI (joints rad;
+        x, y, z m and roll, pitch, yaw rad). The tool tip goes straight, or the joints
+        interpolate."""
+        limits = self.limits(settings, speed_percent)
+        tcp = settings.tool_offset
+        if frame is Frame.JOINT:
+            goal_q = check_joints(self.arm, q_now + values if relative else values)
+            tip_goal = self.kinematics.forward(goal_q) @ tcp
+        else:
+            tip_now = self.kinematics.forward(q_now) @ tcp
+            tip_goal = goal_tip(frame, check_pose_values(values), relative, tip_now, settings)
+        if straight:
+            return self.straight_move(q_now, tip_goal, limits, tcp)
+        if frame is not Frame.JOINT:
+            goal_q = self.pose_goal_joints(q_now, tip_goal @ np.linalg.inv(tcp))
+        return self.joint_move(q_now, goal_q, limits)
+
+    def arc(self, q_now, settings: MotionSettings, frame: Frame, via: np.ndarray,
+            goal: np.ndarray, relative: bool, speed_percent: float | None) -> Trajectory:
+        """Seed 3.4.1 moveArc: JOINT_FRAME points are taken through forward kinematics;
+        relative points are offsets from where the tip is now."""
+        limits = self.limits(settings, speed_percent)
+        tcp = settings.tool_offset
+        tip_now = self.kinematics.forward(q_now) @ tcp
+        if frame is Frame.JOINT:
+            tips = [self.kinematics.forward(check_joints(self.arm, q_now + v if relative else v))
+                    @ tcp for v in (via, goal)]
+        else:
+            tips = [goal_tip(frame, check_pose_values(v), relative, tip_now, settings)
+                    for v in (via, goal)]
+        return self.arc_move(q_now, tips[0], tips[1], limits, tcp)
 
     def joint_move(self, q_now, q_goal, limits: Limits) -> Trajectory:
         return self.timed(np.array([q_now, check_joints(self.arm, q_goal)]), limits)

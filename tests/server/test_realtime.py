@@ -1,0 +1,54 @@
+"""The product as `make run` starts it: the device server with its cycle process on the real-time
+clock (4 ms), driven from another process over gRPC."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import grpc
+import numpy as np
+import pytest
+
+from landscape.client import Session
+from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, settings_pb2, types_pb2
+
+from support import stubs
+
+
+@pytest.fixture(scope="module")
+def target(tmp_path_factory):
+    paths = tmp_path_factory.mktemp("var") / "paths.sqlite3"
+    proc = subprocess.Popen([sys.executable, "-m", "landscape.server", "--port", "0",
+                             "--paths", str(paths)], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
+    try:
+        for line in proc.stdout:   # pybullet prints its own lines first
+            if "listening on" in line:
+                break
+        else:
+            raise AssertionError("the server exited without listening")
+        yield line.rsplit(" ", 1)[-1].strip()
+    finally:
+        proc.terminate()
+        assert proc.wait(timeout=20) == 0   # a clean stop: drives off, cycle process gone
+
+
+def test_a_move_on_the_real_time_clock(target):
+    with grpc.insecure_channel(target) as channel, Session(channel, "realtime") as session:
+        device, _, events = stubs(session.channel)
+        stream = events.Subscribe(event_service_pb2.SubscribeRequest())
+        session.lock()
+        device.Activate(control_pb2.ActivateRequest(), timeout=10)
+        goal = [0.4, -0.1, 1.7, 0.0, 1.2, 0.2]
+        reply = device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            point_name="rt", frame=types_pb2.REFERENCE_FRAME_JOINT_FRAME, values=goal, speed=50))
+        done = next(r.event for r in stream if r.event.HasField("command")
+                    and r.event.command.command_id == reply.ret_val.command_id
+                    and r.event.event_id in ("command_done", "command_failed"))
+        stream.cancel()
+        assert done.event_id == "command_done"
+        position = device.GetRobotPosition(settings_pb2.GetRobotPositionRequest())
+        assert np.max(np.abs(np.array(position.joint_position) - goal)) < 1e-4
+        device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+        state = device.GetMotionControlState(settings_pb2.GetMotionControlStateRequest())
+        assert state.control_mode == "power_off"
