@@ -18,6 +18,7 @@ from landscape.server.events import EventBus
 from landscape.server.paths import PathStore
 from landscape.server.reflection_pool import MethodResolvingPool
 from landscape.server.servicers.device import DeviceServicer
+from landscape.server.stream_limit import StreamLimitInterceptor
 from landscape.server.servicers.digital_io import DigitalIOServicer
 from landscape.server.servicers.events import EventServicer
 from landscape.server.servicers.session import SessionServicer
@@ -66,7 +67,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
 
     server = grpc.server(
         futures.ThreadPoolExecutor(max_workers=config.max_workers, thread_name_prefix="rpc"),
-        interceptors=[ErrorMappingInterceptor()],
+        interceptors=[StreamLimitInterceptor(config.max_streams), ErrorMappingInterceptor()],
         options=[("grpc.max_receive_message_length", config.max_message_bytes),
                  ("grpc.so_reuseport", 0)],
     )

@@ -11,8 +11,10 @@ DEFAULT_PORT = 50051
 class ServerConfig:
     address: str = DEFAULT_ADDRESS
     port: int = DEFAULT_PORT          # 0 picks a free port
-    # Worker threads; each open stream (session, subscription, jog) holds one.
-    max_workers: int = 64
+    # Worker threads; each open stream (session, subscription, jog) holds one while it lasts,
+    # so streams get at most max_streams of them and commands always find one free.
+    max_workers: int = 128
+    max_streams: int = 96
     # Largest request accepted; larger ones fail with RESOURCE_EXHAUSTED. Paths stream in
     # chunks, so no single message needs to be big.
     max_message_bytes: int = 4 * 1024 * 1024

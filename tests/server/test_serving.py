@@ -1,6 +1,8 @@
 """The device server serves the contract, health checking and reflection on loopback."""
 from __future__ import annotations
 
+import time
+
 import grpc
 import pytest
 from grpc_health.v1 import health_pb2, health_pb2_grpc
@@ -52,3 +54,37 @@ def test_an_oversized_message_is_refused_and_the_server_keeps_serving(channel, s
     assert err.value.code() == grpc.StatusCode.RESOURCE_EXHAUSTED
     reply = stub.GetRobotDescription(control_pb2.GetRobotDescriptionRequest(), timeout=5)
     assert reply.robot_type == "TX90"
+
+
+def test_streams_beyond_the_limit_are_refused_and_commands_still_run():
+    from support import start_server
+    from landscape.v1 import event_service_pb2, event_service_pb2_grpc
+    server = start_server(max_streams=2)
+    try:
+        with grpc.insecure_channel(server.target) as channel:
+            events = event_service_pb2_grpc.EventServiceStub(channel)
+            open_streams = [events.Subscribe(event_service_pb2.SubscribeRequest(after_sequence=0))
+                            for _ in range(2)]
+            for stream in open_streams:
+                next(stream)   # both are live
+            with pytest.raises(grpc.RpcError) as refused:
+                next(events.Subscribe(event_service_pb2.SubscribeRequest(), timeout=5))
+            assert refused.value.code() == grpc.StatusCode.RESOURCE_EXHAUSTED
+            device = device_service_pb2_grpc.DeviceServiceStub(channel)
+            state = device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=5).state
+            assert state == types_pb2.DEVICE_STATE_UNLOCKED
+            open_streams[0].cancel()
+            # Its slot comes back once the server has seen the cancellation.
+            deadline = time.monotonic() + 5
+            while True:
+                try:
+                    third = events.Subscribe(event_service_pb2.SubscribeRequest(after_sequence=0))
+                    next(third)
+                    break
+                except grpc.RpcError:
+                    assert time.monotonic() < deadline
+                    time.sleep(0.05)
+            third.cancel()
+            open_streams[1].cancel()
+    finally:
+        server.stop(grace=None)
