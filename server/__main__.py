@@ -24,9 +24,13 @@ def parse_args(argv=None) -> ServerConfig:
     parser.add_argument("--paths", default="var/paths.sqlite3",
                         help="SQLite file keeping the named paths across restarts "
                              "(default %(default)s)")
+    parser.add_argument("--max-streams", type=int, default=ServerConfig.max_streams,
+                        help="most open sessions, subscriptions and jogs at once "
+                             "(default %(default)s)")
     args = parser.parse_args(argv)
     return ServerConfig(address=args.address, port=args.port, cell=args.cell, clock=args.clock,
-                        paths_file=args.paths)
+                        paths_file=args.paths, max_streams=args.max_streams,
+                        max_workers=args.max_streams + 32)
 
 
 def main(argv=None) -> None:
