@@ -10,7 +10,7 @@ import numpy as np
 from google.protobuf import timestamp_pb2
 
 from landscape.server import events
-from landscape.server.errors import CommandError, ParamError
+from landscape.server.errors import CommandError, OutOfRange, ParamError
 from landscape.server.path_planning import PointSpec, at_point
 from landscape.server.settings import Kind
 from landscape.server.states import State
@@ -135,10 +135,13 @@ def point_spec(tag: types_pb2.TagStruct, frame: Frame, units: Units) -> PointSpe
                      tuple(tag.aux_commands))
 
 
-def path_load_stream(requests, units: Units):
-    """The PathLoad stream: its header (from the first message) and every point, in SI."""
+def path_load_stream(requests, units: Units, max_points: int):
+    """The PathLoad stream: its header (from the first message) and every point, in SI; a
+    stream of more than `max_points` points is refused as soon as it gets there."""
     header, specs, frame = None, [], None
     for index, request in enumerate(requests):
+        if len(specs) + len(request.tags) > max_points:
+            raise OutOfRange(f"a path holds at most {max_points} points")
         if index == 0:
             if not request.HasField("header"):
                 raise ParamError("the first PathLoad message must carry the header")

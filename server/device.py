@@ -23,7 +23,7 @@ import numpy as np
 
 from landscape.server import states
 from landscape.server.errors import (ControllerFailure, EstopActive, NotFound, NotLockHolder,
-                                     ParamError, WrongState)
+                                     OutOfRange, ParamError, WrongState)
 from landscape.server.events import EventBus, Phase, Severity
 from landscape.server import aux_commands, path_planning
 from landscape.server.moves import Planner
@@ -416,6 +416,8 @@ class Device:
         if path.straight != straight:
             raise ParamError(f"path {name!r} holds {'straight' if path.straight else 'joint'} "
                              f"motion; load the same motion type or clear it first")
+        if len(path.points) + len(specs) > path_planning.MAX_POINTS:
+            raise OutOfRange(f"path {name!r} would hold more than {path_planning.MAX_POINTS} points")
         q_prev = np.array(path.points[-1].joints) if path.points else self.planning_start()
         points = path_planning.resolve(self.planner, path, q_prev, frame, relative, specs,
                                        settings, self.outputs, first_index=len(path.points))

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from landscape.server.errors import OutOfRange, Unreachable
+from landscape.server.errors import OutOfRange, ParamError, Unreachable
 from landscape.server.motion.cartesian import arc, straight_line, tool_pose
 from landscape.server.motion.timing import time_path
 from landscape.server.motion.trajectory import Limits, PlanningError, Trajectory
@@ -26,7 +26,9 @@ class Planner:
 
     def limits(self, settings: MotionSettings, speed_percent: float | None) -> Limits:
         speed = settings.speed_percent if speed_percent is None else speed_percent
-        if not (math.isfinite(speed) and 0 < speed <= 100):
+        if not math.isfinite(speed):
+            raise ParamError(f"move speed must be a finite number, got {speed}")
+        if not 0 < speed <= 100:
             raise OutOfRange(f"move speed must be above 0 and at most 100 %, got {speed}")
         return Limits.scaled(self.arm, speed, settings.accel_percent,
                              settings.linear_speed * speed / 100.0,

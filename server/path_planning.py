@@ -29,6 +29,7 @@ from landscape.server.settings import MotionSettings
 from landscape.server.targets import Frame, check_joints, check_pose_values, goal_tip
 
 MAX_CYCLES = 10_000
+MAX_POINTS = 100_000    # per path: a bound on what one client can make the server keep
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ UNIMPLEMENTED after that check.
 """
 from __future__ import annotations
 
-from landscape.server import convert, services
+from landscape.server import convert, path_planning, services
 from landscape.server.device import Device
 from landscape.server.servicers.guard import guarded
 from landscape.sim.arm import urdf
@@ -143,7 +143,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
 
     # ---- 3.5 paths ----
     def PathLoad(self, request_iterator, context):
-        header, frame, specs = convert.path_load_stream(request_iterator, self.device.settings.units)
+        header, frame, specs = convert.path_load_stream(request_iterator, self.device.settings.units,
+                                                        path_planning.MAX_POINTS)
         loaded, length = self.device.path_load(
             header.path_name, frame, convert.enum_value(convert.STRAIGHT, header.motion_type,
                                                         "motion_type (JOINT or STRAIGHT)"),
