@@ -79,8 +79,7 @@ def check_limits(arm, data):
     vel = np.abs(data["cmd_vel"]).max(axis=0)
     acc = np.abs(np.diff(data["cmd_vel"], axis=0) / 0.004).max(axis=0)
     assert np.all(vel <= settings.joint_velocities * (1 + 1e-6)), vel
-    # Resampled at the cycle, the commanded acceleration stays within a few percent.
-    assert np.all(acc <= settings.joint_accelerations * 1.05), acc / settings.joint_accelerations
+    assert np.all(acc <= settings.joint_accelerations * (1 + 1e-6)), acc / settings.joint_accelerations
 
 
 def test_an_unreachable_point_fails_the_load_by_index_and_nothing_is_stored(arm):
