@@ -23,11 +23,11 @@ import numpy as np
 
 from landscape.server import states
 from landscape.server.errors import (ControllerFailure, EstopActive, NotFound, NotLockHolder,
-                                     OutOfRange, ParamError, WrongState)
+                                     ParamError, WrongState)
 from landscape.server.events import EventBus, Phase, Severity
 from landscape.server import aux_commands, path_planning
 from landscape.server.moves import Planner
-from landscape.server.paths import PathStore, StoredPath
+from landscape.server.paths import PathLibrary, PathStore
 from landscape.server.targets import Frame
 from landscape.server.rsvp import RsvpBroker
 from landscape.server.sessions import Session, SessionRegistry
@@ -113,8 +113,7 @@ class Device:
         self._command_ids = itertools.count(1)
         self.last_tag = ("", "")   # (path name, tag name), for getTagId
         self.outputs = set(outputs)  # digital outputs aux commands may set
-        self.path_store = paths or PathStore()
-        self.paths = self.path_store.load_all()
+        self.paths = PathLibrary(paths or PathStore())
 
     # ---- life cycle ------------------------------------------------------------------------
 
@@ -132,7 +131,8 @@ class Device:
             self._error = "e-stop pressed"
 
     def close(self) -> None:
-        self.sessions.close()
+        self.sessions.close()   # runs the disconnect handler for the lock holder, if any
+        self.paths.close()
 
     # ---- state -----------------------------------------------------------------------------
 
@@ -402,38 +402,22 @@ class Device:
 
     # ---- 3.5 paths ---------------------------------------------------------------------------------
 
-    def path_load(self, name: str, frame, straight: bool, relative: bool, specs,
+    def path_load(self, name: str, frame: Frame, straight: bool, relative: bool, specs,
                   total: int | None = None) -> tuple[int, int]:
         """Seed 3.5.1 pathLoad: resolve and check every point, then append them to the named
         queue in one transaction; nothing is stored if any point fails. Returns (points
         loaded, path length)."""
-        if not name:
-            raise ParamError("a path needs a name")
-        if total is not None and total != len(specs):
-            raise ParamError(f"number_of_points says {total}, the stream carried {len(specs)}")
-        settings = self._settings
-        path = self.paths.get(name) or StoredPath(name, straight, tuple(settings.tool_offset.ravel()))
-        if path.straight != straight:
-            raise ParamError(f"path {name!r} holds {'straight' if path.straight else 'joint'} "
-                             f"motion; load the same motion type or clear it first")
-        if len(path.points) + len(specs) > path_planning.MAX_POINTS:
-            raise OutOfRange(f"path {name!r} would hold more than {path_planning.MAX_POINTS} points")
-        q_prev = np.array(path.points[-1].joints) if path.points else self.planning_start()
-        points = path_planning.resolve(self.planner, path, q_prev, frame, relative, specs,
-                                       settings, self.outputs, first_index=len(path.points))
-        extended = path.appended(points)
-        self.path_store.put(extended)
-        self.paths[name] = extended
-        return len(points), len(extended.points)
+        path = path_planning.load(self.planner, self.paths.get(name), name, frame, straight,
+                                  relative, specs, self._settings, self.outputs,
+                                  self.planning_start(), total)
+        self.paths.put(path)
+        return len(specs), len(path.points)
 
     def path_clear(self, name: str) -> None:
         motion = self._motion
         if motion is not None and motion.point_name == name and motion.command == "PathMove":
             raise WrongState(f"path {name!r} is running; stop and abort it first")
-        if name not in self.paths:
-            raise NotFound(f"no path named {name!r}")
-        self.path_store.delete(name)
-        del self.paths[name]
+        self.paths.delete(name)
 
     def path_move(self, name: str, cycles: int) -> str:
         """Seed 3.5.2 pathMove: `cycles` passes; 0 is a dry run without aux commands."""

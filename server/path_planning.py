@@ -64,6 +64,27 @@ def _check_numbers(spec: PointSpec) -> None:
             raise OutOfRange(f"{name} {getattr(spec, name):g} is not a percent (0 to 100)")
 
 
+def load(planner: Planner, existing: StoredPath | None, name: str, frame: Frame, straight: bool,
+         relative: bool, specs: list[PointSpec], settings: MotionSettings, outputs: set[str],
+         q_start: np.ndarray, total: int | None = None) -> StoredPath:
+    """Seed 3.5.1 pathLoad: `existing` (or a new path) with `specs` appended, every point
+    resolved and checked; raises naming the first bad point. q_start: where a new path starts
+    from (rad). total: the point count the client announced, if any."""
+    if not name:
+        raise ParamError("a path needs a name")
+    if total is not None and total != len(specs):
+        raise ParamError(f"number_of_points says {total}, the stream carried {len(specs)}")
+    path = existing or StoredPath(name, straight, tuple(settings.tool_offset.ravel()))
+    if path.straight != straight:
+        raise ParamError(f"path {name!r} holds {'straight' if path.straight else 'joint'} "
+                         f"motion; load the same motion type or clear it first")
+    if len(path.points) + len(specs) > MAX_POINTS:
+        raise OutOfRange(f"path {name!r} would hold more than {MAX_POINTS} points")
+    q_prev = np.array(path.points[-1].joints) if path.points else q_start
+    return path.appended(resolve(planner, path, q_prev, frame, relative, specs, settings, outputs,
+                                 first_index=len(path.points)))
+
+
 def resolve(planner: Planner, path: StoredPath, q_prev: np.ndarray, frame: Frame, relative: bool,
             specs: list[PointSpec], settings: MotionSettings, outputs: set[str],
             first_index: int = 0) -> list[PathPoint]:

@@ -10,10 +10,13 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path as FilePath
 
 import numpy as np
+
+from landscape.server.errors import NotFound
 
 
 @dataclass(frozen=True)
@@ -80,6 +83,36 @@ class PathStore:
     def close(self) -> None:
         with self._lock:
             self._db.close()
+
+
+class PathLibrary(Mapping):
+    """The named paths by name, in memory and written through to their store."""
+
+    def __init__(self, store: PathStore):
+        self._store = store
+        self._paths = store.load_all()
+
+    def __getitem__(self, name: str) -> StoredPath:
+        return self._paths[name]
+
+    def __iter__(self):
+        return iter(self._paths)
+
+    def __len__(self) -> int:
+        return len(self._paths)
+
+    def put(self, path: StoredPath) -> None:
+        self._store.put(path)   # first: if the write fails, memory keeps the old path too
+        self._paths[path.name] = path
+
+    def close(self) -> None:
+        self._store.close()
+
+    def delete(self, name: str) -> None:
+        if name not in self._paths:
+            raise NotFound(f"no path named {name!r}")
+        self._store.delete(name)
+        del self._paths[name]
 
 
 def _decode(name: str, body: str) -> StoredPath:
