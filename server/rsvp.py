@@ -34,15 +34,15 @@ class RsvpBroker:
             raise ValueError(f"default {default!r} is not among the choices {choices!r}")
         rsvp_id = f"rsvp-{next(self._ids)}"
         event = self.bus.rsvp_request(rsvp_id, event_id, data, choices, default, timeout_s, alarm)
-        pending = _Pending(session, event.detail, threading.Event()) if session else None
-        if pending:
+        if session is not None:
+            pending = _Pending(session, event.detail, threading.Event())
             with self._lock:
                 self._pending[rsvp_id] = pending
             session.outbox.put(event.detail)
-            answered = (pending.answered.wait(timeout_s) or False) and pending.answer is not None
+            pending.answered.wait(timeout_s)   # also woken by abandon(): then no answer
             with self._lock:
                 self._pending.pop(rsvp_id, None)
-            if answered:
+            if pending.answer is not None:
                 self.bus.rsvp_answer(rsvp_id, pending.answer.choice, pending.answer.data)
                 return pending.answer
         self.bus.rsvp_answer(rsvp_id, default, tuple(data), timed_out=True)

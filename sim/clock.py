@@ -12,17 +12,23 @@ A controller here is anything with `step()` and `cycle_time` (s): the pybullet b
 """
 from __future__ import annotations
 
+import functools
 import itertools
+import logging
 import math
 import multiprocessing
 import os
 import queue
 import threading
+import time
 import traceback
+from concurrent.futures import Future
 from typing import Any, Callable
 
 from landscape.sim import cycle_process as cp
 from landscape.sim.cycle_stats import CycleStats, StatsRing
+
+log = logging.getLogger(__name__)
 
 
 class LockStepClock:
@@ -344,3 +350,106 @@ class _Pending:
         self.done = threading.Event()
         self.ok = False
         self.value: Any = None
+
+
+class ThreadedLockStepClock:
+    """The lock-step clock free running on a thread of this process, with RealTimeClock's
+    surface (proxy, call, send, on_message, set_event_func, between_cycles, stop), so a device
+    server can run on either.
+
+    factory(mailbox) builds the controller, here. Cycles run back to back; pace: at most this
+    many simulated seconds per wall second (None: as fast as the CPU goes). Calls and messages
+    are served between cycles, as the cycle process does, so the controller is only ever
+    touched by the cycle thread. Messages and events go to a dispatch thread, as in
+    RealTimeClock, so their handlers may make proxy calls.
+    """
+
+    def __init__(self, factory: Callable[[cp.Mailbox], cp.Steppable],
+                 on_message: Callable[[Any], None] | None = None, pace: float | None = None,
+                 call_timeout: float = 5.0):
+        self._pace = pace
+        self._mailbox = cp.Mailbox()
+        self.controller = factory(self._mailbox)
+        self.cycle_time = self.controller.cycle_time
+        self._on_message = on_message
+        self._event_func: Callable[[str], None] | None = None
+        self._calls: queue.SimpleQueue = queue.SimpleQueue()
+        self._dispatch_queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._running = True
+        self.call_timeout = call_timeout
+        self._threads = [threading.Thread(target=self._run, name="lockstep-cycle", daemon=True),
+                         threading.Thread(target=self._dispatch, name="lockstep-dispatch",
+                                          daemon=True)]
+        for thread in self._threads:
+            thread.start()
+
+    @functools.cached_property
+    def proxy(self):
+        """A `Controller` whose asynchronous calls run on the cycle thread."""
+        from landscape.sim.controller_proxy import ControllerProxy  # needs the LLI types
+        return ControllerProxy(self)
+
+    def call(self, method: str, *args, timeout: float | None = None) -> Any:
+        """Run `method(*args)` on the controller between cycles (cycle_process.serve_call)."""
+        future: Future = Future()
+        self._calls.put((future, method, args))
+        return future.result(self.call_timeout if timeout is None else timeout)
+
+    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None) -> Any:
+        """Run `func(controller, *args)` on the cycle thread between two cycles: for what the
+        LLI has no call for (the simulator's panel and sensors)."""
+        return self.call(cp.RUN, func, args, timeout=timeout)
+
+    def send(self, msg: Any) -> None:
+        self._mailbox.inbox.append(msg)
+
+    def set_event_func(self, func: Callable[[str], None] | None) -> None:
+        self._event_func = func
+
+    def stop(self) -> None:
+        if self._running:
+            self._running = False
+            self._dispatch_queue.put(None)
+            for thread in self._threads:
+                thread.join(5.0)
+
+    def _run(self) -> None:
+        step, outbox = self.controller.step, self._mailbox.outbox
+        started, cycles = time.monotonic(), 0
+        try:
+            while self._running:
+                step()
+                cycles += 1
+                if self._pace:  # keep simulated time from running ahead of the wall clock
+                    ahead = cycles * self.cycle_time / self._pace - (time.monotonic() - started)
+                    if ahead > 0:
+                        time.sleep(ahead)
+                while outbox:
+                    self._dispatch_queue.put(outbox.popleft())
+                while not self._calls.empty():
+                    self._serve(*self._calls.get())
+                time.sleep(0)  # let the server's threads have the interpreter between cycles
+        finally:
+            for name in ("disable", "destroy"):
+                try:
+                    getattr(self.controller, name)()
+                except Exception:
+                    log.exception("controller %s failed while stopping", name)
+
+    def _dispatch(self) -> None:
+        while (item := self._dispatch_queue.get()) is not None:
+            kind, payload = item
+            handler = self._on_message if kind == cp.MSG else self._event_func
+            if handler is not None:
+                try:
+                    handler(payload)
+                except Exception:
+                    log.exception("handling a %s from the cycle failed", kind)
+
+    def _serve(self, future: Future, method: str, args: tuple) -> None:
+        try:
+            value = cp.serve_call(self.controller, self._mailbox, method, args)
+        except Exception as exc:
+            future.set_exception(exc)
+        else:
+            future.set_result(value)

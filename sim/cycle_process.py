@@ -108,6 +108,21 @@ class Mailbox:
         self.outbox.append(item)
 
 
+def serve_call(controller, mailbox: Mailbox, method: str, args: tuple) -> Any:
+    """What every clock serves between cycles: an asynchronous LLI call, plugging the event
+    function (its events go out through the mailbox), or RUN (func, args): func(controller,
+    *args)."""
+    if method in CONTROLLER_CALLS:
+        return getattr(controller, method)(*args)
+    if method == PLUG_EVENT_FUNC:
+        (plug,) = args
+        return controller.plug_event_func(mailbox.event if plug else None)
+    if method == RUN:
+        func, func_args = args
+        return func(controller, *func_args)
+    raise AttributeError(f"{method!r} is not a call served between cycles")
+
+
 class CycleLoop:
     """Calls `step()` every `cycle_time` seconds on an absolute deadline grid.
 
@@ -276,19 +291,11 @@ class _Server:
             self.running = False
 
     def _call(self, method: str, args: tuple) -> Any:
-        if method in CONTROLLER_CALLS:
-            return getattr(self.controller, method)(*args)
-        if method == PLUG_EVENT_FUNC:
-            (plug,) = args
-            return self.controller.plug_event_func(self.mailbox.event if plug else None)
         if method == RESET_STATS:
             return self.stats.reset()
         if method == SIM_TIME:
             return getattr(self.controller, "time", None)
-        if method == RUN:
-            func, func_args = args
-            return func(self.controller, *func_args)
-        raise AttributeError(f"{method!r} is not a call the cycle process serves")
+        return serve_call(self.controller, self.mailbox, method, args)
 
     def _reply(self, call_id: int, ok: bool, value: Any) -> None:
         try:

@@ -1,6 +1,9 @@
 """Helpers shared by the tests: servers, sessions, stubs, waiting."""
 from __future__ import annotations
 
+import contextlib
+import subprocess
+import sys
 import time
 
 import grpc
@@ -21,6 +24,25 @@ from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_servi
 def start_server(**config) -> RunningServer:
     """A device server on a free loopback port, its simulated arm on the lock-step clock."""
     return serve(ServerConfig(port=0, clock="lockstep", **config))
+
+
+@contextlib.contextmanager
+def spawned_server(*args: str):
+    """The device server as users start it (`python -m landscape.server`, real-time clock) on
+    a free port; yields its target and checks that it stops cleanly (exit code 0)."""
+    proc = subprocess.Popen([sys.executable, "-m", "landscape.server", "--port", "0", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        for line in proc.stdout:   # pybullet prints its own lines on stdout first
+            if "listening on" in line:
+                break
+        else:
+            raise AssertionError("the server exited without listening")
+        yield line.rsplit(" ", 1)[-1].strip()
+    finally:
+        proc.terminate()
+        code = proc.wait(timeout=20)
+    assert code == 0, f"the server exited with {code}"
 
 
 def cell_file(directory, replacements: dict[str, str]) -> str:

@@ -3,10 +3,11 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from support import spawned_server
 
 ROOT = Path(__file__).resolve().parents[2]
 GRPCURL = ROOT / ".tools" / "bin" / "grpcurl"
@@ -20,20 +21,9 @@ def grpcurl() -> Path:
 
 
 @pytest.fixture(scope="module")
-def target():
-    proc = subprocess.Popen([sys.executable, "-m", "landscape.server", "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    try:
-        # pybullet prints its own banner on stdout first; wait for ours.
-        for line in proc.stdout:
-            if "listening on" in line:
-                break
-        else:
-            raise AssertionError("the server exited without listening")
-        yield line.rsplit(" ", 1)[-1].strip()
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
+def target(tmp_path_factory):
+    with spawned_server("--paths", str(tmp_path_factory.mktemp("var") / "paths.sqlite3")) as t:
+        yield t
 
 
 def run(grpcurl, *args) -> str:

@@ -2,9 +2,6 @@
 clock (4 ms), driven from another process over gRPC."""
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import grpc
 import numpy as np
 import pytest
@@ -12,25 +9,13 @@ import pytest
 from landscape.client import Session
 from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, settings_pb2, types_pb2
 
-from support import stubs
+from support import spawned_server, stubs
 
 
 @pytest.fixture(scope="module")
 def target(tmp_path_factory):
-    paths = tmp_path_factory.mktemp("var") / "paths.sqlite3"
-    proc = subprocess.Popen([sys.executable, "-m", "landscape.server", "--port", "0",
-                             "--paths", str(paths)], stdout=subprocess.PIPE,
-                            stderr=subprocess.DEVNULL, text=True)
-    try:
-        for line in proc.stdout:   # pybullet prints its own lines first
-            if "listening on" in line:
-                break
-        else:
-            raise AssertionError("the server exited without listening")
-        yield line.rsplit(" ", 1)[-1].strip()
-    finally:
-        proc.terminate()
-        assert proc.wait(timeout=20) == 0   # a clean stop: drives off, cycle process gone
+    with spawned_server("--paths", str(tmp_path_factory.mktemp("var") / "paths.sqlite3")) as t:
+        yield t
 
 
 def test_a_move_on_the_real_time_clock(target):
