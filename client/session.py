@@ -40,6 +40,7 @@ class Session:
         self._closed = threading.Event()
         self._open_timeout = open_timeout
         self.session_id = ""
+        self.session_secret = ""
 
     def __enter__(self) -> "Session":
         return self.open()
@@ -53,6 +54,7 @@ class Session:
         self._call = stub.Connect(self._requests())
         opened = next(self._call).opened   # raises the RPC's error if the server refuses
         self.session_id = opened.session_id
+        self.session_secret = opened.session_secret
         self._interval = opened.keepalive_interval_ms / 1000.0
         for target in (self._keep_alive, self._read):
             threading.Thread(target=target, daemon=True, name=f"session-{target.__name__}").start()
@@ -66,7 +68,8 @@ class Session:
 
     def lock(self, timeout: float = 10.0) -> str:
         stub = device_service_pb2_grpc.DeviceServiceStub(self._raw_channel)
-        reply = stub.Lock(control_pb2.LockRequest(session_id=self.session_id), timeout=timeout)
+        reply = stub.Lock(control_pb2.LockRequest(session_id=self.session_id,
+                                                   session_secret=self.session_secret), timeout=timeout)
         self.lease = reply.lease
         return self.lease
 

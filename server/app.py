@@ -22,6 +22,7 @@ from landscape.server.stream_limit import StreamLimitInterceptor
 from landscape.server.servicers.digital_io import DigitalIOServicer
 from landscape.server.servicers.events import EventServicer
 from landscape.server.servicers.session import SessionServicer
+from landscape.server.servicers.state import StateServicer
 from landscape.sim.cell import load_cell
 
 log = logging.getLogger(__name__)
@@ -72,7 +73,8 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                  ("grpc.so_reuseport", 0)],
     )
     servicers = {services.DEVICE: DeviceServicer(device), services.DIGITAL_IO: DigitalIOServicer(device),
-                 services.EVENTS: EventServicer(bus), services.SESSIONS: SessionServicer(device)}
+                 services.EVENTS: EventServicer(bus), services.SESSIONS: SessionServicer(device),
+                 services.STATE: StateServicer(device)}
     for spec, servicer in servicers.items():
         spec.add_to_server(servicer, server)
 

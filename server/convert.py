@@ -16,7 +16,7 @@ from landscape.server.settings import Kind
 from landscape.server.states import State
 from landscape.server.targets import Frame
 from landscape.server.units import AngularUnit, LinearUnit, Units
-from landscape.v1 import event_service_pb2, types_pb2
+from landscape.v1 import control_pb2, event_service_pb2, types_pb2
 
 # ---- return values, states, units, settings --------------------------------------------------
 
@@ -32,12 +32,15 @@ ANGULAR_PB = {v: k for k, v in ANGULAR.items()}
 DEVICE_STATE_PB = {state: types_pb2.DeviceState.Value(f"DEVICE_STATE_{state.name}") for state in State}
 
 
-def ok() -> types_pb2.RetVal:
-    return types_pb2.RetVal(ret_code=types_pb2.RETURN_CODE_CMD_EXEC_OK)
+def ok(message: str = "done") -> types_pb2.RetVal:
+    """CMD_EXEC_OK, with a word for people (the code, 0, is omitted from JSON output)."""
+    return types_pb2.RetVal(ret_code=types_pb2.RETURN_CODE_CMD_EXEC_OK, ret_msg=message)
 
 
 def started(command_id: str) -> types_pb2.RetVal:
-    return types_pb2.RetVal(ret_code=types_pb2.RETURN_CODE_CMD_STARTED_OK, command_id=command_id)
+    return types_pb2.RetVal(ret_code=types_pb2.RETURN_CODE_CMD_STARTED_OK, command_id=command_id,
+                            ret_msg=f"started {command_id}: its done event follows on "
+                                    f"EventService.Subscribe")
 
 
 def enum_value(table: dict, value: int, name: str):
@@ -66,6 +69,16 @@ def rate_to_si(kind: Kind, value: float, units: Units) -> float:
     if kind is Kind.ANGULAR:
         return float(units.angle_to_si(value))
     return float(value)
+
+
+def units_to_pb(units: Units) -> types_pb2.Units:
+    return types_pb2.Units(linear=LINEAR_PB[units.linear], angular=ANGULAR_PB[units.angular])
+
+
+PANEL_ACTIONS = {control_pb2.PANEL_ACTION_PRESS_ESTOP: "press_estop",
+                 control_pb2.PANEL_ACTION_RELEASE_ESTOP: "release_estop",
+                 control_pb2.PANEL_ACTION_OPEN_DOOR: "open_door",
+                 control_pb2.PANEL_ACTION_CLOSE_DOOR: "close_door"}
 
 
 def units_from_pb(linear: int, angular: int) -> Units:

@@ -195,10 +195,11 @@ class Device:
 
     # ---- 3.1 lock, release, activate, deactivate --------------------------------------------
 
-    def lock(self, session_id: str) -> str:
-        session = self.sessions.get(session_id)
+    def lock(self, session_id: str, secret: str) -> str:
+        session = self.sessions.owned(session_id, secret)
         if session is None:
-            raise ParamError(f"no open session {session_id!r}: open one with SessionService.Connect")
+            raise ParamError(f"no open session {session_id!r} with that secret: open one with "
+                             f"SessionService.Connect and pass its session_id and session_secret")
         with self._state_lock:
             if session.ended.is_set():  # ended since we looked it up: its handler ran already
                 raise ParamError(f"session {session_id!r} has ended")
@@ -243,6 +244,12 @@ class Device:
             target = State.INACTIVE if self._holder else State.UNLOCKED
             self._move_to(target, "reset")
         return target
+
+    def operate_panel(self, action: str) -> tuple[bool, bool]:
+        """Press or release the e-stop, open or close the door, as a person at the cell would
+        (`action` names a Panel method); returns (e-stop pressed, door open)."""
+        log.warning("operator panel: %s", action)
+        return self.link.between_cycles(_operate_panel, action)
 
     def _command_controller(self, method: str) -> None:
         if getattr(self.controller, method)() is not Status.OK:
@@ -506,3 +513,10 @@ class Device:
                 self.reset()
             except EstopActive as refused:  # pressed again meanwhile
                 self.bus.alarm(Severity.WARNING, ALARM_ESTOP, str(refused))
+
+
+def _operate_panel(controller, action: str) -> tuple[bool, bool]:
+    """Runs between two cycles, where the simulator's panel lives (picklable: top level)."""
+    panel = controller.panel
+    getattr(panel, action)()
+    return panel.estop_pressed, not panel.door_closed

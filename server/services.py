@@ -10,7 +10,8 @@ from types import ModuleType
 
 from landscape.v1 import (device_service_pb2, device_service_pb2_grpc, digital_io_service_pb2,
                           digital_io_service_pb2_grpc, event_service_pb2, event_service_pb2_grpc,
-                          session_service_pb2, session_service_pb2_grpc)
+                          session_service_pb2, session_service_pb2_grpc, state_service_pb2,
+                          state_service_pb2_grpc)
 
 
 @dataclass(frozen=True)
@@ -39,5 +40,6 @@ DEVICE = ServiceSpec("DeviceService", device_service_pb2, device_service_pb2_grp
 DIGITAL_IO = ServiceSpec("DigitalIOService", digital_io_service_pb2, digital_io_service_pb2_grpc)
 EVENTS = ServiceSpec("EventService", event_service_pb2, event_service_pb2_grpc)
 SESSIONS = ServiceSpec("SessionService", session_service_pb2, session_service_pb2_grpc)
+STATE = ServiceSpec("StateService", state_service_pb2, state_service_pb2_grpc)
 
-ALL = (DEVICE, DIGITAL_IO, EVENTS, SESSIONS)
+ALL = (DEVICE, DIGITAL_IO, EVENTS, SESSIONS, STATE)

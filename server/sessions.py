@@ -20,6 +20,7 @@ log = logging.getLogger(__name__)
 class Session:
     def __init__(self, session_id: str, client_name: str):
         self.id = session_id
+        self.secret = secrets.token_urlsafe(24)   # given only on the session stream
         self.client_name = client_name
         self.last_seen = time.monotonic()
         self.outbox: queue.Queue = queue.Queue()   # what the Connect stream sends to the client
@@ -53,6 +54,13 @@ class SessionRegistry:
     def get(self, session_id: str) -> Session | None:
         with self._lock:
             return self._sessions.get(session_id)
+
+    def owned(self, session_id: str, secret: str) -> Session | None:
+        """The open session `session_id` if `secret` is its own, else None."""
+        session = self.get(session_id)
+        if session is None or not secrets.compare_digest(secret.encode(), session.secret.encode()):
+            return None
+        return session
 
     def touch(self, session: Session) -> None:
         session.last_seen = time.monotonic()

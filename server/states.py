@@ -101,6 +101,8 @@ RULES: dict[str, Rule] = {
     "Reset": Rule(frozenset({State.ERROR}), Lease.HOLDER_IF_LOCKED, "-"),
     "GetDeviceState": _read("-"),
     "GetRobotDescription": _read("-"),
+    # The operator panel: no lease (the e-stop works whoever holds the lock); admin only.
+    "OperatePanel": _read("-"),
     # 4 DIGITAL_IO
     "SetDigitalIO": _cmd(LOCKED, "4.1"),
     "GetDigitalIO": _read("4.1"),
@@ -109,6 +111,8 @@ RULES: dict[str, Rule] = {
     # 2 client IDL
     "Subscribe": _read("2.1"),
     "Connect": _read("2.2"),
+    # live state
+    "StreamState": _read("-"),
 }
 
 

@@ -19,19 +19,20 @@ class DeviceServicer(services.DEVICE.servicer_base):
 
     # ---- 3.1 ----
     def Lock(self, request, context):
-        return control_pb2.LockResponse(ret_val=convert.ok(), lease=self.device.lock(request.session_id))
+        lease = self.device.lock(request.session_id, request.session_secret)
+        return control_pb2.LockResponse(ret_val=convert.ok("locked"), lease=lease)
 
     def Release(self, request, context):
         self.device.release()
-        return control_pb2.ReleaseResponse(ret_val=convert.ok())
+        return control_pb2.ReleaseResponse(ret_val=convert.ok("released"))
 
     def Activate(self, request, context):
         self.device.activate()
-        return control_pb2.ActivateResponse(ret_val=convert.ok())
+        return control_pb2.ActivateResponse(ret_val=convert.ok("drives on"))
 
     def Deactivate(self, request, context):
         self.device.deactivate()
-        return control_pb2.DeactivateResponse(ret_val=convert.ok())
+        return control_pb2.DeactivateResponse(ret_val=convert.ok("drives off"))
 
     # ---- 3.2 ----
     def SetSpeed(self, request, context):
@@ -74,7 +75,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.ok(), percent_velocity=s.speed_percent,
             world_linear_velocity=float(s.units.length_from_si(s.linear_speed)),
             world_angular_velocity=float(s.units.angle_from_si(s.angular_speed)),
-            joint_velocities=s.units.angle_from_si(s.joint_velocities).tolist())
+            joint_velocities=s.units.angle_from_si(s.joint_velocities).tolist(),
+            units=convert.units_to_pb(s.units))
 
     def GetAccelerations(self, request, context):
         s = self.device.settings
@@ -82,7 +84,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.ok(), percent_accel=s.accel_percent,
             world_linear_accel=float(s.units.length_from_si(s.linear_accel)),
             world_angular_accel=float(s.units.angle_from_si(s.angular_accel)),
-            joint_accels=s.units.angle_from_si(s.joint_accelerations).tolist())
+            joint_accels=s.units.angle_from_si(s.joint_accelerations).tolist(),
+            units=convert.units_to_pb(s.units))
 
     def GetMaxVelocities(self, request, context):
         arm, units = self.device.arm, self.device.settings.units
@@ -90,7 +93,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.ok(),
             max_world_linear_velocity=float(units.length_from_si(arm.max_linear_velocity)),
             max_world_angular_velocity=float(units.angle_from_si(arm.max_angular_velocity)),
-            max_joint_velocities=units.angle_from_si(arm.max_velocity).tolist())
+            max_joint_velocities=units.angle_from_si(arm.max_velocity).tolist(),
+            units=convert.units_to_pb(units))
 
     def GetMaxAccelerations(self, request, context):
         arm, units = self.device.arm, self.device.settings.units
@@ -98,19 +102,22 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.ok(),
             max_world_linear_accel=float(units.length_from_si(arm.max_linear_acceleration)),
             max_world_angular_accel=float(units.angle_from_si(arm.max_angular_acceleration)),
-            max_joint_accels=units.angle_from_si(arm.max_acceleration).tolist())
+            max_joint_accels=units.angle_from_si(arm.max_acceleration).tolist(),
+            units=convert.units_to_pb(units))
 
     def GetToolOffsets(self, request, context):
         s = self.device.settings
         return settings_pb2.GetToolOffsetsResponse(
-            ret_val=convert.ok(), offset=convert.matrix_to_pose(s.tool_offset, s.units))
+            ret_val=convert.ok(), offset=convert.matrix_to_pose(s.tool_offset, s.units),
+            units=convert.units_to_pb(s.units))
 
     def GetRobotPosition(self, request, context):
         joints = self.device.feedback().position
         units = self.device.settings.units
         return settings_pb2.GetRobotPositionResponse(
             ret_val=convert.ok(), joint_position=units.angle_from_si(joints).tolist(),
-            world_position=convert.matrix_to_pose(self.device.tool_in_world(joints), units))
+            world_position=convert.matrix_to_pose(self.device.tool_in_world(joints), units),
+            units=convert.units_to_pb(units))
 
     def GetMotionControlState(self, request, context):
         motion, mode = self.device.motion_control_state()
@@ -190,6 +197,12 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.ok(), state=convert.DEVICE_STATE_PB[s.state], locked=s.locked,
             lock_holder=s.lock_holder, error=s.error, estop=s.estop,
             manual_control=s.manual_control, command_id=s.command_id)
+
+    def OperatePanel(self, request, context):
+        action = convert.enum_value(convert.PANEL_ACTIONS, request.action, "action")
+        estop, door_open = self.device.operate_panel(action)
+        return control_pb2.OperatePanelResponse(ret_val=convert.ok(action), estop_pressed=estop,
+                                                door_open=door_open)
 
     def GetRobotDescription(self, request, context):
         arm = self.device.arm

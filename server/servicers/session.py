@@ -33,7 +33,8 @@ class SessionServicer(services.SESSIONS.servicer_base):
         yield pb.ConnectResponse(opened=pb.SessionOpened(
             session_id=session.id,
             keepalive_interval_ms=round(registry.keepalive_interval * 1000),
-            keepalive_timeout_ms=round(registry.keepalive_timeout * 1000)))
+            keepalive_timeout_ms=round(registry.keepalive_timeout * 1000),
+            session_secret=session.secret))
         while not session.ended.is_set():
             try:
                 item = session.outbox.get(timeout=0.1)
@@ -48,10 +49,8 @@ class SessionServicer(services.SESSIONS.servicer_base):
         reason = "stream closed by the client"
         try:
             for message in request_iterator:
-                registry.touch(session)
-                if message.WhichOneof("message") == "keep_alive":
-                    session.outbox.put(pb.ConnectResponse(keep_alive=message.keep_alive))
-                elif message.WhichOneof("message") == "rsvp_answer":
+                registry.touch(session)   # any message counts as a keep-alive
+                if message.WhichOneof("message") == "rsvp_answer":
                     answer = message.rsvp_answer
                     if not self.device.rsvp.answer(session, answer.rsvp_id, answer.choice,
                                                    list(answer.data)):

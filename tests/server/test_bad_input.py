@@ -10,7 +10,8 @@ import pytest
 from landscape.client import Session
 from landscape.server.path_planning import MAX_POINTS
 from landscape.server.states import State
-from landscape.v1 import control_pb2, motion_pb2, session_service_pb2, session_service_pb2_grpc
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, session_service_pb2,
+                          session_service_pb2_grpc)
 from landscape.v1 import settings_pb2, types_pb2
 
 from support import Arm, error_info
@@ -131,3 +132,21 @@ def test_bad_sessions_and_locks_are_refused(arm):
             control_pb2.LockRequest(session_id="no-such-session")))
         assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
     assert arm.server.device.state is State.UNLOCKED
+
+
+def test_lock_needs_the_sessions_secret_not_just_its_id(server):
+    """Issue 9.6: a client that knows another session's id cannot lock with it."""
+    with grpc.insecure_channel(server.target) as channel:
+        owner = Session(channel, "owner").open()
+        try:
+            device = device_service_pb2_grpc.DeviceServiceStub(channel)
+            for secret in ("", "guess", owner.session_secret[:-1]):
+                error = refused(lambda: device.Lock(control_pb2.LockRequest(
+                    session_id=owner.session_id, session_secret=secret)))
+                assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
+                assert server.device.state is State.UNLOCKED
+            reply = device.Lock(control_pb2.LockRequest(
+                session_id=owner.session_id, session_secret=owner.session_secret), timeout=5)
+            assert reply.lease and reply.ret_val.ret_msg == "locked"
+        finally:
+            owner.close()

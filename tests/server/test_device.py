@@ -34,7 +34,8 @@ def test_only_the_lock_holder_commands_and_the_other_still_reads(server, holder)
     try:
         device, _, events = stubs(other.channel)
         with pytest.raises(grpc.RpcError) as refused:
-            device.Lock(control_pb2.LockRequest(session_id=other.session_id), timeout=5)
+            device.Lock(control_pb2.LockRequest(session_id=other.session_id,
+                                                session_secret=other.session_secret), timeout=5)
         assert refused.value.code() is grpc.StatusCode.FAILED_PRECONDITION
         for call in (lambda: device.SetSpeed(settings_pb2.SetSpeedRequest(
                          speed=50, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), timeout=5),

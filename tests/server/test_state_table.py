@@ -61,7 +61,8 @@ class Cell:
         if request is None:
             request = message_factory.GetMessageClass(method.input_type)()
         if method.name == "Lock":
-            request.session_id = (self.session or _Opened(self.server)).session_id
+            owner = self.session or _Opened(self.server).session
+            request.session_id, request.session_secret = owner.session_id, owner.session_secret
         if method.name == "Connect":
             request.hello.client_name = "table"
         stub = getattr(spec.grpc, f"{spec.name}Stub")(channel)
