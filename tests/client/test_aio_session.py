@@ -1,0 +1,29 @@
+"""The asyncio session against a real device server: lock, lease on calls, disconnect."""
+from __future__ import annotations
+
+import asyncio
+
+import grpc
+
+from landscape.client import AsyncSession
+from landscape.server.states import State
+from landscape.v1 import control_pb2, device_service_pb2_grpc
+
+from support import wait_until
+
+
+def test_async_session_locks_commands_and_its_end_releases(server):
+    async def body():
+        async with grpc.aio.insecure_channel(server.target) as channel:
+            session = await AsyncSession(channel, "async-supervisor").open()
+            await session.lock()
+            device = device_service_pb2_grpc.DeviceServiceStub(channel)
+            reply = await device.Activate(control_pb2.ActivateRequest(),
+                                          metadata=session.metadata(), timeout=10)
+            assert reply.ret_val.ret_msg == "drives on"
+            state = await device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=5)
+            assert state.lock_holder == "async-supervisor"
+            await session.close()
+
+    asyncio.run(asyncio.wait_for(body(), 30))
+    wait_until(lambda: server.device.state is State.UNLOCKED, timeout=10)
