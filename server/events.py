@@ -198,6 +198,7 @@ class Subscription:
         self._replay = deque(replay)   # resumed events; not bounded, the history bounds it
         self._live: deque[Event] = deque()
         self._closed = False
+        self._draining = False     # the bus closed: what is pending still goes out, then end
         self._waiter: asyncio.Future | None = None   # an async reader waiting, on its loop
 
     def get(self, timeout: float | None = None) -> Event | None:
@@ -206,11 +207,9 @@ class Subscription:
         Returns None on timeout or once the subscription is closed.
         """
         with self._cond:
-            if not self._cond.wait_for(self._ready, timeout):
+            if not self._cond.wait_for(self._ready, timeout) or self._closed:
                 return None
-            if self._closed:
-                return None
-            return (self._replay or self._live).popleft()
+            return self._next()
 
     def __iter__(self) -> Iterator[Event]:
         while (event := self.get()) is not None:
@@ -224,8 +223,8 @@ class Subscription:
             with self._cond:
                 if self._closed:
                     return None
-                if self._replay or self._live:
-                    return (self._replay or self._live).popleft()
+                if self._replay or self._live or self._draining:
+                    return self._next()
                 waiter = self._waiter = loop.create_future()
             try:
                 await waiter
@@ -234,7 +233,8 @@ class Subscription:
 
     @property
     def closed(self) -> bool:
-        return self._closed
+        """Closed, or the bus closed and everything pending has been taken."""
+        return self._closed or (self._draining and not (self._replay or self._live))
 
     def close(self) -> None:
         """Stop receiving; pending events are discarded. Idempotent."""
@@ -263,13 +263,23 @@ class Subscription:
             self._cond.notify()
             self._wake()
 
-    def _end(self) -> None:
+    def _end(self, drain: bool = False) -> None:
+        """No more events; with `drain`, the pending ones are still delivered first."""
         with self._cond:
-            self._closed = True
-            self._replay.clear()
-            self._live.clear()
+            if drain:
+                self._draining = True
+            else:
+                self._closed = True
+                self._replay.clear()
+                self._live.clear()
             self._cond.notify_all()
             self._wake()
+
+    def _next(self) -> Event | None:
+        # With _cond held: the next pending event, or None once a drained bus has none left.
+        if self._replay or self._live:
+            return (self._replay or self._live).popleft()
+        return None
 
     def _wake(self) -> None:
         # With _cond held: hand the async reader's wake-up to its loop.
@@ -278,7 +288,7 @@ class Subscription:
             waiter.get_loop().call_soon_threadsafe(_resolve, waiter)
 
     def _ready(self) -> bool:
-        return self._closed or bool(self._replay) or bool(self._live)
+        return self._closed or self._draining or bool(self._replay) or bool(self._live)
 
 
 def _resolve(waiter: asyncio.Future) -> None:
@@ -398,7 +408,8 @@ class EventBus:
             return subscription
 
     def close(self) -> None:
-        """End every subscription (their get returns None); later ones start closed.
+        """End every subscription once it has delivered what is pending (then their get
+        returns None); later ones start closed.
 
         Publishing still works, so a device core shutting down need not check.
         """
@@ -406,7 +417,7 @@ class EventBus:
             self._closed = True
             subscribers, self._subscribers = self._subscribers, set()
             for subscription in subscribers:
-                subscription._end()
+                subscription._end(drain=True)
 
     def _replay_after(self, after: int) -> list[Event]:
         # Called with the lock held; kept sequences are contiguous, oldest first.

@@ -7,7 +7,9 @@ written; every waiting stream then takes what it is due:
   cycles it is due, with no gaps, even when several arrive at once.
 - A stream that falls more than `max_lag` cycles behind (a slow reader: its writes wait on
   flow control) jumps to the newest cycle and says how many it skipped: latest sample wins,
-  nothing is queued for it, and nobody else waits for it.
+  nothing is queued for it, and nobody else waits for it. `max_lag` (1 s) lets a reader that
+  stalls for a moment (a busy machine) catch up without a gap. (What a stalled reader finds
+  queued in the transport besides is bounded by its own HTTP/2 flow-control window.)
 
 Watchers cost no thread: they wait on one shared future that each wake-up replaces.
 """
@@ -37,7 +39,7 @@ class View:
 
 
 class StateHub:
-    def __init__(self, device, max_lag: int = 50, conversions: int = 64):
+    def __init__(self, device, max_lag: int = 250, conversions: int = 64):
         self.device = device
         self.ring = device.link.feedback
         self.max_lag = max_lag
