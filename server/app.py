@@ -131,7 +131,8 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                           on_lost=lambda why: device and device.controller_lost(why),
                           pace=config.lockstep_pace)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
-    device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs)
+    device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs,
+                    reset_settings=config.reset_settings)
     hub, dispatch, limits = StateHub(device), Dispatch(), StreamLimits(config.stream_caps)
     try:
         if config.start_device:
@@ -146,7 +147,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     running = RunningServer(server, health_servicer, port, config.address, bus, device, link,
                             hub, dispatch, limits, runner)
     device.on_health = running.set_serving
-    log.info("device server listening on %s", listen_address(config.address, port))
+    log.debug("device server listening on %s", listen_address(config.address, port))
     return running
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from google.protobuf import timestamp_pb2
 
-from landscape.server import events
+from landscape.server import bounds, events
 from landscape.server.errors import CommandError, OutOfRange, ParamError
 from landscape.server.path_planning import PointSpec, at_point
 from landscape.server.settings import Kind
@@ -160,6 +160,7 @@ class PathLoadStream:
         self._messages = 0
 
     def feed(self, request) -> None:
+        bounds.check(request)
         if len(self.specs) + len(request.tags) > self.max_points:
             raise OutOfRange(f"a path holds at most {self.max_points} points")
         if self._messages == 0:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 
-from landscape.server import alarms, states
+from landscape.server import alarms, states, stored_settings
 from landscape.server.errors import (ControllerFailure, EstopActive, NotLockHolder, ParamError,
                                      WrongState)
 from landscape.server.events import EventBus, Severity
@@ -68,7 +68,8 @@ class DeviceStatus:
 class Device:
     def __init__(self, link, bus: EventBus, arm: ArmModel, *, paths: PathStore | None = None,
                  outputs: set[str] = frozenset(), enable_timeout: float = 5.0,
-                 keepalive_interval: float = 0.5, keepalive_timeout: float = 2.0):
+                 keepalive_interval: float = 0.5, keepalive_timeout: float = 2.0,
+                 reset_settings: bool = False):
         self.link = link
         self.bus = bus
         self.arm = arm
@@ -84,14 +85,19 @@ class Device:
         self._lease: str | None = None
         self._epoch = 0                    # +1 whenever the lock changes hands
         self._local = threading.local()    # the epoch a command was admitted under
-        self._settings = MotionSettings(arm)
+        self._store = paths or PathStore()
+        defaults = MotionSettings(arm)
+        self._settings = (defaults if reset_settings
+                          else stored_settings.from_record(defaults, self._store.load_settings()))
+        if reset_settings:
+            self._store.save_settings(stored_settings.to_record(defaults))
         self._error = ""
         self._power = EnableState.DISABLED   # the controller's last reported power state
         self._estop = False
         self._controller_changed = threading.Condition()
         self._state_lock = threading.RLock()
         self._command_lock = threading.Lock()
-        self.motions = MotionControl(self, paths or PathStore(), set(outputs))
+        self.motions = MotionControl(self, self._store, set(outputs))
 
     @property
     def controller(self):
@@ -305,10 +311,13 @@ class Device:
     # ---- 3.2 settings, 3.3 queries ---------------------------------------------------------
 
     def update_settings(self, change) -> MotionSettings:
-        """Apply `change(settings) -> settings`; a validation error leaves them as they were."""
+        """Apply `change(settings) -> settings`: validated, stored, then in force; a validation
+        or storage error leaves them as they were."""
         with self._state_lock:
-            self._settings = change(self._settings)
-            return self._settings
+            settings = change(self._settings)
+            self._store.save_settings(stored_settings.to_record(settings))
+            self._settings = settings
+            return settings
 
     def feedback(self) -> Sample:
         """The newest cycle's feedback (never more than a cycle old)."""

@@ -55,7 +55,10 @@ class OutOfRange(CommandError):
 
 
 class NotFound(CommandError):
-    status, reason, ret_code = grpc.StatusCode.NOT_FOUND, "NOT_FOUND", CMD_PARAM_ERR
+    """A name (path, tool, sensor) the device does not know: a parameter error (the seed's
+    CMD_PARAM_ERR), so INVALID_ARGUMENT; the reason says NOT_FOUND."""
+
+    status, reason, ret_code = grpc.StatusCode.INVALID_ARGUMENT, "NOT_FOUND", CMD_PARAM_ERR
 
 
 class ControllerFailure(CommandError):

@@ -21,6 +21,7 @@ that resumes "after the last sequence I saw" resumes correctly after a loss too.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import enum
 import itertools
 import threading
@@ -31,6 +32,8 @@ from dataclasses import dataclass
 
 DEFAULT_HISTORY = 10_000   # events kept for resuming subscribers
 DEFAULT_BUFFER = 1_024     # events a subscriber may fall behind before it loses some
+MAX_TEXT = 1_024           # characters of any one string of an event; longer ones are cut
+                           # (with "…"), so no event exceeds a few kilobytes
 
 _INT32 = range(-2**31, 2**31)
 _UINT32 = range(2**32)
@@ -291,6 +294,23 @@ class Subscription:
         return self._closed or self._draining or bool(self._replay) or bool(self._live)
 
 
+def _clip(text: str) -> str:
+    return text if len(text) <= MAX_TEXT else text[:MAX_TEXT - 1] + "…"
+
+
+def _clipped(detail):
+    """`detail` with every string field (and every string of a tuple field) clipped."""
+    changes = {}
+    for field in dataclasses.fields(detail):
+        value = getattr(detail, field.name)
+        if isinstance(value, str) and len(value) > MAX_TEXT:
+            changes[field.name] = _clip(value)
+        elif isinstance(value, tuple) and any(len(v) > MAX_TEXT for v in value
+                                              if isinstance(v, str)):
+            changes[field.name] = tuple(_clip(v) if isinstance(v, str) else v for v in value)
+    return dataclasses.replace(detail, **changes) if changes else detail
+
+
 def _resolve(waiter: asyncio.Future) -> None:
     if not waiter.done():
         waiter.set_result(None)
@@ -380,7 +400,8 @@ class EventBus:
     def publish(self, event_id: str, data: Sequence[str], detail: Detail) -> Event:
         """Number, stamp, keep and fan out one event. Prefer the typed helpers above."""
         _check(isinstance(detail, _PUBLISHED), f"cannot publish a {type(detail).__name__}")
-        data = tuple(data)
+        data = tuple(_clip(d) for d in data[:16])
+        detail = _clipped(detail)
         with self._lock:
             # Numbered and stamped under the lock, so sequence order is time order.
             self._last_sequence += 1
