@@ -1,0 +1,218 @@
+"""The broad phase: cheap lower bounds on distances, for whole stretches of a motion at once.
+
+Every moving shape (on link1..link6, the mounted tool and a held part included) has a bounding
+sphere fixed in its link; every fixed shape (base_link, fixtures, parts, tools in the rack)
+has a bounding box, and the floor is a box 1 km deep. A lower bound on the distance of a pair
+is then sphere-to-box (or sphere-to-sphere between two moving shapes), in numpy, for thousands
+of (pair, configuration) at once.
+
+Motion bound: when the joints step by dq (6,) along a straight line in joint space, no point of
+a shape on link l moves more than sum_j lever[j] |dq_j| (m): joint j turns every point beyond
+it on a circle about its axis, of radius at most the point's distance to the joint's origin,
+which the chain bounds by |origin of joint j+1| + ... + |origin of joint l| + |sphere centre|
++ sphere radius (triangle inequality; no configuration makes it larger); for joint l itself,
+whose axis is fixed in the link, the distance to the axis. Over samples the bound adds up:
+(travel of each joint, `joint_travel`) @ levers. Two moving shapes move relative to each other
+only by the joints between their links: `pair_levers`.
+
+`uncertain_stretches` splits a sampled motion in halves, recursively, per pair: a stretch of
+samples is clear when the bound at its middle sample, less what the pair can move within the
+stretch, is at least the margin. What remains are stretches that need exact distances
+(check.py). Shapes: N samples, G moving shapes, S fixed shapes, P pairs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .shapes import Geometry
+
+_FLOOR_DEPTH = 1000.0   # m: the half-space is bounded by a box this deep and this wide
+
+
+@dataclass(frozen=True, eq=False)
+class Bounds:
+    """Bounding volumes of a scene's shapes.
+
+    Moving shapes (G): link (G,) int 1..6; centre (G, 3) m, sphere centres in their link's
+    frame; radius (G,) m; lever (G, 6) m/rad, the motion bound per joint step.
+    Fixed shapes (S): box_centre (S, 3) m and box_axes (S, 3, 3) (columns: the box's axes)
+    in the base_link frame, box_half (S, 3) m half extents.
+    """
+
+    link: np.ndarray
+    centre: np.ndarray
+    radius: np.ndarray
+    lever: np.ndarray
+    box_centre: np.ndarray
+    box_axes: np.ndarray
+    box_half: np.ndarray
+
+
+def build_bounds(moving: list[Geometry], fixed: list[Geometry], joint_origins: np.ndarray,
+                 joint_axes: np.ndarray) -> Bounds:
+    """Bounds of the moving shapes (link >= 1) and the fixed ones (link 0); joint_origins
+    (6, 3) m: each joint's origin in its parent link (ArmModel.joint_origins); joint_axes
+    (6, 3): each joint's unit axis in its own link."""
+    reach = np.linalg.norm(np.asarray(joint_origins, dtype=float), axis=1)   # (6,)
+    G = len(moving)
+    link = np.array([g.link for g in moving], dtype=int)
+    centre, radius, lever = np.zeros((G, 3)), np.zeros(G), np.zeros((G, 6))
+    for i, g in enumerate(moving):
+        local_centre, half = _local_box(g.shape)
+        c = centre[i] = g.placement[:3, :3] @ local_centre + g.placement[:3, 3]
+        radius[i] = float(np.linalg.norm(half))
+        for j in range(g.link - 1):   # joints before the shape's own: by distance to origin
+            lever[i, j] = reach[j + 1:g.link].sum() + np.linalg.norm(c) + radius[i]
+        # The shape's own joint has its axis fixed in the shape's link: distance to the axis.
+        axis = joint_axes[g.link - 1]
+        lever[i, g.link - 1] = np.linalg.norm(c - (c @ axis) * axis) + radius[i]
+    S = len(fixed)
+    box_centre, box_axes, box_half = np.zeros((S, 3)), np.zeros((S, 3, 3)), np.zeros((S, 3))
+    for i, g in enumerate(fixed):
+        local_centre, local_axes, half = _fixed_box(g.shape)
+        box_axes[i] = g.placement[:3, :3] @ local_axes
+        box_centre[i] = g.placement[:3, :3] @ local_centre + g.placement[:3, 3]
+        box_half[i] = half
+    return Bounds(link, centre, radius, lever, box_centre, box_axes, box_half)
+
+
+def pair_levers(bounds: Bounds, a: np.ndarray, b: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """(P, 6) m/rad: how far the shapes of each pair can move relative to each other per joint
+    step. Against a fixed shape, the moving one's levers; between two moving shapes, those of
+    the one further out along the arm, for the joints between the two links only (the rest
+    moves both together)."""
+    out = bounds.lever[a].copy()
+    for p in np.flatnonzero(~fixed):
+        near, far = sorted((a[p], b[p]), key=lambda g: bounds.link[g])
+        out[p] = bounds.lever[far]
+        out[p, :bounds.link[near]] = 0.0
+    return out
+
+
+def _local_box(shape) -> tuple[np.ndarray, np.ndarray]:
+    """Centre (3,) and half extents (3,) of a coal shape's box in its own frame."""
+    shape.computeLocalAABB()
+    lo, hi = np.asarray(shape.aabb_local.min_), np.asarray(shape.aabb_local.max_)
+    return (lo + hi) / 2.0, (hi - lo) / 2.0
+
+
+def _fixed_box(shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(centre (3,), axes (3, 3), half extents (3,)) of a fixed shape in its own frame; a
+    half-space n.x <= d becomes a box below its plane."""
+    if isinstance(shape, coal.Halfspace):
+        n = np.asarray(shape.n, dtype=float)
+        axes = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), n).matrix()
+        return n * (shape.d - _FLOOR_DEPTH), axes, np.full(3, _FLOOR_DEPTH)
+    centre, half = _local_box(shape)
+    return centre, np.eye(3), half
+
+
+class SphereCentres:
+    """Sphere centres of the moving shapes in base_link at samples of a motion, computed on
+    first use (the broad phase visits only some samples): values (N, G, 3) m, valid where
+    `ensure` has been called. kinematics: gives link frames (Kinematics.link_frames); q (N, 6)
+    rad."""
+
+    def __init__(self, bounds: Bounds, kinematics, q: np.ndarray):
+        self.kinematics, self.q = kinematics, q
+        self.values = np.empty((len(q), len(bounds.radius), 3))
+        self._done = np.zeros(len(q), dtype=bool)
+        self._links = []     # (link, its shapes (g,), their centres in its frame (3, g))
+        for link in range(1, 7):
+            idx = np.flatnonzero(bounds.link == link)
+            if len(idx):
+                self._links.append((link, idx, bounds.centre[idx].T))
+
+    def ensure(self, samples: np.ndarray) -> np.ndarray:
+        """Compute the centres at these samples (K,) if not done yet; returns `values`."""
+        new = np.unique(samples[~self._done[samples]])
+        if len(new):
+            frames = self.kinematics.link_frames(self.q[new])                 # (n, 6, 4, 4)
+            for link, idx, local in self._links:
+                F = frames[:, link - 1]
+                self.values[new[:, None], idx] = (np.swapaxes(F[:, :3, :3] @ local, 1, 2)
+                                                  + F[:, None, :3, 3])
+            self._done[new] = True
+        return self.values
+
+
+def joint_travel(q: np.ndarray) -> np.ndarray:
+    """(N, 6) rad: how far each joint has turned (absolute steps added up) from sample 0 to
+    sample k along q (N, 6). A pair with levers (6,) moves at most (T[e] - T[s]) @ levers
+    from sample s to sample e (joints linear between samples)."""
+    steps = np.abs(np.diff(q, axis=0))
+    return np.concatenate([np.zeros((1, q.shape[1])), np.cumsum(steps, axis=0)])
+
+
+def sphere_box(bounds: Bounds, centres: np.ndarray, moving: np.ndarray,
+               box: np.ndarray) -> np.ndarray:
+    """(C,) lower bounds on the distance from moving shapes (C,) with sphere centres (C, 3)
+    to fixed shapes box (C,)."""
+    local = np.einsum("ci,cij->cj", centres - bounds.box_centre[box], bounds.box_axes[box])
+    outside = np.maximum(np.abs(local) - bounds.box_half[box], 0.0)
+    return np.linalg.norm(outside, axis=1) - bounds.radius[moving]
+
+
+@dataclass(frozen=True, eq=False)
+class PairTable:
+    """The pairs to bound: a (P,) moving shape; b (P,) the other, a fixed shape's box index
+    when fixed[p], else a moving shape index; lever (P, 6) m/rad (pair_levers)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    fixed: np.ndarray
+    lever: np.ndarray
+
+
+def lower_bounds(bounds: Bounds, pairs: PairTable, centres: np.ndarray, pair: np.ndarray,
+                 sample: np.ndarray) -> np.ndarray:
+    """(C,) lower bounds on the distance of pairs (C,) (indices into `pairs`) at samples (C,),
+    with sphere centres (N, G, 3)."""
+    a, b, fixed = pairs.a[pair], pairs.b[pair], pairs.fixed[pair]
+    out = np.empty(len(pair))
+    if fixed.any():
+        out[fixed] = sphere_box(bounds, centres[sample[fixed], a[fixed]], a[fixed], b[fixed])
+    free = ~fixed
+    if free.any():
+        gap = centres[sample[free], a[free]] - centres[sample[free], b[free]]
+        out[free] = (np.linalg.norm(gap, axis=1) - bounds.radius[a[free]]
+                     - bounds.radius[b[free]])
+    return out
+
+
+def uncertain_stretches(bounds: Bounds, pairs: PairTable, centres: SphereCentres,
+                        travel: np.ndarray, active: np.ndarray, margin: float
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The stretches of samples the broad phase cannot clear: (pair (L,), start (L,), end (L,),
+    bounds computed). active (K,): the pair indices to check; travel (N, 6): joint_travel.
+
+    A stretch [s, e] is clear for a pair when its bound at the middle sample m, less the pair's
+    motion from m to the farther end, is at least `margin`. If not, it is halved, unless it is
+    a single step or the bound at m alone is below the margin (halving cannot clear the halves
+    next to m): then it goes to the narrow phase whole."""
+    last = len(travel) - 1
+    pair = np.asarray(active, dtype=int)
+    start = np.zeros(len(pair), dtype=int)
+    end = np.full(len(pair), last, dtype=int)
+    computed = 0
+    kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    while len(pair):
+        mid = (start + end) // 2
+        lever = pairs.lever[pair]
+        reach = np.maximum(np.einsum("kj,kj->k", travel[mid] - travel[start], lever),
+                           np.einsum("kj,kj->k", travel[end] - travel[mid], lever))
+        bound = lower_bounds(bounds, pairs, centres.ensure(mid), pair, mid)
+        computed += len(pair)
+        unclear = bound - reach < margin
+        whole = unclear & ((end - start <= 1) | (bound < margin))
+        kept.append((pair[whole], start[whole], end[whole]))
+        split = unclear & ~whole
+        pair, start, end, mid = pair[split], start[split], end[split], mid[split]
+        pair = np.concatenate([pair, pair])
+        start, end = np.concatenate([start, mid]), np.concatenate([mid, end])
+    pair, start, end = (np.concatenate(x) for x in zip(*kept))
+    return pair, start, end, computed
