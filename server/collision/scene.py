@@ -50,7 +50,7 @@ class CollisionScene:
         self._part_at = {p.name: pose_matrix(p.pose.xyz, p.pose.rpy) for p in cell.world.parts}
         self._mounted: str | None = None
         self._held: tuple[str, np.ndarray] | None = None     # part, its pose in the flange
-        self._allowed: dict[str, AllowedContact] = {}
+        self._allowed: list[AllowedContact] = []
         self._known = frozenset(ARM_LINKS) | {f.name for f in cell.world.fixtures} \
             | set(self._tools) | set(self._parts) | ({FLOOR} if cell.world.floor else set())
         self._kinematics = Kinematics(cell.arm)
@@ -176,14 +176,16 @@ class CollisionScene:
         with self._lock:
             for c in contacts:
                 self._names(c.a, c.b)
-                self._allowed[c.reason] = c
+            self._allowed += [c for c in contacts if c not in self._allowed]
             self._changed()
 
     def forbid(self, reason: str) -> None:
-        """Withdraw the allowed contact named `reason`."""
+        """Withdraw the allowed contacts named `reason`."""
         with self._lock:
-            if self._allowed.pop(reason, None) is None:
+            kept = [c for c in self._allowed if c.reason != reason]
+            if len(kept) == len(self._allowed):
                 raise CollisionModelError(f"no allowed contact is named {reason!r}")
+            self._allowed = kept
             self._changed()
 
     def coupling(self, tool: str) -> tuple[AllowedContact, ...]:
@@ -214,7 +216,7 @@ class CollisionScene:
         with self._lock:
             if self._model is None:
                 self._model = CollisionModel(self.cell.arm, self._base, self._geometries(),
-                                             self._known, self._allowed.values(), self.margin)
+                                             self._known, self._allowed, self.margin)
             return self._model
 
     def _geometries(self) -> list[Geometry]:
