@@ -11,7 +11,8 @@ a shape on link l moves more than sum_j lever[j] |dq_j| (m): joint j turns every
 it on a circle about its axis, of radius at most the point's distance to the joint's origin,
 which the chain bounds by |origin of joint j+1| + ... + |origin of joint l| + |sphere centre|
 + sphere radius (triangle inequality; no configuration makes it larger); for joint l itself,
-whose axis is fixed in the link, the distance to the axis. Over samples the bound adds up:
+whose axis is fixed in the link, the distance to the axis, and none for a shape round about
+that axis (a cylinder on it: turning leaves the space it fills unchanged). Over samples the bound adds up:
 (travel of each joint, `joint_travel`) @ levers. Two moving shapes move relative to each other
 only by the joints between their links: `pair_levers`.
 
@@ -31,6 +32,7 @@ import pinocchio as pin
 from .shapes import Geometry
 
 _FLOOR_DEPTH = 1000.0   # m: the half-space is bounded by a box this deep and this wide
+_ON_AXIS = 1e-9         # m (and sine): a shape this close to a joint's axis is on it
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,58 +40,93 @@ class Bounds:
     """Bounding volumes of a scene's shapes.
 
     Moving shapes (G): link (G,) int 1..6; centre (G, 3) m, sphere centres in their link's
-    frame; radius (G,) m; lever (G, 6) m/rad, the motion bound per joint step.
+    frame; radius (G,) m; lever (G, 6) m/rad, the motion bound per joint step; round_next (G,)
+    bool: the shape is a solid of revolution about the next joint's axis (link5's cylinder
+    about J6), so that joint's turning never changes a distance to it.
     Fixed shapes (S): box_centre (S, 3) m and box_axes (S, 3, 3) (columns: the box's axes)
-    in the base_link frame, box_half (S, 3) m half extents.
+    in the base_link frame, box_half (S, 3) m half extents; box_round_next (S,) bool: round
+    about J1's axis (the base column).
     """
 
     link: np.ndarray
     centre: np.ndarray
     radius: np.ndarray
     lever: np.ndarray
+    round_next: np.ndarray
     box_centre: np.ndarray
     box_axes: np.ndarray
     box_half: np.ndarray
+    box_round_next: np.ndarray
+
+    def __post_init__(self):
+        # The centres in homogeneous coordinates (G, 4), for sphere_centres.
+        object.__setattr__(self, "centre_h", np.concatenate(
+            [self.centre, np.ones((len(self.centre), 1))], axis=1))
 
 
 def build_bounds(moving: list[Geometry], fixed: list[Geometry], joint_origins: np.ndarray,
                  joint_axes: np.ndarray) -> Bounds:
     """Bounds of the moving shapes (link >= 1) and the fixed ones (link 0); joint_origins
     (6, 3) m: each joint's origin in its parent link (ArmModel.joint_origins); joint_axes
-    (6, 3): each joint's unit axis in its own link."""
-    reach = np.linalg.norm(np.asarray(joint_origins, dtype=float), axis=1)   # (6,)
+    (6, 3): each joint's unit axis, the same in its own link and its parent at q = 0."""
+    origins = np.asarray(joint_origins, dtype=float)
+    reach = np.linalg.norm(origins, axis=1)                                  # (6,)
     G = len(moving)
     link = np.array([g.link for g in moving], dtype=int)
     centre, radius, lever = np.zeros((G, 3)), np.zeros(G), np.zeros((G, 6))
+    round_next = np.zeros(G, dtype=bool)
     for i, g in enumerate(moving):
         local_centre, half = _local_box(g.shape)
         c = centre[i] = g.placement[:3, :3] @ local_centre + g.placement[:3, 3]
         radius[i] = float(np.linalg.norm(half))
         for j in range(g.link - 1):   # joints before the shape's own: by distance to origin
             lever[i, j] = reach[j + 1:g.link].sum() + np.linalg.norm(c) + radius[i]
-        # The shape's own joint has its axis fixed in the shape's link: distance to the axis.
+        # The shape's own joint has its axis fixed in the shape's link: distance to the axis,
+        # or nothing at all for a shape round about that axis (its turning moves no surface).
         axis = joint_axes[g.link - 1]
-        lever[i, g.link - 1] = np.linalg.norm(c - (c @ axis) * axis) + radius[i]
+        own = np.linalg.norm(c - (c @ axis) * axis) + radius[i]
+        lever[i, g.link - 1] = 0.0 if _round_about(g, np.zeros(3), axis) else own
+        if g.link < 6:
+            round_next[i] = _round_about(g, origins[g.link], joint_axes[g.link])
     S = len(fixed)
     box_centre, box_axes, box_half = np.zeros((S, 3)), np.zeros((S, 3, 3)), np.zeros((S, 3))
+    box_round_next = np.zeros(S, dtype=bool)
     for i, g in enumerate(fixed):
         local_centre, local_axes, half = _fixed_box(g.shape)
         box_axes[i] = g.placement[:3, :3] @ local_axes
         box_centre[i] = g.placement[:3, :3] @ local_centre + g.placement[:3, 3]
         box_half[i] = half
-    return Bounds(link, centre, radius, lever, box_centre, box_axes, box_half)
+        box_round_next[i] = _round_about(g, origins[0], joint_axes[0])
+    return Bounds(link, centre, radius, lever, round_next, box_centre, box_axes, box_half,
+                  box_round_next)
+
+
+def _round_about(g: Geometry, origin: np.ndarray, axis: np.ndarray) -> bool:
+    """Is the shape a solid of revolution about the line through origin (3,) along axis (3,),
+    both in its link's frame? (A cylinder or capsule on that line, or a sphere centred on it.)"""
+    if not isinstance(g.shape, (coal.Cylinder, coal.Capsule, coal.Sphere)):
+        return False
+    c = g.placement[:3, 3] - origin
+    on_line = np.linalg.norm(c - (c @ axis) * axis) < _ON_AXIS
+    along = isinstance(g.shape, coal.Sphere) or np.linalg.norm(
+        np.cross(g.placement[:3, 2], axis)) < _ON_AXIS
+    return bool(on_line and along)
 
 
 def pair_levers(bounds: Bounds, a: np.ndarray, b: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     """(P, 6) m/rad: how far the shapes of each pair can move relative to each other per joint
     step. Against a fixed shape, the moving one's levers; between two moving shapes, those of
     the one further out along the arm, for the joints between the two links only (the rest
-    moves both together)."""
+    moves both together). The joint next to the nearer shape counts for nothing when that
+    shape is round about its axis."""
     out = bounds.lever[a].copy()
+    out[fixed & bounds.box_round_next[np.where(fixed, b, 0)], 0] = 0.0
     for p in np.flatnonzero(~fixed):
         near, far = sorted((a[p], b[p]), key=lambda g: bounds.link[g])
         out[p] = bounds.lever[far]
         out[p, :bounds.link[near]] = 0.0
+        if bounds.round_next[near]:
+            out[p, bounds.link[near]] = 0.0
     return out
 
 
@@ -111,6 +148,12 @@ def _fixed_box(shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return centre, np.eye(3), half
 
 
+def sphere_centres(bounds: Bounds, frames: np.ndarray) -> np.ndarray:
+    """(n, G, 3) m: the sphere centres in base_link, from link frames (n, 6, 4, 4)."""
+    F = frames[:, bounds.link - 1, :3, :]                               # (n, G, 3, 4)
+    return (F @ bounds.centre_h[:, :, None])[..., 0]
+
+
 class SphereCentres:
     """Sphere centres of the moving shapes in base_link at samples of a motion, computed on
     first use (the broad phase visits only some samples): values (N, G, 3) m, valid where
@@ -118,24 +161,16 @@ class SphereCentres:
     rad."""
 
     def __init__(self, bounds: Bounds, kinematics, q: np.ndarray):
-        self.kinematics, self.q = kinematics, q
+        self.bounds, self.kinematics, self.q = bounds, kinematics, q
         self.values = np.empty((len(q), len(bounds.radius), 3))
         self._done = np.zeros(len(q), dtype=bool)
-        self._links = []     # (link, its shapes (g,), their centres in its frame (3, g))
-        for link in range(1, 7):
-            idx = np.flatnonzero(bounds.link == link)
-            if len(idx):
-                self._links.append((link, idx, bounds.centre[idx].T))
 
     def ensure(self, samples: np.ndarray) -> np.ndarray:
         """Compute the centres at these samples (K,) if not done yet; returns `values`."""
         new = np.unique(samples[~self._done[samples]])
         if len(new):
-            frames = self.kinematics.link_frames(self.q[new])                 # (n, 6, 4, 4)
-            for link, idx, local in self._links:
-                F = frames[:, link - 1]
-                self.values[new[:, None], idx] = (np.swapaxes(F[:, :3, :3] @ local, 1, 2)
-                                                  + F[:, None, :3, 3])
+            frames = self.kinematics.link_frames(self.q[new])
+            self.values[new] = sphere_centres(self.bounds, frames)
             self._done[new] = True
         return self.values
 

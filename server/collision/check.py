@@ -23,6 +23,8 @@ Units: joints rad, distances m, times s; points are in the world frame.
 """
 from __future__ import annotations
 
+import bisect
+import heapq
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -31,7 +33,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .bounds import SphereCentres, joint_travel, lower_bounds, uncertain_stretches
+from .bounds import (SphereCentres, joint_travel, lower_bounds, sphere_centres,
+                     uncertain_stretches)
 from .model import AllowedContact, CollisionModel
 
 LEAVE_TOLERANCE = 0.001   # m: how much closer a pair starting within the margin may come
@@ -111,23 +114,20 @@ class Clearance:
 
 
 def check_motion(model: CollisionModel, positions, dt: float, marks: Marks = (), *,
-                 margin: float | None = None, exclude: Iterable[str] = (),
-                 allow: Iterable[AllowedContact] = (), allow_leaving: bool = True
-                 ) -> CheckResult:
-    """Check the motion through joint positions (N, 6) rad sampled every dt s.
+                 exclude: Iterable[str] = (), allow: Iterable[AllowedContact] = (),
+                 allow_leaving: bool = True) -> CheckResult:
+    """Check the motion through joint positions (N, 6) rad sampled every dt s, against the
+    model's margin.
 
-    marks: (sample, label) pairs or {sample: label}, e.g. Trajectory.marks; margin (m): the
-    model's unless given; exclude: bodies left out (the surface a guarded move is meant to
-    touch); allow: contacts allowed for this check besides the model's own. allow_leaving: pairs
-    within the margin at the first sample may move apart (module docstring); False: they are a
-    contact at time 0. Raises ValueError on malformed input, CollisionModelError on unknown
-    body names."""
+    marks: (sample, label) pairs or {sample: label}, e.g. Trajectory.marks; exclude: bodies
+    left out (the surface a guarded move is meant to touch); allow: contacts allowed for this
+    check besides the model's own. allow_leaving: pairs within the margin at the first sample
+    may move apart (module docstring); False: they are a contact at time 0. Raises ValueError
+    on malformed input, CollisionModelError on unknown body names."""
     Q = _positions(positions)
     if not (math.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be positive, got {dt!r}")
-    margin = model.margin if margin is None else float(margin)
-    if not margin > 0:
-        raise ValueError(f"the margin must be positive, got {margin!r} m")
+    margin = model.margin
     active = model.active_pairs(exclude, allow)
     bounds, table = model.bounds, model.pair_table
     travel = joint_travel(Q)
@@ -135,9 +135,9 @@ def check_motion(model: CollisionModel, positions, dt: float, marks: Marks = (),
     stretches = uncertain_stretches(bounds, table, centres, travel, active, margin)
     bound_checks = stretches[-1]
     walk = _Walk(model, Q, margin, allow_leaving)
-    for p, s, e in _runs(*stretches[:-1]):
-        if s < walk.first_u:
-            walk.run(p, s, e, travel[s:e + 1] @ table.lever[p])
+    walk.walk([_Run(p, s, e, along, float(s), along[0], margin, margin)
+               for p, s, e in _runs(*stretches[:-1])
+               for along in [(travel[s:e + 1] @ table.lever[p]).tolist()]])
     contact = None
     if walk.first is not None:
         contact = _contact(model, walk.first, Q, dt, _sorted_marks(marks))
@@ -152,19 +152,18 @@ def clearance(model: CollisionModel, q, *, exclude: Iterable[str] = (),
     to know how near it is within its slow-down range)."""
     Q = _positions(np.asarray(q, dtype=float).reshape(1, -1))
     active = model.active_pairs(exclude, allow)
-    first = np.zeros(len(active), dtype=int)
-    centres = SphereCentres(model.bounds, model.kinematics, Q).ensure(first)
-    bound = lower_bounds(model.bounds, model.pair_table, centres, active, first)
     data, gdata = model.data()
     pin.updateGeometryPlacements(model.pin_model, data, model.geom_model, gdata, Q[0])
-    near = active[bound < limit]
-    if not len(near):
+    frames = np.array([[data.oMi[i].homogeneous for i in range(1, 7)]])     # (1, 6, 4, 4)
+    bound = lower_bounds(model.bounds, model.pair_table, sphere_centres(model.bounds, frames),
+                         active, np.zeros(len(active), dtype=int))
+    if not len(active) or bound.min() >= limit:
         return Clearance(math.inf)
     # The pair nearest by its bound gives a distance d; only pairs whose bound is below d can
     # be nearer (below 0 for an overlap: bounds hold for separations, not for depths).
     # pinocchio then computes those (its active pairs) in one pass, in C++.
-    first = int(near[int(np.argmin(bound[bound < limit]))])
-    cutoff = pin.computeDistance(model.geom_model, gdata, first).min_distance
+    nearest = int(active[int(np.argmin(bound))])
+    cutoff = pin.computeDistance(model.geom_model, gdata, nearest).min_distance
     near = active[bound < min(limit, max(cutoff, 0.0) + _GJK_SLACK)]
     gdata.deactivateAllCollisionPairs()
     for k in near:
@@ -191,8 +190,25 @@ class _Hit:
     points: np.ndarray  # (2, 3) base_link
 
 
+@dataclass
+class _Run:
+    """One pair's walk from sample s to sample e: at u (fractional sample), having moved `at`
+    (m) by its bound; along: the cumulative bound at samples s..e (floats, m). A check below
+    `threshold` is a contact; the next check comes max(d - threshold, floor) further on."""
+
+    pair: int
+    s: int
+    e: int
+    along: list[float]
+    u: float
+    at: float
+    threshold: float
+    floor: float
+
+
 class _Walk:
-    """Conservative advancement along runs of sample steps, pair by pair; keeps the first hit."""
+    """Conservative advancement along runs of sample steps, all pairs together, earliest
+    first: it stops at the first contact, as soon as every run has reached it."""
 
     def __init__(self, model: CollisionModel, Q: np.ndarray, margin: float,
                  allow_leaving: bool):
@@ -204,9 +220,15 @@ class _Walk:
         self.first: _Hit | None = None
         self.leaving: list[int] = []
 
-    @property
-    def first_u(self) -> float:
-        return math.inf if self.first is None else self.first.u
+    def walk(self, runs: list[_Run]) -> None:
+        heap = [(r.u, k) for k, r in enumerate(runs)]
+        heapq.heapify(heap)
+        while heap:
+            u, k = heapq.heappop(heap)
+            if self.first is not None and u >= self.first.u:
+                return                     # every other run is there or further on too
+            if self.step(runs[k]):
+                heapq.heappush(heap, (runs[k].u, k))
 
     def distance(self, pair: int, u: float):
         if u != self.placed_u:
@@ -220,45 +242,32 @@ class _Walk:
         self.pair_checks += 1
         return pin.computeDistance(self.model.geom_model, self.gdata, pair)
 
-    def run(self, pair: int, s: int, e: int, along: np.ndarray) -> None:
-        """Walk pair `pair` from sample s to sample e; along (e - s + 1,) m: its cumulative
-        motion bound at those samples. The last sample of the motion is always checked."""
-        u, threshold, floor = float(s), self.margin, self.margin
-        last = len(self.Q) - 1
-        while u < self.first_u:
-            result = self.distance(pair, u)
-            d = result.min_distance
-            if u == 0.0 and d < self.margin and self.allow_leaving:
-                threshold, floor = d - LEAVE_TOLERANCE, LEAVE_TOLERANCE
-                self.leaving.append(pair)
-            elif d >= self.margin:
-                threshold, floor = self.margin, self.margin
-            if d < threshold:
-                self.first = _Hit(pair, u, d, self.q.copy(),
-                                  np.array([result.getNearestPoint1(),
-                                            result.getNearestPoint2()]))
-                return
-            if u >= e:
-                return
-            target = _at(along, u - s) + max(d - threshold, floor)
-            if target < along[-1]:
-                u = s + _inverse(along, target)
-            elif e == last:
-                u = float(e)
-            else:
-                return
-
-
-def _at(along: np.ndarray, x: float) -> float:
-    i = min(int(x), len(along) - 2) if len(along) > 1 else 0
-    return float(along[i] + (x - i) * (along[i + 1] - along[i])) if len(along) > 1 \
-        else float(along[0])
-
-
-def _inverse(along: np.ndarray, target: float) -> float:
-    """The fractional index where the nondecreasing `along` reaches target (< along[-1])."""
-    i = int(np.searchsorted(along, target, side="right")) - 1
-    return i + (target - along[i]) / (along[i + 1] - along[i])
+    def step(self, run: _Run) -> bool:
+        """Check the run where it is and move it on; False when it is done. The last sample of
+        the motion is always checked."""
+        result = self.distance(run.pair, run.u)
+        d = result.min_distance
+        if run.u == 0.0 and d < self.margin and self.allow_leaving:
+            run.threshold, run.floor = d - LEAVE_TOLERANCE, LEAVE_TOLERANCE
+            self.leaving.append(run.pair)
+        elif d >= self.margin:
+            run.threshold, run.floor = self.margin, self.margin
+        if d < run.threshold:
+            self.first = _Hit(run.pair, run.u, d, self.q.copy(),
+                              np.array([result.getNearestPoint1(), result.getNearestPoint2()]))
+            return False
+        if run.u >= run.e:
+            return False
+        along = run.along
+        run.at += max(d - run.threshold, run.floor)
+        if run.at < along[-1]:      # where the bound reaches `at`: between samples i and i + 1
+            i = bisect.bisect_right(along, run.at) - 1
+            run.u = run.s + i + (run.at - along[i]) / (along[i + 1] - along[i])
+            return True
+        if run.e == len(self.Q) - 1:
+            run.u = float(run.e)
+            return True
+        return False
 
 
 def _runs(pair: np.ndarray, start: np.ndarray, end: np.ndarray) -> list[tuple[int, int, int]]:

@@ -16,8 +16,8 @@ assistant disables "default" collisions; and shapes on neighbouring links that s
 the whole range of the joint between them (a tool and link5: its "never" collisions). Fixed
 shapes never meet each other (nothing moves them).
 
-A model is immutable and shared: every thread checks with its own pinocchio data. Frames: everything
-in the arm's base_link frame; `base` (4, 4) places base_link in the world.
+A model is immutable and shared: every thread checks with its own pinocchio data. Frames:
+everything in the arm's base_link frame; `base` (4, 4) places base_link in the world.
 """
 from __future__ import annotations
 
@@ -37,6 +37,7 @@ from .bounds import PairTable, build_bounds, pair_levers
 from .shapes import ARM_LINKS, Geometry, arm_description
 
 DEFAULT_MARGIN = 0.005   # m: closer than this is a contact
+_ACTIVE_CACHE = 64       # distinct (exclude, allow) requests remembered per model
 
 
 class CollisionModelError(ValueError):
@@ -112,6 +113,7 @@ class CollisionModel:
         fixed_b = np.array([self.geometries[j].link == 0 for _, j in pairs], dtype=bool)
         self.pair_table = PairTable(a, b, fixed_b, pair_levers(self.bounds, a, b, fixed_b))
         self._local = threading.local()
+        self._active: dict = {}    # (exclude, allow) -> active pairs, for repeated requests
 
     def _apart_over_one_joint(self, pairs: list[tuple[int, int]],
                               slot: dict[int, int]) -> set[tuple[int, int]]:
@@ -151,13 +153,18 @@ class CollisionModel:
         """Indices of the pairs to check: all but those with an excluded body and those the
         model's and the given allowed contacts name. Unknown body names raise
         CollisionModelError (a typo must not silently check nothing)."""
-        exclude = frozenset(exclude)
-        allow = tuple(allow)
-        self._check_names(exclude | {b for c in allow for b in (c.a, c.b)})
-        allowed = {c.key for c in self.allowed + allow}
-        keep = [k for k, (a, b) in enumerate(self.pair_bodies)
-                if a not in exclude and b not in exclude and frozenset((a, b)) not in allowed]
-        return np.array(keep, dtype=int)
+        key = (frozenset(exclude), frozenset(allow))
+        found = self._active.get(key)
+        if found is None:
+            exclude, allow = key
+            self._check_names(exclude | {b for c in allow for b in (c.a, c.b)})
+            allowed = {c.key for c in self.allowed + tuple(allow)}
+            found = np.array([k for k, (a, b) in enumerate(self.pair_bodies)
+                              if a not in exclude and b not in exclude
+                              and frozenset((a, b)) not in allowed], dtype=int)
+            if len(self._active) < _ACTIVE_CACHE:
+                self._active[key] = found
+        return found
 
     def data(self) -> tuple[pin.Data, pin.GeometryData]:
         """This thread's pinocchio data for the model (checks write only their data, so any

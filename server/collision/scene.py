@@ -39,7 +39,9 @@ class CollisionScene:
     """What is where in the cell, for collision checking."""
 
     def __init__(self, cell: Cell, margin: float = DEFAULT_MARGIN):
-        self.cell, self.margin = cell, margin
+        if not margin > 0:
+            raise CollisionModelError(f"the margin must be positive, got {margin!r} m")
+        self.cell, self.margin = cell, float(margin)
         self._lock = threading.Lock()
         self._base = pose_matrix(cell.base.xyz, cell.base.rpy)      # base_link in the world
         self._world_in_base = np.linalg.inv(self._base)
@@ -51,12 +53,11 @@ class CollisionScene:
         self._mounted: str | None = None
         self._held: tuple[str, np.ndarray] | None = None     # part, its pose in the flange
         self._allowed: list[AllowedContact] = []
-        self._known = frozenset(ARM_LINKS) | {f.name for f in cell.world.fixtures} \
-            | set(self._tools) | set(self._parts) | ({FLOOR} if cell.world.floor else set())
+        self._known = (frozenset(ARM_LINKS) | {f.name for f in cell.world.fixtures}
+                       | set(self._tools) | set(self._parts)
+                       | ({FLOOR} if cell.world.floor else set()))
         self._kinematics = Kinematics(cell.arm)
         self._model: CollisionModel | None = None
-        if not margin > 0:
-            raise CollisionModelError(f"the margin must be positive, got {margin!r} m")
 
     # ---- what is where ------------------------------------------------------------------------
 
@@ -146,8 +147,8 @@ class CollisionScene:
             if self._held is None:
                 raise CollisionModelError("no part is held")
             name, in_flange = self._held
-            self._held = None
             self._part_at[name] = self._flange_world(q) @ in_flange
+            self._held = None
             self._changed()
             return self._part_at[name].copy()
 

@@ -25,8 +25,8 @@ def test_the_default_cell_has_every_body(scene, kit):
     assert model.bodies() == tuple(expected)
     assert model.margin == DEFAULT_MARGIN
     # Fixed bodies are never paired with each other; base_link only with moving links.
-    fixed = {"base_link", FLOOR} | {f.name for f in world.fixtures} | {t.name for t in world.tools} \
-        | {p.name for p in world.parts}
+    fixed = ({"base_link", FLOOR} | {f.name for f in world.fixtures}
+             | {t.name for t in world.tools} | {p.name for p in world.parts})
     assert not [p for p in model.pair_bodies if set(p) <= fixed]
     for a, b in model.pair_bodies:
         assert a in ARM_LINKS[1:]
@@ -78,43 +78,73 @@ def test_geometry_follows_the_link_frames_and_the_base(kit):
     assert np.allclose(model.to_world(np.zeros(3)), (0.0, 0.0, 0.1))
 
 
-def shape_points(shape, n: int = 12) -> np.ndarray:
-    """Points on the surface extremes of a box or cylinder, in its own frame (K, 3)."""
-    if isinstance(shape, coal.Box):
-        h = np.asarray(shape.halfSide)
-        return np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
-                         for sz in (-1, 1)]) * h
-    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    rim = np.column_stack([shape.radius * np.cos(a), shape.radius * np.sin(a), np.zeros(n)])
-    return np.concatenate([rim + (0, 0, shape.halfLength), rim - (0, 0, shape.halfLength)])
-
-
-def world_points(model, gdata, index: int) -> np.ndarray:
+def distances_to_probes(model, gdata, index: int, probes: np.ndarray) -> np.ndarray:
+    """(K,) m: the distance of shape `index`, where gdata places it, to points probes (K, 3)."""
     g = model.geometries[index]
     T = gdata.oMg[index].homogeneous
-    return shape_points(g.shape) @ T[:3, :3].T + T[:3, 3]
+    shape_at = coal.Transform3s(T[:3, :3], T[:3, 3])
+    point = coal.Sphere(1e-6)
+    out = []
+    for p in probes:
+        result = coal.DistanceResult()
+        out.append(coal.distance(g.shape, shape_at, point, coal.Transform3s(np.eye(3), p),
+                                 coal.DistanceRequest(), result))
+    return np.array(out)
 
 
 def test_the_motion_bound_holds_for_random_steps(scene):
-    """No point of any moving shape moves further than its levers say, along random straight
-    joint steps (checked at the step's end and in between)."""
+    """No moving shape's distance to anything changes by more than its levers say, along
+    random straight joint steps (checked half way and at the end): fixed probe points all
+    around stand for the obstacles."""
     scene.mount_tool("gripper")
     scene.attach_part("block_1", in_flange=pose_matrix((0.0, 0.0, 0.15), (0, 0, 0.2)))
     model = scene.model()
     data, gdata = model.pin_model.createData(), pin.GeometryData(model.geom_model)
     moving = [i for i, g in enumerate(model.geometries) if g.link > 0]
     rng = np.random.default_rng(3)
-    for _ in range(200):
+    for _ in range(60):
         q = rng.uniform(model.arm.lower, model.arm.upper)
         dq = rng.normal(0.0, 0.3, 6) * (rng.random(6) < 0.6)
+        probes = rng.uniform(-1.3, 1.3, (8, 3)) + (0, 0, 0.5)
         pin.updateGeometryPlacements(model.pin_model, data, model.geom_model, gdata, q)
-        before = [world_points(model, gdata, i) for i in moving]
+        before = [distances_to_probes(model, gdata, i, probes) for i in moving]
         for f in (0.5, 1.0):
             pin.updateGeometryPlacements(model.pin_model, data, model.geom_model, gdata,
                                          q + f * dq)
             for k, i in enumerate(moving):
-                moved = np.linalg.norm(world_points(model, gdata, i) - before[k], axis=1).max()
-                assert moved <= model.bounds.lever[k] @ np.abs(f * dq) + 1e-12
+                change = np.abs(distances_to_probes(model, gdata, i, probes) - before[k]).max()
+                assert change <= model.bounds.lever[k] @ np.abs(f * dq) + 1e-6
+
+
+def test_pair_distances_change_no_more_than_their_levers(scene):
+    """Between two moving shapes (and against the round base column) only the joints between
+    them count, and a joint about which the nearer shape is round counts for nothing."""
+    scene.mount_tool("gripper")
+    model = scene.model()
+    data, gdata = model.pin_model.createData(), pin.GeometryData(model.geom_model)
+    rng = np.random.default_rng(8)
+
+    def distances(q):
+        pin.computeDistances(model.pin_model, data, model.geom_model, gdata, q)
+        return np.array([r.min_distance for r in gdata.distanceResults])
+
+    for _ in range(80):
+        q = rng.uniform(model.arm.lower, model.arm.upper)
+        dq = rng.normal(0.0, 0.3, 6)
+        before, after = distances(q), distances(q + dq)
+        apart = (before > 0) & (after > 0)
+        limit = model.pair_table.lever @ np.abs(dq)
+        assert np.all(np.abs(after - before)[apart] <= limit[apart] + 1e-6)
+
+
+def test_round_shapes_do_not_move_when_they_turn_about_their_axis(scene):
+    """link1 (about J1), link4 (J4) and link6 (J6) are cylinders on their joint's axis; the base
+    column is round about J1, link3 about J4 and link5 about J6."""
+    b = scene.model().bounds
+    own = {link: b.lever[k, link - 1] for k, link in enumerate(b.link)}
+    assert own[1] == own[4] == own[6] == 0.0 and own[2] > 0 and own[3] > 0 and own[5] > 0
+    assert b.round_next.tolist() == [False, False, True, False, True, False]
+    assert b.box_round_next[0]        # base_link, the first fixed shape
 
 
 def test_the_pair_bounds_are_below_the_distances(scene):
