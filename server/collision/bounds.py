@@ -12,9 +12,10 @@ it on a circle about its axis, of radius at most the point's distance to the joi
 which the chain bounds by |origin of joint j+1| + ... + |origin of joint l| + |sphere centre|
 + sphere radius (triangle inequality; no configuration makes it larger); for joint l itself,
 whose axis is fixed in the link, the distance to the axis, and none for a shape round about
-that axis (a cylinder on it: turning leaves the space it fills unchanged). Over samples the bound adds up:
-(travel of each joint, `joint_travel`) @ levers. Two moving shapes move relative to each other
-only by the joints between their links: `pair_levers`.
+that axis (a cylinder on it: turning leaves the space it fills unchanged). Over samples the
+bound adds up: (travel of each joint, `joint_travel`) @ levers. Two moving shapes move relative
+to each other only by the joints between their links (`pair_levers`), and not by the joint
+next to the nearer one if that one is round about its axis (link5 about J6).
 
 `uncertain_stretches` splits a sampled motion in halves, recursively, per pair: a stretch of
 samples is clear when the bound at its middle sample, less what the pair can move within the
@@ -234,7 +235,8 @@ def uncertain_stretches(bounds: Bounds, pairs: PairTable, centres: SphereCentres
     start = np.zeros(len(pair), dtype=int)
     end = np.full(len(pair), last, dtype=int)
     computed = 0
-    kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    nothing = np.zeros(0, dtype=int)
+    kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = [(nothing, nothing, nothing)]
     while len(pair):
         mid = (start + end) // 2
         lever = pairs.lever[pair]

@@ -10,9 +10,10 @@ is clear never makes two shapes overlap, anywhere along it, and one that comes w
 at a check is refused there.
 
 How: the broad phase (bounds.py) clears most (pair, stretch of samples) at once with sphere and
-box bounds; what it leaves are runs of sample steps per pair, walked by conservative
-advancement: at each check the exact distance d (coal, through pinocchio) gives the next check
-max(d - margin, margin) further along the pair's motion bound.
+box bounds; what it leaves are runs of samples per pair, walked by conservative advancement: at
+each check the exact distance d (coal, through pinocchio) puts the next check max(d - margin,
+margin) further along the pair's motion bound. All runs advance together, the one furthest
+behind first, so the first contact found is the earliest and ends the walk.
 
 Allowed contacts (model.AllowedContact) and excluded bodies drop pairs from a check. A pair that
 starts within the margin (the arm resting on what it touched, a part lifted off the table) may
@@ -69,6 +70,7 @@ class Contact:
     def metadata(self) -> dict[str, str]:
         """The contact as strings, for an ErrorInfo's metadata."""
         out = {"body_a": self.bodies[0], "body_b": self.bodies[1],
+               "shape_a": self.shapes[0], "shape_b": self.shapes[1],
                "time": f"{self.time:.3f}", "sample": str(self.sample),
                "fraction": f"{self.fraction:.4f}", "distance": f"{self.distance:.4f}"}
         if self.segment is not None:
@@ -134,10 +136,12 @@ def check_motion(model: CollisionModel, positions, dt: float, marks: Marks = (),
     centres = SphereCentres(bounds, model.kinematics, Q)
     stretches = uncertain_stretches(bounds, table, centres, travel, active, margin)
     bound_checks = stretches[-1]
+    runs = []
+    for p, s, e in _runs(*stretches[:-1]):
+        along = (travel[s:e + 1] @ table.lever[p]).tolist()
+        runs.append(_Run(p, s, e, along, float(s), along[0], margin, margin))
     walk = _Walk(model, Q, margin, allow_leaving)
-    walk.walk([_Run(p, s, e, along, float(s), along[0], margin, margin)
-               for p, s, e in _runs(*stretches[:-1])
-               for along in [(travel[s:e + 1] @ table.lever[p]).tolist()]])
+    walk.walk(runs)
     contact = None
     if walk.first is not None:
         contact = _contact(model, walk.first, Q, dt, _sorted_marks(marks))

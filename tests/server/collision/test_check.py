@@ -262,6 +262,13 @@ def test_malformed_motions_raise(scene, positions, dt):
         check_motion(scene.model(), positions, dt)
 
 
+def test_with_every_body_excluded_nothing_is_checked(kit, scene):
+    a, b = beside_table(kit)
+    model = scene.model()
+    result = check_motion(model, [a, b], 0.004, exclude=set(model.bodies()))
+    assert result.clear and result.bound_checks == 0 and result.pair_checks == 0
+
+
 def test_a_clear_result_counts_its_work(kit, scene):
     result = kit.check(scene, [kit.q0, kit.ik((0.4, 0.3, 0.7))])
     assert result.clear and result.bound_checks > 0
