@@ -29,5 +29,7 @@ class ServerConfig:
     paths_file: str | None = None
     # Start from the default settings instead of the stored ones (and store the defaults).
     reset_settings: bool = False
+    # m: no planned motion may bring two bodies of the cell closer than this (collision/).
+    collision_margin: float = 0.005
     # Initialise the controller at start-up (False leaves the device Idle, for tests).
     start_device: bool = True

@@ -28,6 +28,7 @@ from typing import Callable
 
 
 from landscape.server import alarms, states, stored_settings
+from landscape.server.collision import CollisionScene
 from landscape.server.errors import (ControllerFailure, EstopActive, NotLockHolder, ParamError,
                                      WrongState)
 from landscape.server.events import EventBus, Severity
@@ -66,7 +67,8 @@ class DeviceStatus:
 
 
 class Device:
-    def __init__(self, link, bus: EventBus, arm: ArmModel, *, paths: PathStore | None = None,
+    def __init__(self, link, bus: EventBus, arm: ArmModel, *, collisions: CollisionScene,
+                 paths: PathStore | None = None,
                  outputs: set[str] = frozenset(), enable_timeout: float = 5.0,
                  keepalive_interval: float = 0.5, keepalive_timeout: float = 2.0,
                  reset_settings: bool = False):
@@ -74,6 +76,8 @@ class Device:
         self.bus = bus
         self.arm = arm
         self.kinematics = Kinematics(arm)
+        # What is where in the cell, for checking motions before they start (collision/).
+        self.collisions = collisions
         self.enable_timeout = enable_timeout
         self.rsvp_timeout = 30.0
         self.rsvp = RsvpBroker(bus)

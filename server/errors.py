@@ -101,3 +101,10 @@ class Internal(CommandError):
     traceback. Nothing the call was to do should be assumed done."""
 
     status, reason = grpc.StatusCode.INTERNAL, "INTERNAL"
+
+
+class Collision(CommandError):
+    """A planned motion would bring two bodies of the cell closer than the safety margin;
+    metadata names them and where (time, fraction, segment). Nothing moved."""
+
+    status, reason = grpc.StatusCode.FAILED_PRECONDITION, "COLLISION"

@@ -56,14 +56,19 @@ class StateHub:
         self._tick = loop.create_future()
         loop.add_reader(self.ring.tick_fd, self._on_tick)
 
-    def close(self) -> None:
-        """End every stream (from the loop's thread or any other)."""
+    async def aclose(self) -> None:
+        """End every stream and stop listening to the ring (on the loop, before the ring's
+        pipe closes)."""
         self._closed = True
-        if self._loop is not None and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._on_tick)
+        if self._loop is not None:
+            self._loop.remove_reader(self.ring.tick_fd)
+            self._wake()
 
     def _on_tick(self) -> None:
         self.ring.drain_ticks()
+        self._wake()
+
+    def _wake(self) -> None:
         tick, self._tick = self._tick, self._loop.create_future()
         if not tick.done():
             tick.set_result(None)
