@@ -82,10 +82,10 @@ async def configure_joint_reports(session, cmd: m.ConfigureJointReports) -> str:
 
 async def configure_status_report(session, cmd: m.ConfigureStatusReport) -> str:
     r = session.settings.reporting
-    r.joints, r.pose, r.gripper = cmd.joints, cmd.pose, cmd.gripper
-    r.settings, r.sensors, r.guards = cmd.settings, cmd.sensors, cmd.guards
+    r.joints, r.pose, r.gripper = cmd.report_joints, cmd.report_pose, cmd.report_gripper
+    r.settings, r.sensors, r.guards = cmd.report_settings, cmd.report_sensors, cmd.report_guards
     return "status report configured" + (" (guards are not supported: none to report)"
-                                         if cmd.guards else "")
+                                         if cmd.report_guards else "")
 
 
 async def dwell(session, cmd: m.Dwell) -> str:

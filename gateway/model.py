@@ -144,7 +144,8 @@ class Command:
     """CRCLCommandType: every command has the client's CommandID; guards end it early."""
 
     KIND: ClassVar[str] = ""
-    MOTION: ClassVar[bool] = False      # moves the arm: preempts a motion in progress
+    MOTION: ClassVar[bool] = False      # moves the arm
+    LASTS: ClassVar[bool] = False       # runs for a while: the next command preempts it
 
     command_id: int
     name: str | None = None
@@ -154,6 +155,7 @@ class Command:
 def _command(kind: str, motion: bool = False):
     def register(cls):
         cls.KIND, cls.MOTION = kind, motion
+        cls.LASTS = cls.LASTS or motion
         COMMAND_TYPES[kind + "Type"] = cls
         return cls
     return register
@@ -209,17 +211,18 @@ class ConfigureJointReports(Command):
 @_command("ConfigureStatusReport")
 @dataclass(frozen=True, kw_only=True)
 class ConfigureStatusReport(Command):
-    joints: bool
-    pose: bool
-    gripper: bool
-    settings: bool
-    sensors: bool
-    guards: bool
+    report_joints: bool
+    report_pose: bool
+    report_gripper: bool
+    report_settings: bool
+    report_sensors: bool
+    report_guards: bool
 
 
 @_command("Dwell")
 @dataclass(frozen=True, kw_only=True)
 class Dwell(Command):
+    LASTS: ClassVar[bool] = True
     seconds: float
 
 

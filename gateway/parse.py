@@ -375,7 +375,8 @@ def _configure_status_report(c, element):
     tags = ("ReportJointStatuses", "ReportPoseStatus", "ReportGripperStatus",
             "ReportSettingsStatus", "ReportSensorsStatus", "ReportGuardsStatus")
     values = [c.required(tag, xs_boolean) for tag in tags]
-    return dict(zip(("joints", "pose", "gripper", "settings", "sensors", "guards"), values))
+    return dict(zip(("report_joints", "report_pose", "report_gripper", "report_settings",
+                     "report_sensors", "report_guards"), values))
 
 
 def _move_screw(c, element):

@@ -12,17 +12,22 @@ MAX_EXPANDED = 1_000_000    # commands after unrolling: a bound on what one prog
 
 
 def expand(program: m.Program) -> list[m.Command]:
-    out, _ = _block(list(program.commands), 0, None)
+    return unroll(list(program.commands))
+
+
+def unroll(items: list, command_of=lambda item: item) -> list:
+    """`items` (commands, or anything `command_of` maps to its command) with loops unrolled."""
+    out, _ = _block(items, 0, None, command_of)
     return out
 
 
-def _block(commands: list, i: int, loop: str | None) -> tuple[list, int]:
+def _block(items: list, i: int, loop: str | None, command_of) -> tuple[list, int]:
     out = []
-    while i < len(commands):
-        command = commands[i]
+    while i < len(items):
+        command = command_of(items[i])
         if isinstance(command, m.LoopBlockStart):
-            body, i = _block(commands, i + 1, command.loop_name)
-            end = commands[i]
+            body, i = _block(items, i + 1, command.loop_name, command_of)
+            end = command_of(items[i])
             if end.max_count < 0:
                 raise CrclError(f"LoopBlockEnd {end.loop_name!r}: MaxCount {end.max_count} is negative")
             if len(out) + len(body) * end.max_count > MAX_EXPANDED:
@@ -34,7 +39,7 @@ def _block(commands: list, i: int, loop: str | None) -> tuple[list, int]:
                                 f"{command.command_id}) closes no open loop of that name")
             return out, i
         else:
-            out.append(command)
+            out.append(items[i])
         i += 1
     if loop is not None:
         raise CrclError(f"LoopBlockStart {loop!r} has no LoopBlockEnd")

@@ -4,9 +4,10 @@
   the typed parser; a refused document becomes a CRCL_Error status saying why, and the
   session goes on.
 - GetStatus is answered at once from the live state; it never waits behind a command.
-- Any other command becomes the current one (CRCL_Working). A new command while one runs
-  preempts it (spec section VI): the old one is cancelled and a motion stops along its path
-  first. CommandIDs are the client's.
+- Other commands run in the order they arrive, each the current one (CRCL_Working) while it
+  runs. A new command preempts a running one that lasts (a motion, a dwell, a program: spec
+  section VI): it is cancelled and the arm stops along its path before the new one starts;
+  quick commands (settings) just finish first. CommandIDs are the client's.
 - Before InitCanon, and after EndCanon, commands other than InitCanon are errors (EndCanon
   and StopMotion before InitCanon have nothing to do, and are done).
 - InitCanon takes the device's lock for this session (one session at a time holds it), turns
@@ -16,6 +17,7 @@
 from __future__ import annotations
 
 import asyncio
+import collections
 import itertools
 import logging
 from dataclasses import dataclass
@@ -35,6 +37,7 @@ from landscape.v1 import motion_pb2, types_pb2
 
 log = logging.getLogger(__name__)
 _session_numbers = itertools.count(1)
+MAX_QUEUED = 10_000     # commands waiting behind the running one, per session
 
 
 @dataclass(frozen=True)
@@ -54,8 +57,11 @@ class CrclSession:
         self.control: Control | None = None
         self.ended = False                  # after EndCanon, until the next InitCanon
         self._status_ids = itertools.count(1)
-        self._task: asyncio.Task | None = None
-        self._task_moves = False            # the running task may have started a motion
+        self._queue: collections.deque = collections.deque()
+        self._worker: asyncio.Task | None = None
+        self._running: asyncio.Task | None = None
+        self._running_lasts = False         # the running command is preempted by the next
+        self._must_halt = False             # a preempted motion may still move the arm
         self.motion_start: asyncio.Future | None = None   # a motion call in flight
 
     # ---- documents -------------------------------------------------------------------------
@@ -69,6 +75,9 @@ class CrclSession:
             return parse.document(tree)
         except (xmlsafe.XmlRefused, SchemaInvalid, parse.CrclParseError) as error:
             raise CrclError(f"document refused: {error}") from None
+        except Exception as error:   # a gateway bug: refuse the document, keep the connection
+            log.exception("%s: reading a document", self.name)
+            raise CrclError(f"document refused: gateway error {error!r}") from None
 
     async def receive(self, data: bytes) -> bytes | None:
         """Take one document; returns the status to send back (GetStatus only), else None."""
@@ -78,17 +87,17 @@ class CrclSession:
             await self.refuse(str(error), _command_id_of(data))
             return self.status() if b"GetStatusType" in data else None
         if isinstance(document, m.Program):
-            await self.start(self._run_program(document), moves=True,
-                             record=CommandRecord(document.commands[0].command_id, WORKING,
-                                                  program_index=0,
-                                                  program_length=len(document.commands)))
+            self.submit(lambda: self._run_program(document), True, CommandRecord(
+                document.commands[0].command_id, WORKING, program_index=0,
+                program_length=len(document.commands)))
             return None
         command = document.command
         if isinstance(command, m.GetStatus):
             return self.status()
-        await self.start(self.execute(command), moves=True, record=CommandRecord(
-            command.command_id, WORKING, program_file=document.program_file,
-            program_index=document.program_index, program_length=document.program_length))
+        self.submit(lambda: self.execute(command), command.MOTION or command.LASTS,
+                    CommandRecord(command.command_id, WORKING, program_file=document.program_file,
+                                  program_index=document.program_index,
+                                  program_length=document.program_length))
         return None
 
     async def refuse(self, why: str, command_id: int | None = None) -> None:
@@ -104,45 +113,62 @@ class CrclSession:
 
     # ---- running commands ---------------------------------------------------------------------
 
-    async def start(self, body, moves: bool, record: CommandRecord) -> None:
-        """Preempt what runs, then run `body` as the current command."""
-        await self.preempt()
-        self.record = record
-        self._task_moves = moves
-        self._task = asyncio.create_task(self._finish(body, record))
+    def submit(self, body, lasts: bool, record: CommandRecord) -> None:
+        """Queue a command (`body()` makes its coroutine). Commands run in order; a new one
+        preempts a running command that lasts (a motion, a dwell, a program)."""
+        if len(self._queue) >= MAX_QUEUED:
+            self.record = CommandRecord(record.command_id, ERROR,
+                                        f"more than {MAX_QUEUED} commands queued: refused")
+            return
+        self._queue.append((body, lasts, record))
+        if self._running is None and len(self._queue) == 1:
+            self.record = record     # it runs next: status names it from now on
+        if self._running is not None and self._running_lasts and not self._running.done():
+            self._running.cancel()
+        if self._worker is None or self._worker.done():
+            self._worker = asyncio.create_task(self._work(), name=f"{self.name} commands")
 
-    async def _finish(self, body, record: CommandRecord) -> None:
-        try:
-            description = await body
-            if self.record is record and record.state == WORKING:
-                record.state, record.description = DONE, description or ""
-        except (CrclError, DeviceRefused) as error:
-            if self.record is record:
+    async def _work(self) -> None:
+        while self._queue:
+            body, lasts, record = self._queue.popleft()
+            if self._must_halt:
+                self._must_halt = False
+                await self._halt_quietly()
+            self.record = record
+            self._running, self._running_lasts = asyncio.create_task(body()), lasts
+            try:
+                description = await asyncio.shield(self._running)
+                if self.record is record:
+                    record.state, record.description = DONE, description or ""
+            except asyncio.CancelledError:
+                if not self._running.cancelled():
+                    raise              # the worker itself is cancelled: the session closes
+                record.state, record.description = ERROR, "preempted by the next command"
+                self._must_halt = lasts
+            except (CrclError, DeviceRefused) as error:
                 record.state, record.description = ERROR, str(error)
-        except asyncio.CancelledError:
-            raise
-        except Exception as error:   # a bug must not take the connection down silently
-            log.exception("%s: command %d failed", self.name, record.command_id)
-            if self.record is record:
+            except Exception as error:   # a bug must not take the connection down silently
+                log.exception("%s: command %d failed", self.name, record.command_id)
                 record.state, record.description = ERROR, f"gateway error: {error!r}"
+            finally:
+                self._running = None
 
     async def wait(self) -> None:
-        """Until the current command has finished (for programs and tests)."""
-        if self._task is not None:
-            await asyncio.gather(self._task, return_exceptions=True)
+        """Until every queued command has finished (for programs and tests)."""
+        while self._worker is not None and not self._worker.done():
+            await asyncio.gather(self._worker, return_exceptions=True)
 
-    async def preempt(self) -> None:
-        """Cancel the running command; if it may have moved the arm, stop along the path."""
-        task, self._task = self._task, None
-        if task is None or task.done():
-            return
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
-        if self.motion_start is not None:     # let a move request in flight land first
+    async def _halt_quietly(self) -> None:
+        """After a preempted motion: let a move request in flight land, then stop on the
+        path. A failure here is the next command's to report."""
+        if self.motion_start is not None:
             await asyncio.gather(self.motion_start, return_exceptions=True)
             self.motion_start = None
-        if self._task_moves and self.control is not None:
-            await self.halt()
+        if self.control is not None:
+            try:
+                await self.halt()
+            except DeviceRefused as error:
+                log.warning("%s: stopping the preempted motion: %s", self.name, error)
 
     async def halt(self) -> None:
         """Stop a motion along its path and drop it (the arm rests, drives stay on)."""
@@ -195,10 +221,12 @@ class CrclSession:
 
     async def close(self) -> None:
         """The connection ended."""
-        task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
+        self._queue.clear()
+        for task in (self._running, self._worker):
+            if task is not None:
+                task.cancel()
+        await asyncio.gather(*(t for t in (self._running, self._worker) if t),
+                             return_exceptions=True)
         await self.drop_control()
 
     # ---- programs ----------------------------------------------------------------------------

@@ -9,6 +9,8 @@ import threading
 import time
 from pathlib import Path
 
+from lxml import etree
+
 from landscape.gateway.device import DeviceLink
 from landscape.gateway.schemas import SchemaSet, default_directory
 from landscape.gateway.server import Gateway
@@ -89,8 +91,9 @@ class RawClient:
                 raise ConnectionError("the gateway closed the connection")
             self.buffer += chunk
         i = self.buffer.index(end) + len(end)
-        text, self.buffer = self.buffer[:i].decode(), self.buffer[i:]
-        return text.strip()
+        raw, self.buffer = self.buffer[:i], self.buffer[i:]
+        check_status(raw)
+        return raw.decode().strip()
 
     def status(self) -> str:
         self.next_id += 1
@@ -114,6 +117,21 @@ class RawClient:
 
     def close(self) -> None:
         self.sock.close()
+
+
+_STATUS_SCHEMA = None
+
+
+def check_status(raw: bytes) -> None:
+    """Every status the gateway writes must validate against CRCLStatus.xsd."""
+    global _STATUS_SCHEMA
+    if XSD is None:
+        return
+    if _STATUS_SCHEMA is None:
+        parser = etree.XMLParser(no_network=True)
+        _STATUS_SCHEMA = etree.XMLSchema(etree.parse(str(XSD / "CRCLStatus.xsd"), parser))
+    document = etree.fromstring(raw.strip())
+    assert _STATUS_SCHEMA.validate(document), (_STATUS_SCHEMA.error_log, raw)
 
 
 def field(status: str, tag: str) -> str | None:
