@@ -88,7 +88,12 @@ async def configure_status_report(session, cmd: m.ConfigureStatusReport) -> str:
                                          if cmd.report_guards else "")
 
 
+MAX_DWELL = 86_400.0   # s
+
+
 async def dwell(session, cmd: m.Dwell) -> str:
+    if cmd.seconds > MAX_DWELL:
+        raise CrclError(f"a dwell of {cmd.seconds:g} s is longer than a day")
     await asyncio.sleep(cmd.seconds)
     return f"dwelled {cmd.seconds:g} s"
 

@@ -47,7 +47,10 @@ def xs_double(element) -> float:
         _fail(element, f"{text} is a double but not a usable value here")
     if not _DOUBLE.match(text):
         _fail(element, f"{text!r} is not a number (xs:double)")
-    return float(text)
+    value = float(text)
+    if not math.isfinite(value):
+        _fail(element, f"{text[:40]!r} is beyond the range of a double")
+    return value
 
 
 def _integer(element, bounds) -> int:

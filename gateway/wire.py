@@ -11,12 +11,16 @@ so it costs one `bytes.find` per markup token. It refuses a DOCTYPE outright (no
 no entity declarations can ever reach the parser) and bounds what one document may take.
 A document that grows past the bound is skipped to its end while its bytes are dropped, so the
 connection stays usable; a single token past the bound cannot be skipped safely and is fatal.
+An XML declaration inside a document means it was truncated: it is refused, and the next
+document starts there.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 DEFAULT_MAX_DOCUMENT = 1 << 20     # bytes; a CRCL command is a few hundred, a program a few 10k
+SKIP_BUDGET = 256                  # an oversized document is skipped for this many times the
+                                   # bound at most; past that the connection closes
 
 _WHITESPACE = b" \t\r\n"
 
@@ -54,6 +58,7 @@ class DocumentSplitter:
         self._in_root = False   # the root element has started
         self._skipping: str | None = None   # why the current document is being dropped
         self._skip_offset = 0
+        self._skipped = 0       # bytes of the current document dropped so far
 
     @property
     def pending(self) -> int:
@@ -111,6 +116,8 @@ class DocumentSplitter:
             return False
         second = buf[lt + 1]
         if second == 0x3F:                               # <? ... ?>
+            if self._in_root and _is_declaration(buf, lt):
+                self._truncated(out, lt)                 # a new document began: resync here
             end = self._find_end(b"?>", lt + 2)
         elif buf.startswith(b"<!--", lt):
             end = self._find_end(b"-->", lt + 4)
@@ -123,6 +130,10 @@ class DocumentSplitter:
             raise WireError("a DOCTYPE or other declaration: DTDs and entities are not accepted")
         else:
             end = self._tag_end(lt)
+            if end <= -2:                                # a '<' inside a tag: it was cut short
+                self._truncated(out, -end - 2)
+                self._pos = -end - 2
+                return True
         if end < 0:
             self._check_token(lt)
             return False
@@ -145,13 +156,17 @@ class DocumentSplitter:
         return -1 if i < 0 else i + len(marker)
 
     def _tag_end(self, lt: int) -> int:
-        """Index just past the '>' closing the tag at lt, skipping quoted attribute values."""
+        """Index just past the '>' closing the tag at lt, skipping quoted attribute values;
+        -1 if it has not arrived yet; -2 - k if a '<' at k comes first (the tag was cut)."""
         buf, i = self._buf, lt + 1
         while True:
             gt = buf.find(b">", i)
+            stray = buf.find(b"<", i, len(buf) if gt < 0 else gt)
+            quote = _first_quote(buf, i, len(buf) if gt < 0 else gt)
+            if stray >= 0 and (quote < 0 or stray < quote):
+                return -2 - stray
             if gt < 0:
                 return -1
-            quote = _first_quote(buf, i, gt)
             if quote < 0:
                 return gt + 1
             close = buf.find(buf[quote:quote + 1], quote + 1)
@@ -171,6 +186,15 @@ class DocumentSplitter:
         self._in_root = False
         self._depth = 0
         self._skipping = None
+        self._skipped = 0
+
+    def _truncated(self, out: list, lt: int) -> None:
+        """An XML declaration inside a document: the document was cut short (a declaration
+        may only open one). Refuse it and start the next document at the declaration."""
+        offset = self._skip_offset if self._skipping else self._base + self._doc_start
+        out.append(Refused("truncated document: another began before its end", offset))
+        self._doc_start, self._depth, self._in_root, self._skipping = lt, 0, False, None
+        self._skipped = 0
 
     def _check_size(self) -> None:
         """Past the bound, drop the document's bytes as they are scanned, up to its end."""
@@ -179,6 +203,10 @@ class DocumentSplitter:
                               f"maximum document size): dropped")
             self._skip_offset = self._base + self._doc_start
         if self._skipping and self._pos > self._doc_start:
+            self._skipped += self._pos
+            if self._skipped > SKIP_BUDGET * self.max_document:
+                raise WireError(f"a document without end: more than {self._skipped} bytes "
+                                f"dropped")
             del self._buf[:self._pos]
             self._base += self._pos
             self._pos = self._doc_start = 0
@@ -194,6 +222,10 @@ class DocumentSplitter:
             self._base += self._doc_start
             self._pos -= self._doc_start
             self._doc_start = 0
+
+
+def _is_declaration(buf: bytearray, lt: int) -> bool:
+    return buf.startswith(b"<?xml", lt) and len(buf) > lt + 5 and buf[lt + 5] in b" \t\r\n?"
 
 
 def _first_quote(buf: bytearray, start: int, stop: int) -> int:

@@ -137,3 +137,34 @@ def check_status(raw: bytes) -> None:
 def field(status: str, tag: str) -> str | None:
     match = re.search(rf"<{tag}>(.*?)</{tag}>", status, re.S)
     return match.group(1) if match else None
+
+
+def program(commands: list[tuple[str, str]]) -> bytes:
+    """A CRCLProgram: InitCanon, (kind, body) middle commands, EndCanon; CommandIDs 1, 2, ..."""
+    middle = "".join(f'<MiddleCommand xsi:type="{kind}Type"><CommandID>{i}</CommandID>{body}'
+                     f"</MiddleCommand>" for i, (kind, body) in enumerate(commands, start=2))
+    return (f'<?xml version="1.0" encoding="UTF-8"?>\n<CRCLProgram {XSI}><InitCanon><CommandID>1'
+            f"</CommandID></InitCanon>{middle}<EndCanon><CommandID>{len(commands) + 2}</CommandID>"
+            f"</EndCanon></CRCLProgram>").encode()
+
+
+def reachable_program() -> bytes:
+    """Moves, waypoints and settings the TX90 can do, in millimetres and degrees."""
+    return program([
+        ("SetLengthUnits", "<UnitName>millimeter</UnitName>"),
+        ("SetAngleUnits", "<UnitName>degree</UnitName>"),
+        ("SetTransSpeed", '<TransSpeed xsi:type="TransSpeedAbsoluteType"><Setting>500</Setting>'
+                          "</TransSpeed>"),
+        ("SetEndPoseTolerance", "<Tolerance><XPointTolerance>1</XPointTolerance><YPointTolerance>1"
+                                "</YPointTolerance><ZPointTolerance>1</ZPointTolerance></Tolerance>"),
+        ("MoveTo", "<MoveStraight>false</MoveStraight>" + pose(500, 100, 600)),
+        ("MoveTo", "<MoveStraight>true</MoveStraight>" + pose(500, -100, 600)),
+        ("MoveThroughTo", "<MoveStraight>false</MoveStraight>" + pose(550, 0, 500, tag="Waypoint")
+         + pose(500, 150, 550, tag="Waypoint") + "<NumPositions>2</NumPositions>"),
+        ("Dwell", "<DwellTime>0.05</DwellTime>"),
+        ("Message", "<Message>program half done</Message>"),
+        ("ActuateJoints", '<ActuateJoint><JointNumber>1</JointNumber><JointPosition>10'
+                          '</JointPosition><JointDetails xsi:type="JointSpeedAccelType">'
+                          "<JointSpeed>30</JointSpeed></JointDetails></ActuateJoint>"),
+        ("MoveTo", "<MoveStraight>true</MoveStraight>" + pose(450, 0, 550)),
+    ])

@@ -63,3 +63,18 @@ def test_a_single_endless_token_ends_the_stream():
     splitter = DocumentSplitter(max_document=1000)
     with pytest.raises(WireError, match="token"):
         splitter.feed(b'<A x="' + b"y" * 5000)
+
+
+def test_a_truncated_document_is_refused_where_the_next_declaration_starts():
+    cut = COMMANDS[0][:len(COMMANDS[0]) // 2]
+    out = DocumentSplitter().feed(cut + b"\n" + COMMANDS[1])
+    assert isinstance(out[0], Refused) and "truncated" in out[0].reason
+    assert documents(out) == [COMMANDS[1]]
+
+
+def test_a_document_without_end_closes_the_stream_after_its_budget():
+    splitter = DocumentSplitter(max_document=100)
+    splitter.feed(b"<A>")
+    with pytest.raises(WireError, match="without end"):
+        for _ in range(1000):
+            splitter.feed(b"x" * 100)
