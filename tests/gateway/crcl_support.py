@@ -156,7 +156,8 @@ def reachable_program() -> bytes:
         ("SetTransSpeed", '<TransSpeed xsi:type="TransSpeedAbsoluteType"><Setting>500</Setting>'
                           "</TransSpeed>"),
         ("SetEndPoseTolerance", "<Tolerance><XPointTolerance>1</XPointTolerance><YPointTolerance>1"
-                                "</YPointTolerance><ZPointTolerance>1</ZPointTolerance></Tolerance>"),
+                                "</YPointTolerance><ZPointTolerance>1</ZPointTolerance><XAxisTolerance>1"
+                                "</XAxisTolerance><ZAxisTolerance>1</ZAxisTolerance></Tolerance>"),
         ("MoveTo", "<MoveStraight>false</MoveStraight>" + pose(500, 100, 600)),
         ("MoveTo", "<MoveStraight>true</MoveStraight>" + pose(500, -100, 600)),
         ("MoveThroughTo", "<MoveStraight>false</MoveStraight>" + pose(550, 0, 500, tag="Waypoint")
