@@ -63,6 +63,7 @@ class CrclSession:
         self._running_lasts = False         # the running command is preempted by the next
         self._must_halt = False             # a preempted motion may still move the arm
         self.motion_start: asyncio.Future | None = None   # a motion call in flight
+        self.listeners: list = []           # called with no argument when the record changes
 
     # ---- documents -------------------------------------------------------------------------
 
@@ -105,6 +106,11 @@ class CrclSession:
         log.info("%s: %s", self.name, why)
         self.record = CommandRecord(self.record.command_id if command_id is None else command_id,
                                     ERROR, why)
+        self.changed()
+
+    def changed(self) -> None:
+        for listener in self.listeners:
+            listener()
 
     def status(self) -> bytes:
         feed = self.link.feed
@@ -135,6 +141,7 @@ class CrclSession:
                 self._must_halt = False
                 await self._halt_quietly()
             self.record = record
+            self.changed()
             self._running, self._running_lasts = asyncio.create_task(body()), lasts
             try:
                 description = await asyncio.shield(self._running)
@@ -152,6 +159,7 @@ class CrclSession:
                 record.state, record.description = ERROR, f"gateway error: {error!r}"
             finally:
                 self._running = None
+                self.changed()
 
     async def wait(self) -> None:
         """Until every queued command has finished (for programs and tests)."""
@@ -239,6 +247,7 @@ class CrclSession:
         for index, command in enumerate(commands):
             record.command_id, record.program_index = command.command_id, index
             record.program_length = len(commands)
+            self.changed()
             try:
                 await self.execute(command)
             except (CrclError, DeviceRefused) as error:
