@@ -100,6 +100,7 @@ class Control:
         self.session = session
         self.limits: settings_pb2.GetMaxVelocitiesResponse | None = None
         self.accel_limits: settings_pb2.GetMaxAccelerationsResponse | None = None
+        self.pushed: dict[tuple[str, int], float] = {}   # device settings this session sent
 
     async def call(self, rpc: str, request, stub=None, timeout: float = CALL_TIMEOUT):
         try:
@@ -110,6 +111,7 @@ class Control:
 
     async def prepare(self) -> None:
         """After Lock: drives on, SI units on the device, and the arm's limits read once."""
+        self.pushed.clear()
         await self.call("Activate", control_pb2.ActivateRequest())
         await self.call("SetUnits", settings_pb2.SetUnitsRequest(
             linear_units=types_pb2.LINEAR_UNIT_METERS, angular_units=types_pb2.ANGULAR_UNIT_RADIANS))

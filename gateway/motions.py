@@ -57,22 +57,29 @@ def accel_percent(session, rate: SiRate | None = None) -> float:
 
 
 async def push_rates(session) -> None:
-    """The session's speeds and accelerations, as the device's settings."""
+    """The session's speeds and accelerations, as the device's settings (only those that
+    changed since they were last sent)."""
     s, control = session.settings, session.control
     v_max, w_max = control.limits.max_world_linear_velocity, control.limits.max_world_angular_velocity
     a_max = control.accel_limits.max_world_linear_accel
     alpha_max = control.accel_limits.max_world_angular_accel
     percent = speed_percent(session)
-    angular = min(w_max, s.rot_speed.value(w_max) * 100.0 / percent)
-    for kind, value in ((types_pb2.SPEED_TYPE_PERCENT_SPEED, percent),
-                        (types_pb2.SPEED_TYPE_LINEAR_SPEED, v_max),
-                        (types_pb2.SPEED_TYPE_ANGULAR_SPEED, angular)):
-        await control.call("SetSpeed", settings_pb2.SetSpeedRequest(speed=value, attribute=kind))
-    for kind, value in ((types_pb2.ACCEL_TYPE_PERCENT_ACCEL, accel_percent(session)),
-                        (types_pb2.ACCEL_TYPE_LINEAR_ACCEL, s.trans_accel.value(a_max)),
-                        (types_pb2.ACCEL_TYPE_ANGULAR_ACCEL, s.rot_accel.value(alpha_max))):
-        await control.call("SetAcceleration",
-                           settings_pb2.SetAccelerationRequest(accel=value, attribute=kind))
+    wanted = {
+        ("SetSpeed", types_pb2.SPEED_TYPE_PERCENT_SPEED): percent,
+        ("SetSpeed", types_pb2.SPEED_TYPE_LINEAR_SPEED): v_max,
+        ("SetSpeed", types_pb2.SPEED_TYPE_ANGULAR_SPEED):
+            min(w_max, s.rot_speed.value(w_max) * 100.0 / percent),
+        ("SetAcceleration", types_pb2.ACCEL_TYPE_PERCENT_ACCEL): accel_percent(session),
+        ("SetAcceleration", types_pb2.ACCEL_TYPE_LINEAR_ACCEL): s.trans_accel.value(a_max),
+        ("SetAcceleration", types_pb2.ACCEL_TYPE_ANGULAR_ACCEL): s.rot_accel.value(alpha_max)}
+    for (rpc, kind), value in wanted.items():
+        if control.pushed.get((rpc, kind)) == value:
+            continue
+        request = (settings_pb2.SetSpeedRequest(speed=value, attribute=kind) if rpc == "SetSpeed"
+                   else settings_pb2.SetAccelerationRequest(accel=value, attribute=kind))
+        control.pushed.pop((rpc, kind), None)   # unknown until the device says yes
+        await control.call(rpc, request)
+        control.pushed[(rpc, kind)] = value
 
 
 class _AccelFor:
@@ -91,8 +98,10 @@ class _AccelFor:
             await asyncio.shield(self._set(accel_percent(self.session)))
 
     async def _set(self, percent: float) -> None:
-        await self.session.control.call("SetAcceleration", settings_pb2.SetAccelerationRequest(
-            accel=percent, attribute=types_pb2.ACCEL_TYPE_PERCENT_ACCEL))
+        control, key = self.session.control, ("SetAcceleration", types_pb2.ACCEL_TYPE_PERCENT_ACCEL)
+        control.pushed.pop(key, None)
+        await control.call(key[0], settings_pb2.SetAccelerationRequest(accel=percent, attribute=key[1]))
+        control.pushed[key] = percent
 
 
 def _pose_rates(session, pose: m.Pose) -> tuple[float | None, float | None]:
