@@ -99,6 +99,7 @@ class CrclSession:
                     CommandRecord(command.command_id, WORKING, program_file=document.program_file,
                                   program_index=document.program_index,
                                   program_length=document.program_length))
+        await asyncio.sleep(0)   # a command done at once is Done for the next GetStatus
         return None
 
     async def refuse(self, why: str, command_id: int | None = None) -> None:
