@@ -10,125 +10,18 @@ error names the line and the element: "line 12: <JointNumber>: ...".
 from __future__ import annotations
 
 import math
-import re
 
 from lxml import etree
 
 from landscape.gateway import model as m
+from landscape.gateway.xsd_lexical import (CrclParseError, enum_of, fail, local_name, fraction,
+                                           joint_number, non_negative, positive, xs_boolean,
+                                           xs_double, xs_int, xs_long, xs_string, xs_token)
 
 XSI_TYPE = "{http://www.w3.org/2001/XMLSchema-instance}type"
 
 
-class CrclParseError(Exception):
-    """A document the gateway cannot take; the message says where (line, element) and why."""
-
-
-# ---- XML Schema lexical forms ---------------------------------------------------------------------
-
-_DOUBLE = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
-_INTEGER = re.compile(r"^[+-]?\d+$")
-INT_RANGE = (-2**31, 2**31 - 1)
-LONG_RANGE = (-2**63, 2**63 - 1)
-
-
-def _fail(element, message: str):
-    raise CrclParseError(f"line {element.sourceline}: <{_local(element)}>: {message}")
-
-
-def _text(element) -> str:
-    if len(element):
-        _fail(element, "expected text, found child elements")
-    return element.text or ""
-
-
-def xs_double(element) -> float:
-    text = _text(element).strip()
-    if text in ("INF", "+INF", "-INF", "NaN"):
-        _fail(element, f"{text} is a double but not a usable value here")
-    if not _DOUBLE.match(text):
-        _fail(element, f"{text!r} is not a number (xs:double)")
-    value = float(text)
-    if not math.isfinite(value):
-        _fail(element, f"{text[:40]!r} is beyond the range of a double")
-    return value
-
-
-def _integer(element, bounds) -> int:
-    text = _text(element).strip()
-    if not _INTEGER.match(text):
-        _fail(element, f"{text!r} is not an integer")
-    value = int(text)
-    if not bounds[0] <= value <= bounds[1]:
-        _fail(element, f"{value} is out of range")
-    return value
-
-
-def xs_int(element) -> int:
-    return _integer(element, INT_RANGE)
-
-
-def xs_long(element) -> int:
-    return _integer(element, LONG_RANGE)
-
-
-def xs_boolean(element) -> bool:
-    text = _text(element).strip()
-    if text not in ("true", "false", "1", "0"):
-        _fail(element, f"{text!r} is not a boolean (true, false, 1 or 0)")
-    return text in ("true", "1")
-
-
-def xs_string(element) -> str:
-    return _text(element)
-
-
-def xs_token(element) -> str:
-    return " ".join(_text(element).split())
-
-
-def fraction(element) -> float:
-    value = xs_double(element)
-    if not 0.0 <= value <= 1.0:
-        _fail(element, f"{value:g} is not a fraction from 0 to 1")
-    return value
-
-
-def positive(element) -> float:
-    value = xs_double(element)
-    if value <= 0:
-        _fail(element, f"{value:g} must be above 0")
-    return value
-
-
-def non_negative(element) -> float:
-    value = xs_double(element)
-    if value < 0:
-        _fail(element, f"{value:g} must not be negative")
-    return value
-
-
-def joint_number(element) -> int:
-    value = xs_int(element)
-    if value < 1:
-        _fail(element, f"joint numbers start at 1, got {value}")
-    return value
-
-
-def _enum(*names: str):
-    def read(element) -> str:
-        value = xs_token(element)
-        if value not in names:
-            _fail(element, f"{value!r} is not one of {', '.join(names)}")
-        return value
-    return read
-
-
 # ---- the element sequence of one type ----------------------------------------------------------------
-
-def _local(element) -> str:
-    tag = element.tag
-    return tag if isinstance(tag, str) else "?"
-
 
 class Children:
     """Reads an element's children in schema order: each call takes the next matching ones."""
@@ -138,7 +31,7 @@ class Children:
         self.items = [child for child in element if isinstance(child.tag, str)]
         for child in self.items:
             if child.tag.startswith("{"):
-                _fail(child, "CRCL elements have no namespace")
+                fail(child, "CRCL elements have no namespace")
         self.i = 0
 
     def optional(self, tag: str, read):
@@ -151,7 +44,7 @@ class Children:
         if self.i >= len(self.items) or self.items[self.i].tag != tag:
             found = (f"found <{self.items[self.i].tag}>" if self.i < len(self.items)
                      else "it ends")
-            _fail(self.parent, f"expected <{tag}>, {found}")
+            fail(self.parent, f"expected <{tag}>, {found}")
         return self.optional(tag, read)
 
     def many(self, tag: str, read, minimum: int = 0) -> tuple:
@@ -159,23 +52,23 @@ class Children:
         while (value := self.optional(tag, read)) is not None:
             values.append(value)
         if len(values) < minimum:
-            _fail(self.parent, f"needs at least {minimum} <{tag}>, found {len(values)}")
+            fail(self.parent, f"needs at least {minimum} <{tag}>, found {len(values)}")
         return tuple(values)
 
     def done(self) -> None:
         if self.i < len(self.items):
-            _fail(self.items[self.i], "unexpected element here")
+            fail(self.items[self.i], "unexpected element here")
 
 
 def _xsi_type(element, allowed: dict, default=None):
     value = element.get(XSI_TYPE)
     if value is None:
         if default is None:
-            _fail(element, f"needs xsi:type, one of {', '.join(allowed)}")
+            fail(element, f"needs xsi:type, one of {', '.join(allowed)}")
         return default
     value = value.split(":")[-1].strip()
     if value not in allowed:
-        _fail(element, f"xsi:type {value!r} is none of {', '.join(allowed)}")
+        fail(element, f"xsi:type {value!r} is none of {', '.join(allowed)}")
     return allowed[value]
 
 
@@ -251,10 +144,10 @@ def _check_axes(element, x: m.Vector, z: m.Vector) -> None:
     nx, nz = math.hypot(x.i, x.j, x.k), math.hypot(z.i, z.j, z.k)
     for name, norm in (("XAxis", nx), ("ZAxis", nz)):
         if abs(norm - 1.0) > AXIS_TOLERANCE:
-            _fail(element, f"{name} must be a unit vector, its length is {norm:.6g}")
+            fail(element, f"{name} must be a unit vector, its length is {norm:.6g}")
     dot = (x.i * z.i + x.j * z.j + x.k * z.k) / (nx * nz)
     if abs(dot) > AXIS_TOLERANCE:
-        _fail(element, f"XAxis and ZAxis must be orthogonal, their dot product is {dot:.6g}")
+        fail(element, f"XAxis and ZAxis must be orthogonal, their dot product is {dot:.6g}")
 
 
 def parameter_setting(element) -> m.ParameterSetting:
@@ -286,7 +179,7 @@ def joint_tolerances(element) -> tuple[m.JointTolerance, ...]:
 
 def _unique_joints(element, joints: list[int]) -> None:
     if len(set(joints)) != len(joints):
-        _fail(element, f"a joint appears more than once: {joints}")
+        fail(element, f"a joint appears more than once: {joints}")
 
 
 def guard(element) -> m.Guard:
@@ -294,7 +187,7 @@ def guard(element) -> m.Guard:
     _name(c)
     value = m.Guard(
         sensor_id=c.required("SensorID", xs_token), sub_field=c.optional("SubField", xs_token),
-        limit_type=c.required("LimitType", _enum("OVER_MAX", "UNDER_MIN", "INCREASE_OVER_LIMIT",
+        limit_type=c.required("LimitType", enum_of("OVER_MAX", "UNDER_MIN", "INCREASE_OVER_LIMIT",
                                                  "DECREASE_BEYOND_LIMIT")),
         limit_value=c.required("LimitValue", xs_double),
         recheck_time_us=c.optional("RecheckTimeMicroSeconds", xs_long),
@@ -351,7 +244,7 @@ UNIT_NAMES = {"length": ("meter", "millimeter", "inch"), "angle": ("degree", "ra
 def _fields(cls, c: Children, element) -> dict:
     """The fields of command class `cls` from the children after CommandID and Guard."""
     if issubclass(cls, m.SetUnits):
-        return {"unit": c.required("UnitName", _enum(*UNIT_NAMES[cls.QUANTITY]))}
+        return {"unit": c.required("UnitName", enum_of(*UNIT_NAMES[cls.QUANTITY]))}
     if issubclass(cls, m.SetRate):
         return {"rate": c.required(cls.QUANTITY, _rate(cls.QUANTITY))}
     reader = _READERS.get(cls)
@@ -370,7 +263,7 @@ def _configure_joint_reports(c, element):
     joints = [r.joint for r in reports]
     _unique_joints(element, joints)
     if joints != sorted(joints):
-        _fail(element, f"joint numbers must be given in increasing order, got {joints}")
+        fail(element, f"joint numbers must be given in increasing order, got {joints}")
     return {"reset_all": reset_all, "reports": reports}
 
 
@@ -395,7 +288,7 @@ def _move_through_to(c, element):
     waypoints = c.many("Waypoint", pose, minimum=2)
     count = c.required("NumPositions", xs_int)
     if count != len(waypoints):
-        _fail(element, f"NumPositions says {count}, there are {len(waypoints)} waypoints")
+        fail(element, f"NumPositions says {count}, there are {len(waypoints)} waypoints")
     return {"straight": straight, "waypoints": waypoints, "num_positions": count}
 
 
@@ -431,7 +324,7 @@ _READERS = {
                                                joint_tolerances),
     m.SetMotionCoordination: _one("Coordinated", "coordinated", xs_boolean),
     m.SetRobotParameters: _settings("ParameterSetting"),
-    m.StopMotion: _one("StopCondition", "condition", _enum("Immediate", "Fast", "Normal")),
+    m.StopMotion: _one("StopCondition", "condition", enum_of("Immediate", "Fast", "Normal")),
     m.EnableSensor: _with_options("SensorID", "sensor_id", "SensorOption", xs_token),
     m.DisableSensor: _one("SensorID", "sensor_id", xs_token),
     m.EnableGripper: _with_options("GripperName", "gripper_name", "GripperOption", xs_token),
@@ -467,7 +360,7 @@ def document(tree: etree._ElementTree) -> m.CommandInstance | m.Program:
         return command_instance(root)
     if root.tag == "CRCLProgram":
         return program(root)
-    _fail(root, "the root must be CRCLCommandInstance or CRCLProgram")
+    fail(root, "the root must be CRCLCommandInstance or CRCLProgram")
 
 
 def command_instance(root) -> m.CommandInstance:
