@@ -9,7 +9,7 @@ import pytest
 
 from landscape.server.states import State
 
-from crcl_support import EXAMPLES, RawClient, command, field, pose
+from crcl_support import EXAMPLES, RawClient, command, field, pose, needs_examples
 
 MOVE = "<MoveStraight>{}</MoveStraight>"
 
@@ -78,6 +78,7 @@ def test_commands_before_init_canon_and_after_end_canon_are_errors(client):
     assert "after EndCanon" in field(after, "StateDescription")
 
 
+@needs_examples
 def test_an_invalid_document_is_an_error_and_the_connection_goes_on(client):
     client.send((EXAMPLES / "commandConfigureStatusReport.xml").read_bytes())
     status = client.status()
