@@ -19,7 +19,7 @@ from landscape.client import AsyncSession
 from landscape.gateway.events import EventRouter
 from landscape.gateway.state_feed import StateFeed
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
-                          settings_pb2, types_pb2)
+                          event_service_pb2_grpc, settings_pb2, types_pb2)
 
 CALL_TIMEOUT = 30.0     # s; blocking device calls (activate, stop) finish well within
 
@@ -56,6 +56,7 @@ class DeviceLink:
         self.channel = grpc.aio.insecure_channel(target)
         self.device = device_service_pb2_grpc.DeviceServiceStub(self.channel)
         self.digital_io = digital_io_service_pb2_grpc.DigitalIOServiceStub(self.channel)
+        self.event_service = event_service_pb2_grpc.EventServiceStub(self.channel)
         self.feed = StateFeed(self.channel, state_rate_hz)
         self.events = EventRouter(self.channel)
 

@@ -137,6 +137,13 @@ class RsvpAnswer:
 
 
 @dataclass(frozen=True, slots=True)
+class OperatorMessage:
+    """A message for the operator, posted by the lock holder `source`."""
+    text: str
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
 class EventsLost:
     """Events first_sequence..last_sequence (inclusive) that this subscriber will not get."""
     first_sequence: int
@@ -144,9 +151,10 @@ class EventsLost:
 
 
 Detail = (CommandEvent | Alarm | StateChange | DigitalIOSignal | RsvpRequest | RsvpAnswer
-          | EventsLost)
+          | OperatorMessage | EventsLost)
 # What the device publishes; EventsLost is made by the bus for one subscriber only.
-_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer)
+_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer,
+              OperatorMessage)
 
 
 @dataclass(frozen=True, slots=True)
@@ -396,6 +404,10 @@ class EventBus:
         """How an RSVP was answered; data: [rsvp_id, choice, *data]."""
         detail = RsvpAnswer(rsvp_id, choice, tuple(data), timed_out)
         return self.publish("rsvp_answer", (rsvp_id, choice, *data), detail)
+
+    def operator_message(self, text: str, source: str) -> Event:
+        """A message for the operator; data: [text, source]."""
+        return self.publish("operator_message", (text, source), OperatorMessage(text, source))
 
     def publish(self, event_id: str, data: Sequence[str], detail: Detail) -> Event:
         """Number, stamp, keep and fan out one event. Prefer the typed helpers above."""
