@@ -76,7 +76,7 @@ def open_aio_channel(target: str, tls: ClientTLS | None = None, token: str | Non
             credentials = grpc.composite_channel_credentials(
                 credentials, grpc.access_token_call_credentials(token))
         return grpc.aio.secure_channel(target, credentials, options)
-    interceptors = [_AioBearer(token)] if token else None
+    interceptors = _AioBearer.every_kind(token) if token else None
     return grpc.aio.insecure_channel(target, options, interceptors=interceptors)
 
 
@@ -121,19 +121,35 @@ class _Bearer(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClientIntercepto
     intercept_stream_stream = intercept_stream_unary
 
 
-class _AioBearer(grpc.aio.UnaryUnaryClientInterceptor, grpc.aio.UnaryStreamClientInterceptor,
-                 grpc.aio.StreamUnaryClientInterceptor, grpc.aio.StreamStreamClientInterceptor):
+class _AioBearer:
     """Adds the token to every call of a plaintext grpc.aio channel."""
 
     def __init__(self, token: str):
         self._header = (AUTHORIZATION, f"Bearer {token}")
 
-    def _details(self, d):
-        return d._replace(metadata=grpc.aio.Metadata(*(d.metadata or ()), self._header))
+    async def _intercept(self, continuation, details, request):
+        metadata = grpc.aio.Metadata(*(details.metadata or ()), self._header)
+        return await continuation(details._replace(metadata=metadata), request)
 
-    async def intercept_unary_unary(self, continuation, details, request):
-        return await continuation(self._details(details), request)
+    @staticmethod
+    def every_kind(token: str) -> list:
+        """One interceptor per kind of call: grpc.aio files an interceptor under the first
+        kind it is only."""
+        return [_AioBearerUnaryUnary(token), _AioBearerUnaryStream(token),
+                _AioBearerStreamUnary(token), _AioBearerStreamStream(token)]
 
-    intercept_unary_stream = intercept_unary_unary
-    intercept_stream_unary = intercept_unary_unary
-    intercept_stream_stream = intercept_unary_unary
+
+class _AioBearerUnaryUnary(_AioBearer, grpc.aio.UnaryUnaryClientInterceptor):
+    intercept_unary_unary = _AioBearer._intercept
+
+
+class _AioBearerUnaryStream(_AioBearer, grpc.aio.UnaryStreamClientInterceptor):
+    intercept_unary_stream = _AioBearer._intercept
+
+
+class _AioBearerStreamUnary(_AioBearer, grpc.aio.StreamUnaryClientInterceptor):
+    intercept_stream_unary = _AioBearer._intercept
+
+
+class _AioBearerStreamStream(_AioBearer, grpc.aio.StreamStreamClientInterceptor):
+    intercept_stream_stream = _AioBearer._intercept

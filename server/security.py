@@ -36,6 +36,7 @@ log = logging.getLogger(__name__)
 
 # Calls that make the arm safe: never rate limited (a stop must always get through).
 UNLIMITED = {name for name, rule in states.RULES.items() if rule.immediate} | {"OperatePanel"}
+FIRST_MESSAGE_WAIT = 1.0    # s a refused request stream is given to deliver its first message
 
 
 class RateLimited(ResourceExhausted):
@@ -97,10 +98,16 @@ class _Call:
             return "CANCELLED: the client left"
         return f"INTERNAL: {type(exc).__name__}: {exc}"
 
-    async def refuse(self, error: CommandError) -> None:
+    async def refuse(self, error: CommandError, request) -> None:
         if self.audited or self.identity is None:
-            status = error.status.name
-            self.write(f"{status}: {error.message}")
+            self.write(f"{error.status.name}: {error.message}")
+        if not hasattr(request, "ListFields"):
+            # A request stream: take its first message before refusing. A grpc.aio client
+            # whose first write meets an ended call reports INTERNAL instead of our status.
+            try:
+                await asyncio.wait_for(anext(aiter(request), None), FIRST_MESSAGE_WAIT)
+            except Exception:   # gone, slow or broken: it gets the status all the same
+                pass
         await abort(self.context, self.name, error)
 
 
@@ -134,7 +141,7 @@ class SecurityInterceptor(grpc.aio.ServerInterceptor):
             try:
                 record.admit(request)
             except CommandError as error:
-                await record.refuse(error)
+                await record.refuse(error, request)
             failure = None
             try:
                 reply = behavior(request, context)
@@ -156,7 +163,7 @@ class SecurityInterceptor(grpc.aio.ServerInterceptor):
                 if self.identity_limits is not None:
                     slot = self.identity_limits.acquire(record.name, record.identity.name)
             except CommandError as error:
-                await record.refuse(error)
+                await record.refuse(error, request)
             failure = None
             try:
                 if record.audited:
