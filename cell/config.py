@@ -178,11 +178,29 @@ def _is_wildcard(address: str) -> bool:
         return False
 
 
+def builtin_worlds() -> list[str]:
+    cells = resources.files("landscape.sim").joinpath("cells")
+    return sorted(item.name[:-5] for item in cells.iterdir() if item.name.endswith(".toml"))
+
+
+def _world(r: _Reader) -> Path | None:
+    """A world file's path, or the name of one shipped with the simulator (sim/cells/)."""
+    value = r.t.raw("world", "")
+    if isinstance(value, str) and value and "/" not in value and not value.endswith(".toml"):
+        if value not in builtin_worlds():
+            r.t.fail("world", f"no built-in world is named {value!r} (built-in: "
+                              f"{', '.join(builtin_worlds())}; or give a file's path)")
+        with resources.as_file(resources.files("landscape.sim").joinpath(
+                f"cells/{value}.toml")) as path:
+            return Path(path)
+    return r.path("world", exists=True)
+
+
 def _device(r: _Reader, index: int) -> DeviceSpec:
     name = r.name("name", f"arm{index + 1}")
     address = r.address("address", "127.0.0.1")
     host = r.t.string("host", "127.0.0.1" if _is_wildcard(address) else address)
-    world = r.path("world", exists=True)
+    world = _world(r)
     if world is not None:
         try:
             load_cell(world)
