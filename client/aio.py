@@ -212,10 +212,11 @@ class AsyncRobot(DeviceCommands):
                 log.debug("relinquish: %s refused: %s", step, refused)
         return state
 
-    async def events(self, after_sequence: int | None = None
+    async def events(self, after_sequence: int | None = None, timeout: float | None = None
                      ) -> AsyncIterator[event_service_pb2.Event]:
-        """`async for` events and alarms, live or from after `after_sequence`."""
-        call = self._events.Subscribe(subscribe_request(after_sequence))
+        """`async for` events and alarms, live or from after `after_sequence` (timeout: the
+        stream raises RpcTimeout after that many seconds)."""
+        call = self._events.Subscribe(subscribe_request(after_sequence), timeout=timeout)
         try:
             async for reply in call:
                 yield reply.event
@@ -225,10 +226,12 @@ class AsyncRobot(DeviceCommands):
             call.cancel()
 
     async def live_state(self, rate_hz: float = 10.0, frame: Frame | None = None,
-                         units: types_pb2.Units | None = None, sensors: Sequence[str] = ()
+                         units: types_pb2.Units | None = None, sensors: Sequence[str] = (),
+                         timeout: float | None = None
                          ) -> AsyncIterator[state_service_pb2.StateSample]:
         """`async for` state samples (the StreamStarted terms are skipped)."""
-        call = self._state.StreamState(state_request(rate_hz, frame, units, sensors))
+        call = self._state.StreamState(state_request(rate_hz, frame, units, sensors),
+                                       timeout=timeout)
         try:
             async for message in call:
                 if message.WhichOneof("message") == "sample":

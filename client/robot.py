@@ -139,16 +139,22 @@ class Robot(DeviceCommands):
 
     # ---- streams ----
 
-    def events(self, after_sequence: int | None = None) -> EventStream:
+    def events(self, after_sequence: int | None = None,
+               timeout: float | None = None) -> EventStream:
         """Events and alarms (seed 2.1): live only, or the kept ones after `after_sequence`
-        first. Iterate it; close it (or use `with`) to stop."""
-        return EventStream(self._events.Subscribe(subscribe_request(after_sequence)))
+        first. Iterate it; close it (or use `with`) to stop. With `timeout` (seconds), the
+        stream ends by raising RpcTimeout when that time is up."""
+        return EventStream(self._events.Subscribe(subscribe_request(after_sequence),
+                                                  timeout=timeout))
 
     def live_state(self, rate_hz: float = 10.0, frame: Frame | None = None,
-                   units: types_pb2.Units | None = None, sensors: Sequence[str] = ()) -> StateStream:
+                   units: types_pb2.Units | None = None, sensors: Sequence[str] = (),
+                   timeout: float | None = None) -> StateStream:
         """The device's state at `rate_hz` samples per second (0: every 4 ms cycle); see
-        state_service.proto. Iterate it; close it (or use `with`) to stop."""
-        return StateStream(self._state.StreamState(state_request(rate_hz, frame, units, sensors)))
+        state_service.proto. Iterate it; close it (or use `with`) to stop; `timeout` as for
+        events()."""
+        return StateStream(self._state.StreamState(
+            state_request(rate_hz, frame, units, sensors), timeout=timeout))
 
     def jog(self, velocities: Iterable[Sequence[float]], frame: Frame) -> Iterator:
         """Jog with the deadman held while `velocities` (percent of each axis maximum) lasts;
