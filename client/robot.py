@@ -27,7 +27,7 @@ from landscape.client.errors import (CommandRefused, NotLockHolder, ServerUnavai
 from landscape.client.session import RsvpHandler, Session
 from landscape.client.streams import EventStream, StateStream, state_request, subscribe_request
 from landscape.client.values import DeviceState, Frame
-from landscape.v1 import (device_service_pb2_grpc, digital_io_service_pb2_grpc,
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
                           event_service_pb2_grpc, state_service_pb2_grpc, types_pb2)
 
 log = logging.getLogger(__name__)
@@ -58,11 +58,17 @@ class Robot(DeviceCommands):
 
     def open(self, timeout: float = 10.0) -> "Robot":
         """Open the session and the event subscription that follows this client's commands."""
+        # A first call that waits for the connection (not channel_ready_future: its polling
+        # thread outlives a quick close and prints a traceback).
+        probe = device_service_pb2_grpc.DeviceServiceStub(self._raw)
         try:
-            grpc.channel_ready_future(self._raw).result(timeout=timeout)
-        except grpc.FutureTimeoutError:
-            raise ServerUnavailable(f"no device server answered within {timeout} s",
-                                    grpc.StatusCode.UNAVAILABLE) from None
+            probe.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=timeout,
+                                 wait_for_ready=True)
+        except grpc.RpcError as error:
+            if error.code() is grpc.StatusCode.DEADLINE_EXCEEDED:
+                raise ServerUnavailable(f"no device server answered within {timeout} s",
+                                        grpc.StatusCode.UNAVAILABLE) from None
+            raise from_rpc_error(error) from None
         channel = self._raw
         # Subscribed from the first kept event, so no event of a later command can be missed.
         events = event_service_pb2_grpc.EventServiceStub(channel)

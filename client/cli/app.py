@@ -67,12 +67,15 @@ def _as_json(ctx: click.Context) -> bool:
               help="Client name, shown to others as the lock holder.")
 @click.option("--timeout", type=float, default=120.0, show_default=True,
               help="Seconds to wait for a motion to finish.")
+@click.option("--connect-timeout", type=float, default=5.0, show_default=True,
+              help="Seconds to wait for the device server to answer.")
 @click.version_option(package_name="landscape-grpc", prog_name="landscape")
 @click.pass_context
-def cli(ctx: click.Context, target: str, as_json: bool, client_name: str, timeout: float) -> None:
+def cli(ctx: click.Context, target: str, as_json: bool, client_name: str, timeout: float,
+        connect_timeout: float) -> None:
     """Talk to a LandScape device server: status, watch, move, paths, I/O, tools, CRCL."""
     if ctx.obj is None:   # inside `landscape session` the session's state is given
-        ctx.obj = CliState(target, as_json, client_name, timeout)
+        ctx.obj = CliState(target, as_json, client_name, timeout, connect_timeout)
 
 
 for command in (status.status, status.watch, motion.move, motion.path, hardware.io,

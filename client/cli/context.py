@@ -51,6 +51,7 @@ class CliState:
     as_json: bool
     client_name: str
     timeout: float                  # seconds to wait for a started command to finish
+    connect_timeout: float          # seconds to wait for the device server to answer
     robot: Robot | None = None      # the session's, inside `landscape session`
 
     @property
@@ -67,7 +68,7 @@ class CliState:
         if self.robot is not None:
             yield self.robot
         else:
-            with Robot(self.target, self.client_name) as robot:
+            with self.open_robot() as robot:
                 yield robot
 
     @contextlib.contextmanager
@@ -77,8 +78,11 @@ class CliState:
         if self.robot is not None:
             yield self.robot
             return
-        with Robot(self.target, self.client_name) as robot, robot.control(activate=activate):
+        with self.open_robot() as robot, robot.control(activate=activate):
             yield robot
+
+    def open_robot(self) -> Robot:
+        return Robot(self.target, self.client_name).open(self.connect_timeout)
 
 
 pass_state = click.make_pass_decorator(CliState)

@@ -35,7 +35,7 @@ def session(ctx: click.Context, script, keep_going: bool) -> None:
     interactive = script is sys.stdin and sys.stdin.isatty()
     root = ctx.find_root().command
     first_failure = EXIT_OK
-    with Robot(state.target, state.client_name) as robot:
+    with state.open_robot() as robot:
         state.robot = robot
         try:
             for line in _lines(script, interactive):
