@@ -36,6 +36,7 @@ from landscape.v1 import (device_service_pb2_grpc, digital_io_service_pb2_grpc, 
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT = 30.0   # seconds, for a blocking call that names none
+FENCE_TIMEOUT = 2.0      # seconds for the command subscription to prove live (tracking.py)
 
 
 class _AsyncTracker:
@@ -96,6 +97,13 @@ class _AsyncTracker:
                 yield event
         await self.wait(command_id, max(0.0, deadline - loop.time()))   # raises on failure
 
+    async def wait_live(self, timeout: float) -> bool:
+        """Whether the subscription delivered an event within `timeout` s (see tracking.py)."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout), self._changed:
+                await self._changed.wait_for(lambda: self._log.received or self._ended)
+        return self._log.received > 0
+
     def events(self, command_id: str) -> list[event_service_pb2.Event]:
         return self._log.events(command_id)
 
@@ -150,7 +158,6 @@ class AsyncRobot(DeviceCommands):
             raise ServerUnavailable(f"no device server at {self.target} answered within "
                                     f"{timeout} s", grpc.StatusCode.UNAVAILABLE) from None
         self._events = event_service_pb2_grpc.EventServiceStub(self._channel)
-        self._tracker = _AsyncTracker(self._events.Subscribe(subscribe_request(0)))
         self._session = AsyncSession(self._channel, self.client_name, self._on_rsvp)
         try:
             await self._session.open(timeout)
@@ -180,7 +187,25 @@ class AsyncRobot(DeviceCommands):
     def session(self) -> AsyncSession:
         return self._session
 
+    def _track_commands(self, after_sequence: int | None = None) -> _AsyncTracker:
+        """As Robot._track_commands: opened before the first lock or command."""
+        if self._tracker is None:
+            self._tracker = _AsyncTracker(self._events.Subscribe(
+                subscribe_request(after_sequence)))
+        return self._tracker
+
+    async def _live_tracker(self) -> _AsyncTracker:
+        """As Robot._live_tracker."""
+        tracker = self._track_commands()
+        if not await tracker.wait_live(FENCE_TIMEOUT):
+            log.warning("no event arrived on the command subscription; replaying the device's")
+            await tracker.close()
+            self._tracker = None
+            tracker = self._track_commands(after_sequence=0)
+        return tracker
+
     async def lock(self, timeout: float = 10.0) -> str:
+        self._track_commands()   # before the lock, whose event then proves it live
         try:
             return await self._session.lock(timeout)
         except grpc.aio.AioRpcError as error:
@@ -242,13 +267,14 @@ class AsyncRobot(DeviceCommands):
             call.cancel()
 
     async def _invoke(self, service, rpc, request, started, timeout):
+        tracker = await self._live_tracker() if started else None
         try:
             reply = await getattr(self._stubs[service], rpc)(
                 request, metadata=self._session.metadata(), timeout=timeout or DEFAULT_TIMEOUT)
         except grpc.aio.AioRpcError as error:
             raise from_rpc_error(error) from None
         if started:
-            return AsyncCommand(reply.ret_val.command_id, rpc, reply.ret_val, self._tracker)
+            return AsyncCommand(reply.ret_val.command_id, rpc, reply.ret_val, tracker)
         return reply
 
     def _call(self, service: str, rpc: str, request, *, started: bool = False,

@@ -69,6 +69,12 @@ class CommandTracker:
                 self.wait(command_id, max(0.0, deadline - time.monotonic()))  # raises on failure
                 return
 
+    def wait_live(self, timeout: float) -> bool:
+        """Whether the subscription delivered an event within `timeout` s (see tracking.py)."""
+        with self._changed:
+            self._changed.wait_for(lambda: self._log.received or self._ended, timeout)
+            return self._log.received > 0
+
     def events(self, command_id: str) -> list[event_service_pb2.Event]:
         with self._changed:
             return self._log.events(command_id)

@@ -33,6 +33,7 @@ from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_servi
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT = 30.0   # seconds, for a blocking call that names none
+FENCE_TIMEOUT = 2.0      # seconds for the command subscription to prove live (tracking.py)
 
 
 class Robot(DeviceCommands):
@@ -70,9 +71,7 @@ class Robot(DeviceCommands):
                                         grpc.StatusCode.UNAVAILABLE) from None
             raise from_rpc_error(error) from None
         channel = self._raw
-        # Subscribed from the first kept event, so no event of a later command can be missed.
         events = event_service_pb2_grpc.EventServiceStub(channel)
-        self._tracker = CommandTracker(EventStream(events.Subscribe(subscribe_request(0))))
         try:
             self._session = Session(channel, self.client_name, self._on_rsvp).open()
         except grpc.RpcError as error:
@@ -84,6 +83,24 @@ class Robot(DeviceCommands):
         self._events = events
         self._state = state_service_pb2_grpc.StateServiceStub(channel)
         return self
+
+    def _track_commands(self, after_sequence: int | None = None) -> CommandTracker:
+        """The live subscription that follows this client's commands, opened before its first
+        lock or command (read-only clients need none); see tracking.py."""
+        if self._tracker is None:
+            self._tracker = CommandTracker(EventStream(self._events.Subscribe(
+                subscribe_request(after_sequence))))
+        return self._tracker
+
+    def _live_tracker(self) -> CommandTracker:
+        """The tracker, proved live before a command starts (else replaying, to be sure)."""
+        tracker = self._track_commands()
+        if not tracker.wait_live(FENCE_TIMEOUT):
+            log.warning("no event arrived on the command subscription; replaying the device's")
+            tracker.close()
+            self._tracker = None
+            tracker = self._track_commands(after_sequence=0)
+        return tracker
 
     def close(self) -> None:
         """End the session (the device releases the lock if it was held) and the streams."""
@@ -110,6 +127,7 @@ class Robot(DeviceCommands):
     def lock(self, timeout: float = 10.0) -> str:
         """Seed 3.1.1: take the lock for this session; returns the lease, which every later
         call of this Robot carries."""
+        self._track_commands()   # before the lock, whose event then proves it live
         try:
             return self._session.lock(timeout)
         except grpc.RpcError as error:
@@ -175,12 +193,13 @@ class Robot(DeviceCommands):
 
     def _call(self, service: str, rpc: str, request, *, started: bool = False,
               timeout: float | None = None):
+        tracker = self._live_tracker() if started else None
         try:
             reply = getattr(self._stubs[service], rpc)(request, timeout=timeout or DEFAULT_TIMEOUT)
         except grpc.RpcError as error:
             raise from_rpc_error(error) from None
         if started:
-            return Command(reply.ret_val.command_id, rpc, reply.ret_val, self._tracker)
+            return Command(reply.ret_val.command_id, rpc, reply.ret_val, tracker)
         return reply
 
 

@@ -48,3 +48,11 @@ def test_aborted_and_lost_events():
     log.record(command(10, "c", Phase.PHASE_STARTED))
     log.record(command(11, "d", Phase.PHASE_STARTED))
     assert log.events("a") == []   # only the newest `keep` commands are kept
+
+
+
+def test_any_delivered_event_proves_the_subscription_live():
+    log = CommandLog()
+    assert log.received == 0
+    log.record(pb.Event(sequence=7, state_change=pb.StateChange(to_state="inactive")))
+    assert log.received == 1 and log.last_sequence == 7
