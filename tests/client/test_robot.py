@@ -156,9 +156,6 @@ def test_the_rsvp_handler_answers_the_devices_question(server):
         assert asked[0].event_id == "estop_released"
 
 
-@pytest.mark.xfail(raises=NotImplementedByServer, strict=False,
-                   reason="StateService.StreamState is being built (state-streaming work); "
-                          "the server answers UNIMPLEMENTED until it lands")
 def test_live_state_samples_arrive_at_the_rate_asked(server):
     with Robot(server.target, "state-watcher") as robot:
         with robot.live_state(rate_hz=50, timeout=10) as stream:
