@@ -71,7 +71,8 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
         rate_limit=args.rate_limit or None, rate_burst=args.rate_burst, insecure=args.insecure)
     config = ServerConfig(address=args.address, port=args.port, cell=args.cell,
                           clock=args.clock, paths_file=args.paths,
-                          reset_settings=args.reset_settings, security=security)
+                          reset_settings=args.reset_settings, security=security,
+                          max_message_bytes=args.max_message_bytes)
     return config, args.log_level
 
 
@@ -96,6 +97,9 @@ def _security_arguments(group) -> None:
                             "limited (default %(default)s; 0 for none)")
     group.add_argument("--rate-burst", type=int, default=2000,
                        help="calls one client may make at once (default %(default)s)")
+    group.add_argument("--max-message-bytes", type=int, default=4 * 1024 * 1024,
+                       help="largest request accepted, bytes (default %(default)s); paths "
+                            "stream in chunks, so no message needs to be big")
     group.add_argument("--insecure", action="store_true",
                        help="listen on a non-loopback address without TLS or tokens all the "
                             "same (a network of your own only)")

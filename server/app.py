@@ -190,7 +190,7 @@ def _security_layer(security: SecurityConfig) -> SecurityInterceptor:
 
 async def _bind(config: ServerConfig,
                 security: SecurityInterceptor) -> tuple[grpc.aio.Server, int]:
-    server = grpc.aio.server(interceptors=[security],
+    server = grpc.aio.server(interceptors=[] if security.idle else [security],
                              options=[("grpc.max_receive_message_length", config.max_message_bytes),
                                       ("grpc.so_reuseport", 0)])
     where = listen_address(config.address, config.port)

@@ -52,11 +52,11 @@ class _Call:
         self.name = method.rsplit("/", 1)[-1]           # "MoveAbsolute"
         self.started, self.wall = time.monotonic(), time.time()
         self.identity: Identity | None = None
-        self.request = ""
+        self.request = None        # described only if written down
 
     def admit(self, request) -> None:
         """Steps 1 to 3; a CommandError says why not."""
-        self.request = describe(request)
+        self.request = request
         layer, context = self.layer, self.context
         if layer.tokens is not None:
             self.identity = layer.tokens.identify(context.invocation_metadata())
@@ -83,7 +83,8 @@ class _Call:
         who = self.identity.name if self.identity else "anonymous"
         role = self.identity.role.label if self.identity else "-"
         audit.record(who=who, role=role, peer=self.context.peer(), rpc=self.rpc,
-                     request=self.request, result=result, started=self.started, wall=self.wall)
+                     request=describe(self.request), result=result, started=self.started,
+                     wall=self.wall)
 
     def outcome(self, exc: BaseException | None = None) -> str:
         """The call's result: the status it ended with, else how it ended."""
@@ -116,6 +117,11 @@ class SecurityInterceptor(grpc.aio.ServerInterceptor):
                  rate: RateLimiter | None = None, identity_limits: StreamLimits | None = None):
         self.tokens, self.audit, self.rate = tokens, audit, rate
         self.identity_limits = identity_limits if tokens is not None else None
+
+    @property
+    def idle(self) -> bool:
+        """Nothing to check, limit or write: the server need not install it."""
+        return self.tokens is None and self.audit is None and self.rate is None
 
     async def intercept_service(self, continuation, handler_call_details):
         handler = await continuation(handler_call_details)
