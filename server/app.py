@@ -30,6 +30,7 @@ from landscape.server.servicers.guard import Dispatch
 from landscape.server.servicers.session import SessionServicer
 from landscape.server.servicers.state import StateServicer
 from landscape.server.state_stream import StateHub
+from landscape.server.workcell import Workcell, build_workcell
 from landscape.sim.cell import load_cell
 
 log = logging.getLogger(__name__)
@@ -70,6 +71,7 @@ class RunningServer:
     address: str
     bus: EventBus
     device: Device
+    workcell: Workcell
     link: ControllerLink
     hub: StateHub
     dispatch: Dispatch
@@ -132,19 +134,22 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                           pace=config.lockstep_pace)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
     device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs)
-    hub, dispatch, limits = StateHub(device), Dispatch(), StreamLimits(config.stream_caps)
+    workcell = build_workcell(device, cell)
+    hub, dispatch = StateHub(device, workcell), Dispatch()
+    limits = StreamLimits(config.stream_caps)
     try:
         if config.start_device:
             device.start()
-        health_servicer = runner.run(_start(server, device, bus, hub, dispatch, limits))
+        health_servicer = runner.run(_start(server, device, workcell, bus, hub, dispatch,
+                                            limits))
     except BaseException:
         device.close()
         link.stop()
         runner.run(server.stop(None))
         runner.close()
         raise
-    running = RunningServer(server, health_servicer, port, config.address, bus, device, link,
-                            hub, dispatch, limits, runner)
+    running = RunningServer(server, health_servicer, port, config.address, bus, device, workcell,
+                            link, hub, dispatch, limits, runner)
     device.on_health = running.set_serving
     log.info("device server listening on %s", listen_address(config.address, port))
     return running
@@ -164,11 +169,11 @@ async def _bind(config: ServerConfig) -> tuple[grpc.aio.Server, int]:
     return server, port
 
 
-async def _start(server, device, bus, hub, dispatch, limits):
+async def _start(server, device, workcell, bus, hub, dispatch, limits):
     hub.attach(asyncio.get_running_loop())
     servicers = {
-        services.DEVICE: DeviceServicer(device, hub, dispatch, limits),
-        services.DIGITAL_IO: DigitalIOServicer(device, dispatch, limits),
+        services.DEVICE: DeviceServicer(device, workcell, hub, dispatch, limits),
+        services.DIGITAL_IO: DigitalIOServicer(device, workcell, dispatch, limits),
         services.EVENTS: EventServicer(device, bus, dispatch, limits),
         services.SESSIONS: SessionServicer(device, dispatch, limits),
         services.STATE: StateServicer(device, hub, dispatch, limits),

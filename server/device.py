@@ -92,6 +92,11 @@ class Device:
         self._state_lock = threading.RLock()
         self._command_lock = threading.Lock()
         self.motions = MotionControl(self, paths or PathStore(), set(outputs))
+        self.manual_control = "off"        # seed 3.7.3: "teachpendant", "spaceball" or "off"
+        # The cell's other parts (app.py wires them): reports from the cycle by "op", and
+        # what to do each time the controller has (re)started.
+        self.report_handlers: dict[str, Callable[[dict], None]] = {}
+        self.on_controller_start: list[Callable[[], None]] = []
 
     @property
     def controller(self):
@@ -114,6 +119,8 @@ class Device:
                 raise ControllerFailure("the controller did not initialise")
         if not self._wait_controller(lambda: self.link.feedback.head >= 0, timeout):
             raise ControllerFailure("no feedback from the controller")
+        for started in self.on_controller_start:
+            started()
 
     def close(self, timeout: float = 5.0) -> None:
         """Leave the arm safe: the lock holder's session ends (the disconnect handler stops,
@@ -130,6 +137,10 @@ class Device:
         return self._state
 
     @property
+    def lock_holder(self) -> Session | None:
+        return self._holder
+
+    @property
     def settings(self) -> MotionSettings:
         return self._settings
 
@@ -141,7 +152,7 @@ class Device:
         with self._state_lock:
             return DeviceStatus(self._state, self._holder is not None,
                                 self._holder.client_name if self._holder else "", self._error,
-                                self._estop, "off", self.motions.running_id)
+                                self._estop, self.manual_control, self.motions.running_id)
 
     def _transition(self, expected, new: State, reason: str) -> State:
         """Compare-and-set: move to `new` if the state is one of `expected` (else WrongState);
@@ -186,6 +197,12 @@ class Device:
                 yield
             finally:
                 self._local.epoch = None
+
+    def check_holder(self, what: str, lease: str | None) -> None:
+        """For a read-only RPC's parts that change something (vendor commands): the lock
+        holder's lease while the device is locked, anyone's call when it is not."""
+        with self._state_lock:
+            self._check_lease(what, states.Rule(states.ALL, Lease.HOLDER_IF_LOCKED, "-"), lease)
 
     def check_epoch(self) -> None:
         """Called with `_state_lock` held before a command acts: the lock must not have
@@ -235,6 +252,7 @@ class Device:
                                  f"released by {holder.client_name}")
             self._holder = self._lease = None
             self._epoch += 1
+            self.manual_control = "off"
 
     def activate(self) -> None:
         self._command_controller("enable")
@@ -335,6 +353,7 @@ class Device:
                 return
             self._holder = self._lease = None
             self._epoch += 1
+            self.manual_control = "off"
         self.bus.alarm(Severity.WARNING, alarms.LOCK_HOLDER_LOST,
                        f"lock holder {session.client_name} disconnected ({reason}): stopping, "
                        f"powering down and releasing")
@@ -364,6 +383,13 @@ class Device:
                        else Severity.ERROR, code, message)
         return True
 
+    def fault(self, code: int, message: str) -> None:
+        """Into Error with an alarm and the drives off (a fault found above the controller,
+        such as a compliance panic that asks for it)."""
+        if self._fault(code, message):
+            with contextlib.suppress(ControllerFailure):
+                self._command_controller("disable")
+
     def controller_lost(self, reason: str) -> None:
         """The link lost the controller (its process died or fell silent): Error, an alarm
         naming the cause, the running command failed, health NOT_SERVING. The lock stays with
@@ -388,16 +414,14 @@ class Device:
         if estop:
             self._fault(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
         elif self._state in states.ACTIVE:
-            if self._fault(alarms.CONTROLLER, f"controller error: {text}"):
-                with contextlib.suppress(ControllerFailure):
-                    self._command_controller("disable")
+            self.fault(alarms.CONTROLLER, f"controller error: {text}")
         else:
             self.bus.alarm(Severity.WARNING, alarms.CONTROLLER, f"controller: {text}")
 
     def on_cycle_message(self, msg: dict) -> None:
         """The Executor's reports (executor.py), in order, on the link's dispatch thread."""
         if msg.get("op") != "controller":
-            self.motions.on_report(msg)
+            self.report_handlers.get(msg.get("op"), self.motions.on_report)(msg)
             return
         estop, was_estop = bool(msg["estop"]), self._estop
         with self._controller_changed:

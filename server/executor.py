@@ -13,17 +13,29 @@ keeping every joint's acceleration within its limit allows. Keeping the rate alw
 (the trajectory is within the limits at r = 1, so at any r <= 1), so a stop or a restart never
 asks more of a joint than its limit.
 
+A motion may carry a sensor loop (force_control.py): a guard (moveReact) that stops it when a
+sensor crosses a threshold, a compliance (comply) that shifts its setpoints to hold a force.
+Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. Sensors,
+the I/O image and the I/O watches are read every cycle (cycle_inputs.py), so the loops see
+this cycle's readings.
+
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
   server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2 (ramps that start and
                     resume), "stop_acceleration": (6,) rad/s^2 (stops: the arm's own),
-                    "arrays": SharedArrays of `pack_run`}: segments played in order; a mark
-                    reports its label when its sample is passed
+                    "arrays": SharedArrays of `pack_run`, optional "guard": GuardSpec,
+                    "comply": ComplySpec}: segments played in order; a mark reports its label
+                    when its sample is passed
+                   {"op": "comply", "id", "spec": ComplySpec}: compliance for the running motion
                    {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
+                   the jog messages (jog_control.py) and the I/O ones (cycle_inputs.py)
   cycle -> server  {"op": "controller", "enable": EnableState value, "estop": bool} on change
                    {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label"}
                    {"op": "paused", "id"}  {"op": "resumed", "id"}  {"op": "done", "id"}
                    {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
+                   a guarded motion's end adds "guard": {"event": "triggered" | "envelope" |
+                   "full distance", "values": (3,), "position": (6,) rad}; a compliant one's
+                   "comply": {"offset": (3,) m, "force": (3,) N, "panic": code or None}
 """
 from __future__ import annotations
 
@@ -31,8 +43,12 @@ import time
 
 import numpy as np
 
-from landscape.server.feedback import (CMD, ENABLE, ESTOP, QD, SEQ, TAU, TIME, WALL, WIDTH, Q,
-                                       FeedbackRing)
+from landscape.server.cycle_inputs import CycleSensors, IoMonitor
+from landscape.server.feedback import (CMD, ENABLE, ESTOP, IO, QD, SENSORS, SEQ, TAU, TIME, WALL,
+                                       WIDTH, Q, FeedbackRing)
+from landscape.server.force_control import RANGE_KIND, Admittance, ThresholdMonitor, vector
+from landscape.server.jog_control import JogIntegrator
+from landscape.sim.arm import ArmModel
 from landscape.sim.controller import Controller, EnableState, EstopState, JointCmd
 from landscape.sim.shared_array import SharedArrays
 
@@ -60,6 +76,10 @@ class _Motion:
         self.abort_when_paused = False
         self.settling: str | None = None   # what to report once the arm has settled
         self.settle_cycles = 0
+        self.end_as: str | None = None     # a sensor loop's stop: how the motion ends
+        self.outcome: dict = {}            # what the loops add to the final report
+        self.guard: ThresholdMonitor | None = None
+        self.compliance: Admittance | None = None
 
     def _load(self, index: int) -> None:
         self.segment = index
@@ -131,9 +151,11 @@ class _Motion:
 
 class Executor:
     """The cyclic function. `ring` receives every cycle's feedback (feedback.py); reports go to
-    the server through `mailbox`, in order, after that cycle's row."""
+    the server through `mailbox`, in order, after that cycle's row. `arm`: the arm model for
+    the loops that need its Jacobian (jog, comply); without it they are refused."""
 
-    def __init__(self, mailbox, cycle_time: float, ring: FeedbackRing | None = None):
+    def __init__(self, mailbox, cycle_time: float, ring: FeedbackRing | None = None,
+                 arm: ArmModel | None = None):
         self.mailbox = mailbox
         self.cycle_time = cycle_time
         self.ring = ring
@@ -141,22 +163,44 @@ class Executor:
         self._row = np.full(WIDTH, np.nan)
         self._hold: np.ndarray | None = None   # commanded position when not moving, rad
         self._motion: _Motion | None = None
+        self._jog: JogIntegrator | None = None
         self._arrays: SharedArrays | None = None   # the running motion's trajectory block
         self._last_state = None
         self._reports: list[dict] = []   # reports of this cycle, posted after its row
+        self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
+        self._sensors = CycleSensors()
+        self._io = IoMonitor()
+        self._tip = None
+        if arm is not None:
+            from landscape.server.tip_model import TipModel   # pinocchio: only where it runs
+            self._tip = TipModel(arm)
+
+    @property
+    def sequence(self) -> int:
+        """The sequence number the next cycle's row gets."""
+        return self._sequence
 
     def __call__(self, ctrl: Controller) -> bool:
         fbk = ctrl.get()
         state = ctrl.state()
         enabled = state.enable is EnableState.ENABLED
         while (msg := self.mailbox.poll()) is not None:
-            self._handle(msg)
+            self._handle(msg, fbk)
+        sensors = self._sensors.read(ctrl, self._sequence)
+        self._io.poll(ctrl, self._sequence, self._reports)
         if not enabled or self._hold is None:
             self._hold = fbk.pos.copy()
             if self._motion is not None and not enabled:
                 self._end("failed", message="drives disabled during the motion")
+            if self._jog is not None and not enabled:
+                self._end_jog("failed", "drives disabled while jogging")
         if self._motion is not None:
-            pos, vel = self._play(self._motion, fbk)
+            pos, vel = self._play(self._motion, fbk, sensors)
+        elif self._jog is not None:
+            pos, vel = self._jog.step()
+            self._hold = pos.copy()
+            if self._jog.finished:
+                self._end_jog(*self._jog.ending)
         else:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
@@ -181,10 +225,12 @@ class Executor:
         row[Q], row[QD], row[CMD], row[TAU] = fbk.pos, fbk.vel, pos, fbk.torque
         row[ENABLE] = int(state.enable)
         row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
+        row[SENSORS] = self._sensors.values
+        row[IO] = self._io.image
         self.ring.write(self._sequence, row)
         self._sequence += 1
 
-    def _play(self, motion: _Motion, fbk) -> tuple[np.ndarray, np.ndarray]:
+    def _play(self, motion: _Motion, fbk, sensors) -> tuple[np.ndarray, np.ndarray]:
         if motion.settling is None:
             motion.advance()
             marks = motion.marks
@@ -192,14 +238,24 @@ class Executor:
                 self._reports.append({"op": "mark", "id": motion.id,
                                       "label": int(marks[motion.next_mark][1])})
                 motion.next_mark += 1
+            running = motion.target_rate == 1.0 and not motion.paused
+            if running:
+                self._watch(motion, fbk, sensors)
             if motion.s >= motion.last and not motion.next_segment():
-                motion.settling = "done"
+                if not (motion.compliance is not None and motion.compliance.holding):
+                    motion.settling = motion.end_as or "done"
             elif motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused:
-                motion.settling = "aborted" if motion.abort_when_paused else "paused"
-            else:
-                self._hold = motion.sample(motion.positions).copy()   # outlives the motion's arrays
-                return self._hold, motion.sample(motion.velocities) * motion.rate
-            self._hold = motion.sample(motion.positions).copy()   # outlives the motion's arrays
+                motion.settling = motion.end_as or ("aborted" if motion.abort_when_paused
+                                                    else "paused")
+            if motion.settling is None:
+                # outlives the motion's arrays
+                self._hold = self._shifted(motion, sensors, running and motion.settling is None)
+                velocity = motion.sample(motion.velocities) * motion.rate
+                if motion.compliance is not None:
+                    velocity = velocity + (self._hold - self._last_setpoint) / self.cycle_time
+                self._last_setpoint = self._hold
+                return self._hold, velocity
+            self._hold = self._shifted(motion, sensors, False)
         # At the end of the motion or of a stop ramp: hold until the arm has settled there, so
         # "done" and "paused" mean the arm is at rest where the command says.
         motion.settle_cycles += 1
@@ -212,12 +268,63 @@ class Executor:
                 motion.paused, motion.settling, motion.settle_cycles = True, None, 0
                 self._reports.append({"op": "paused", "id": motion.id, **note})
             else:
-                self._end(motion.settling, **note)
+                if "message" in motion.outcome and "message" in note:
+                    note["message"] = f"{motion.outcome['message']}; {note['message']}"
+                if motion.compliance is not None:
+                    motion.outcome["comply"] = motion.compliance.summary(sensors)
+                self._end(motion.settling, **{**motion.outcome, **note})
         return self._hold, np.zeros_like(self._hold)
 
-    def _handle(self, msg: dict) -> None:
+    # ---- sensor loops ----------------------------------------------------------------------
+
+    def _watch(self, motion: _Motion, fbk, sensors) -> None:
+        """A running motion's sensor loops: a guard that fires, or a compliance that must stop,
+        brake the motion at the arm's full deceleration."""
+        if motion.guard is not None:
+            verdict = motion.guard.check(sensors)
+            if verdict is not None:
+                event, values = verdict
+                motion.guard = None
+                self._sensors.watch_range = False
+                motion.outcome["guard"] = {"event": event, "values": values.tolist(),
+                                           "position": fbk.pos.tolist()}
+                if event == "envelope":
+                    motion.outcome["message"] = (f"sensor reading {vector(values)} left its "
+                                                 f"envelope")
+                _brake(motion, "done" if event == "triggered" else "failed")
+        compliance = motion.compliance
+        if compliance is not None and compliance.problem is not None and motion.end_as is None:
+            motion.outcome["message"] = compliance.problem
+            _brake(motion, "failed")
+
+    def _shifted(self, motion: _Motion, sensors, active: bool) -> np.ndarray:
+        """The motion's setpoint now: planned, shifted by its compliance if it has one."""
+        planned = motion.sample(motion.positions)
+        compliance = motion.compliance
+        if compliance is None:
+            return planned.copy()
+        return compliance.shift(planned, sensors, active)
+
+    def _attach(self, motion: _Motion, msg: dict) -> None:
+        """The run's sensor loops (a missing arm model refuses a compliance)."""
+        guard, comply = msg.get("guard"), msg.get("comply")
+        if guard is not None:
+            motion.guard = ThresholdMonitor(guard)
+            self._sensors.watch_range = guard.kind == RANGE_KIND
+            motion.outcome["guard"] = {"event": "full distance"}
+        if comply is not None:
+            motion.compliance = Admittance(comply, self._tip, self.cycle_time)
+            self._last_setpoint = motion.sample(motion.positions).copy()
+
+    # ---- messages ----------------------------------------------------------------------------
+
+    def _handle(self, msg: dict, fbk) -> None:
         op, motion = msg.get("op"), self._motion
-        if op == "run":
+        if op in ("io_image", "watch", "unwatch"):
+            self._io.handle(msg)
+        elif op in ("jog", "jog_velocity", "jog_end"):
+            self._handle_jog(msg, fbk)
+        elif op == "run":
             if motion is not None:
                 self._end("aborted")
             self._arrays = msg["arrays"]
@@ -225,6 +332,15 @@ class Executor:
                                    self.cycle_time)
             self._motion.stop_limit = np.asarray(msg["stop_acceleration"], dtype=float)
             self._reports.append({"op": "started", "id": msg["id"], "wall_time": time.time()})
+            if msg.get("comply") is not None and self._tip is None:
+                self._end("failed", message="this controller has no arm model for comply")
+            else:
+                self._attach(self._motion, msg)
+        elif op == "comply" and motion is not None and motion.id == msg["id"]:
+            if motion.compliance is None and self._tip is not None:
+                self._attach(motion, {"comply": msg["spec"]})
+        elif self._jog is not None and op in ("stop", "abort"):
+            self._jog.end("aborted", f"{op} while jogging")
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
             motion.limit = motion.stop_limit   # stops brake at the arm's full deceleration
             motion.target_rate = 0.0
@@ -241,12 +357,44 @@ class Executor:
                 motion.abort_when_paused = True
                 motion.target_rate = 0.0
 
+    def _handle_jog(self, msg: dict, fbk) -> None:
+        op, jog = msg["op"], self._jog
+        if op == "jog":
+            self._reports.append({"op": "started", "id": msg["id"], "wall_time": time.time()})
+            if self._motion is not None or jog is not None or self._tip is None:
+                why = ("this controller has no arm model for jogging" if self._tip is None
+                       else "the arm is moving")
+                self._reports.append({"op": "failed", "id": msg["id"], "message": why})
+                return
+            start = self._hold if self._hold is not None else fbk.pos
+            self._jog = JogIntegrator(msg["id"], start, msg["limits"], self._tip,
+                                      np.asarray(msg["tool_offset"], dtype=float),
+                                      self.cycle_time)
+        elif jog is not None and op == "jog_velocity":
+            jog.command(msg)
+        elif jog is not None and op == "jog_end":
+            jog.end("done")
+
+    def _end_jog(self, how: str, message: str = "") -> None:
+        self._reports.append({"op": how, "id": self._jog.id,
+                              **({"message": message} if message else {})})
+        self._jog = None
+
     def _end(self, how: str, **details) -> None:
         self._reports.append({"op": how, "id": self._motion.id, **details})
         self._motion = None
+        self._sensors.watch_range = False
         if self._arrays is not None:
             self._arrays.close()
             self._arrays = None
+
+
+def _brake(motion: _Motion, end_as: str) -> None:
+    """Stop the motion at the arm's full deceleration; once at rest it ends as `end_as`."""
+    motion.limit = motion.stop_limit
+    motion.target_rate = 0.0
+    motion.end_as = end_as
+
 
 
 class _Segments:

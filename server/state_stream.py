@@ -22,7 +22,7 @@ import numpy as np
 
 from landscape.server import convert
 from landscape.server.errors import ParamError
-from landscape.server.feedback import CMD, QD, SEQ, TAU, TIME, WALL, Q
+from landscape.server.feedback import CMD, IO, QD, SENSORS, SEQ, TAU, TIME, WALL, Q
 from landscape.server.targets import Frame
 from landscape.server.units import Units
 from landscape.v1 import state_service_pb2 as pb
@@ -31,16 +31,18 @@ from landscape.v1 import state_service_pb2 as pb
 @dataclass(frozen=True)
 class View:
     """How one stream wants its samples: every `period` cycles, the tool pose in `frame`
-    (BASE or WORLD) and lengths and angles in `units`."""
+    (BASE or WORLD), lengths and angles in `units`, the readings of `sensors` (names)."""
 
     period: int
     frame: Frame
     units: Units
+    sensors: tuple[str, ...] = ()
 
 
 class StateHub:
-    def __init__(self, device, max_lag: int = 250, conversions: int = 64):
+    def __init__(self, device, workcell=None, max_lag: int = 250, conversions: int = 64):
         self.device = device
+        self.workcell = workcell       # sensors and the end effector (workcell.py), if any
         self.ring = device.link.feedback
         self.max_lag = max_lag
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -76,8 +78,13 @@ class StateHub:
             await asyncio.shield(self._tick)
         return not self._closed
 
-    def view(self, rate_hz: float, frame: Frame | None, units: Units) -> tuple[View, str]:
+    def view(self, rate_hz: float, frame: Frame | None, units: Units,
+             sensors: tuple[str, ...] = ()) -> tuple[View, str]:
         """The view a request asks for, and a note if the rate granted is not the one asked."""
+        for name in sensors:
+            self.workcell.sensors.info(name)   # ParamError naming the known ones
+            if not self.workcell.sensors.in_ring(name):
+                raise ParamError(f"{name} is not read every cycle: GetSensorReading reads it")
         cycle = self.device.link.cycle_time
         if not np.isfinite(rate_hz) or rate_hz < 0:
             raise ParamError(f"rate_hz must be 0 (every cycle) or a positive number, got {rate_hz}")
@@ -91,7 +98,7 @@ class StateHub:
             note = f"{rate_hz:g} Hz is above the controller's cycle rate; every cycle it is"
         elif rate_hz and abs(granted - rate_hz) > 1e-6 * rate_hz:
             note = f"samples come every {period} cycles of {cycle * 1000:g} ms"
-        return View(period, frame or Frame.WORLD, units), note
+        return View(period, frame or Frame.WORLD, units, tuple(sensors)), note
 
     async def stream(self, view: View):
         """The samples of one stream: (sequence, skipped) pairs, forever (until closed)."""
@@ -157,5 +164,12 @@ class StateHub:
             point_name=device.motions.running.point_name if device.motions.running else "",
             tag_name=device.motions.last_tag[1], estop=status.estop,
             units=convert.units_to_pb(units))
+        if self.workcell is not None:
+            sample.end_effector, sample.end_effector_state = self.workcell.tools.state(row[IO])
+            sensors = self.workcell.sensors
+            for name in view.sensors:
+                values = sensors.from_row(name, row[SENSORS])
+                sample.sensors.add(name=name, values=convert.sensor_to_pb(
+                    sensors.info(name).kind, values, units))
         sample.time.FromNanoseconds(round(float(row[WALL]) * 1e9))
         return pb.StreamStateResponse(sample=sample)

@@ -82,6 +82,7 @@ async def fail(context, rpc: str, exc: BaseException) -> None:
 def _missing(full_name: str):
     def body(self, request, context):
         raise Unimplemented(f"{full_name} is not implemented yet by this device server")
+    body.unimplemented = True   # kept by functools.wraps: tests can list what is missing
     return body
 
 
