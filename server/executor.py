@@ -53,8 +53,10 @@ from landscape.sim.controller import Controller, EnableState, EstopState, JointC
 from landscape.sim.shared_array import SharedArrays
 
 # At rest means: every joint this close to its command (rad) and this slow (rad/s); an arm that
-# is not there after SETTLE_TIMEOUT (s) is reported anyway, with its following error.
+# is not there after SETTLE_TIMEOUT (s) is reported anyway, with its following error. An arm in
+# contact (a motion with a sensor loop) rests where the contact lets it: SETTLE_CONTACT (rad).
 SETTLE_POSITION = 1e-5
+SETTLE_CONTACT = 1e-3
 SETTLE_VELOCITY = 1e-3
 SETTLE_TIMEOUT = 1.0
 
@@ -260,7 +262,8 @@ class Executor:
         # "done" and "paused" mean the arm is at rest where the command says.
         motion.settle_cycles += 1
         error = float(np.max(np.abs(fbk.pos - self._hold)))
-        settled = error < SETTLE_POSITION and float(np.max(np.abs(fbk.vel))) < SETTLE_VELOCITY
+        tolerance = SETTLE_POSITION if not motion.outcome else SETTLE_CONTACT
+        settled = error < tolerance and float(np.max(np.abs(fbk.vel))) < SETTLE_VELOCITY
         if settled or motion.settle_cycles * self.cycle_time > SETTLE_TIMEOUT:
             note = {} if settled else {"message": f"not settled within {SETTLE_TIMEOUT:g} s "
                                                   f"(following error {error:.2e} rad)"}

@@ -111,7 +111,10 @@ class Admittance:
     """The compliance loop of one motion: `shift` turns each planned setpoint into the
     commanded one; `problem` says why it must stop (a panic, or the timeout) once it must."""
 
-    DERIVATIVE_FILTER = 0.2   # weight of the newest force derivative (about 5 cycles)
+    # Weights of the newest sample in the filters of the force (about 3 cycles: the contact's
+    # damping makes the raw force jump with every cycle's step) and of its derivative.
+    FORCE_FILTER = 0.3
+    DERIVATIVE_FILTER = 0.2
 
     def __init__(self, spec: ComplySpec, tip: TipModel, dt: float):
         self.spec, self.tip, self.dt = spec, tip, dt
@@ -127,6 +130,7 @@ class Admittance:
         self.cycles = 0
         self.problem: str | None = None  # why it must stop: a panic (`panic`) or the timeout
         self.panic = True
+        self._force: np.ndarray | None = None
         self._error: np.ndarray | None = None
         self._derivative = np.zeros(3)
         self._start: np.ndarray | None = None   # the tip (4, 4) where the compliance began
@@ -162,12 +166,16 @@ class Admittance:
     def _update(self, sensors: np.ndarray, planned: np.ndarray) -> None:
         spec, dt = self.spec, self.dt
         self.cycles += 1
-        force = components(FORCE, sensors, spec.tool_offset)
+        raw = components(FORCE, sensors, spec.tool_offset)
         bounded = self.envelope > 0
-        if np.any(np.abs(force[bounded]) > self.envelope[bounded]):
-            self.problem = (f"panic: force {vector(force)} N beyond the envelope "
+        if np.any(np.abs(raw[bounded]) > self.envelope[bounded]):
+            self.problem = (f"panic: force {vector(raw)} N beyond the envelope "
                             f"{vector(self.envelope)} N")
             return
+        if self._force is None:
+            self._force = raw.copy()
+        self._force += self.FORCE_FILTER * (raw - self._force)
+        force = self._force
         error = np.where(self.axes, force - self.setpoint, 0.0)
         if self._error is not None:
             self._derivative += self.DERIVATIVE_FILTER * ((error - self._error) / dt

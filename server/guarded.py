@@ -3,8 +3,10 @@ their events say. The loops themselves run in the cycle (force_control.py).
 
 What the seed leaves open, decided as a cell integrator would expect:
 - Both move relative to the tool tip, in the tool frame (`motion` x, y, z), in a straight
-  line at `speed` % of the maximum speed, and tare the force sensor when they start from rest,
-  so that thresholds and set-points count contact forces, not the tool's weight.
+  line at `speed` % of the maximum speed. moveReact tares the force sensor when it starts (in
+  the air, as a search begins), so that its thresholds count contact forces, not the tool's
+  weight; comply does not (it usually starts in contact): its set-points count from the last
+  tare (moveReact's, or SendCommand "tare <sensor>").
 - moveReact watches the sensor's components (force sensor: fx, fy, fz at the tip in the tool
   frame, N; range sensor: the distance, first component only). Thresholds are signed: a move
   stops when a watched (non-zero) component reaches its threshold from the side it started
@@ -162,7 +164,6 @@ class GuardedMotion:
         trajectory = (Trajectory(dt, self.device.motions.planning_start()[None, :].copy(),
                                  np.zeros((1, 6))) if hold_only
                       else self._tool_move(motion, speed))
-        self.sensors.tare(sensor)
         return self.device.motions.start("Comply", sensor, [trajectory],
                                          loops={"comply": spec}, finish=finish)
 

@@ -104,7 +104,8 @@ class ToolSpec:
     frame moved by `length` along z. Gripper: stroke = finger gap when open (m), finger_speed
     (m/s of each finger). Vacuum cup: cup_radius (m). contact_stiffness (N/m) and
     contact_damping (N*s/m): the compliance of the tool's contacts (pybullet's soft contact,
-    per contact point: a flat face touching a flat surface has about four), so that pressing
+    per contact point: a flat finger face on a flat surface has about four, the cup's lip one),
+    so that pressing
     on something gives a force that grows with the depth instead of saturating the drives.
     id: the number its identification pins code (1 .. 2**MAX_TOOL_ID_BITS - 1), unique."""
 
