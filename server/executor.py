@@ -262,7 +262,8 @@ class Executor:
         # "done" and "paused" mean the arm is at rest where the command says.
         motion.settle_cycles += 1
         error = float(np.max(np.abs(fbk.pos - self._hold)))
-        tolerance = SETTLE_POSITION if not motion.outcome else SETTLE_CONTACT
+        in_contact = motion.compliance is not None or "guard" in motion.outcome
+        tolerance = SETTLE_CONTACT if in_contact else SETTLE_POSITION
         settled = error < tolerance and float(np.max(np.abs(fbk.vel))) < SETTLE_VELOCITY
         if settled or motion.settle_cycles * self.cycle_time > SETTLE_TIMEOUT:
             note = {} if settled else {"message": f"not settled within {SETTLE_TIMEOUT:g} s "
