@@ -16,8 +16,8 @@ Messages (executor.py routes them here):
                    {"op": "watch", "id", "unit", "bits", "period": cycles >= 1,
                     "timeout": cycles, 0 for none}
                    {"op": "unwatch", "id"}
-  cycle -> server  {"op": "io_signal", "id", "bits": the unit's watched bits, "sequence"}
-                   {"op": "io_timeout", "id", "bits", "sequence"}
+  cycle -> server  {"op": "io_signal", "id", "bits": the whole unit's, "sequence": the cycle}
+                   {"op": "io_timeout", "id", "bits": the watched ones, "sequence"}
 """
 from __future__ import annotations
 
@@ -95,8 +95,8 @@ class IoMonitor:
                 continue
             bits = ctrl.read_io_unit(watch.unit, watch.bits)
             if bits == watch.bits:
-                reports.append({"op": "io_signal", "id": watch.id, "bits": bits,
-                                "sequence": sequence})
+                reports.append({"op": "io_signal", "id": watch.id,
+                                "bits": ctrl.read_io_unit(watch.unit), "sequence": sequence})
             elif timed_out:
                 reports.append({"op": "io_timeout", "id": watch.id, "bits": bits,
                                 "sequence": sequence})

@@ -48,7 +48,6 @@ class Watch:
     unit: int
     bits: int
     callback: str
-    fired_sequence: int | None = None   # the cycle whose poll found the bits set
 
 
 class DigitalIO:
@@ -126,13 +125,13 @@ class DigitalIO:
             watch = self.watches.pop(msg["id"], None)
         if watch is None:
             return
-        bits = int(msg["bits"])
+        bits, cycle = int(msg["bits"]), int(msg["sequence"])
         if msg["op"] == "io_timeout":
             self._finish(watch, Phase.FAILED, f"timeout: bits {watch.bits:#x} were not all set "
-                                              f"in time (they read {bits:#x})")
+                                              f"by cycle {cycle} (they read {bits:#x})")
             return
-        watch.fired_sequence = int(msg["sequence"])
-        what = f"bits {watch.bits:#x} of {self._where(watch)} set (unit reads {bits:#x})"
+        what = (f"bits {watch.bits:#x} of {self._where(watch)} set in cycle {cycle} (the unit "
+                f"reads {bits:#x})")
         if watch.callback == "event":
             self.device.bus.digital_io(watch.command_id, watch.type, watch.unit, watch.bits, bits)
             self._finish(watch, Phase.DONE, what)
