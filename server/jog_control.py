@@ -1,16 +1,20 @@
 """Jog integration with its deadman, every cycle in the cycle process (seed 3.7.3, DESIGN 5).
 
-A jog session turns velocity requests into setpoints: joint velocities as asked (JOINT), or
-the tool tip's twist (linear m/s, angular rad/s about the tip, in base, world or tool axes)
-through the tip Jacobian (pinocchio, damped near singularities). Every cycle the wanted joint
-velocity is scaled down as a whole (so the direction holds) to the session's joint velocity
-limits and to the manual-mode tip speed (ISO 10218-1: 250 mm/s), the velocity moves towards
-it within the acceleration limits (the arm's full deceleration when stopping), and each joint
+A jog session turns velocity requests into setpoints. A JOINT jog moves the joints at the
+velocities asked. A Cartesian jog (base, world or tool axes) moves the tool tip at the twist
+asked (linear m/s, angular rad/s about the tip): the tip follows a reference pose that
+advances with the twist, the joints through the tip Jacobian (pinocchio, damped near
+singularities) with a correction towards the reference (closed-loop inverse kinematics), so
+the tip keeps its line and its orientation instead of drifting.
+
+Every cycle the wanted motion is scaled down as a whole (its direction holds) to the joint jog
+speeds and to the manual-mode tip speed (ISO 10218-1: 250 mm/s); the velocity moves towards it
+within the acceleration limits, at the arm's full deceleration when stopping; and each joint
 brakes so as to stop before the end of its range.
 
 The deadman: no request for `deadman` cycles, or a request with the deadman released, brakes
-the arm to rest along its direction at the arm's deceleration. Silence ends the session
-("aborted", saying why); a released deadman only holds the arm until it is pressed again.
+the arm to rest along its direction. Silence ends the session ("aborted", saying why); a
+released deadman only holds the arm until it is pressed again.
 
 Collision seam: `keep_out(q) -> str | None`, when set, vetoes a setpoint (the arm brakes and
 the session ends, saying why); the cell's collision checker (issue 11) plugs in here.
@@ -31,24 +35,30 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+import pinocchio as pin
 
 from landscape.server.tip_model import TipModel, damped_solve
 
 MANUAL_TIP_SPEED = 0.25   # m/s, reduced speed for manual jogging (ISO 10218-1, 5.6)
 RANGE_MARGIN = 1e-3       # rad: jogging stops this far inside the joint range
+TRACKING = 0.2            # of the tip's distance to its reference made good per cycle
 
 
 @dataclass(frozen=True)
 class JogLimits:
     """(6,) arrays: velocity (rad/s, the set speed applied), acceleration (rad/s^2, the set
     acceleration), stop_acceleration (rad/s^2, the arm's own), lower / upper (rad, the joint
-    range); tip_speed (m/s); deadman (cycles without a request before the arm stops)."""
+    range); (2,) cartesian_acceleration and cartesian_stop: linear m/s^2 and angular rad/s^2
+    of the tip, set and the arm's; tip_speed (m/s); deadman (cycles without a request before
+    the arm stops)."""
 
     velocity: np.ndarray
     acceleration: np.ndarray
     stop_acceleration: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    cartesian_acceleration: np.ndarray
+    cartesian_stop: np.ndarray
     tip_speed: float
     deadman: int
 
@@ -61,12 +71,14 @@ class JogIntegrator:
         self.q = np.array(q, dtype=float)
         self.qd = np.zeros(6)
         self.keep_out: Callable[[np.ndarray], str | None] | None = None
+        self.ending: tuple[str, str] | None = None   # (report, message) once it must stop
         self._frame = "joint"
         self._velocity = np.zeros(6)
         self._pressed = False
         self._world = np.eye(3)
         self._silent = 0              # cycles since the last request
-        self.ending: tuple[str, str] | None = None   # (report, message) once it must stop
+        self._twist = np.zeros(6)     # the tip's, Cartesian jogs: m/s, rad/s in base axes
+        self._reference: np.ndarray | None = None   # where the tip should be, Cartesian jogs
 
     def command(self, msg: dict) -> None:
         self._silent = 0
@@ -91,50 +103,82 @@ class JogIntegrator:
             self.end("aborted", f"deadman: no jog request for {limits.deadman * dt * 1000:g} ms;"
                                 f" the arm stopped")
         stopping = self.ending is not None or not self._pressed
-        wanted = np.zeros(6) if stopping else self._wanted()
-        change = wanted - self.qd
-        accel = limits.stop_acceleration if stopping else limits.acceleration
-        excess = float(np.max(np.abs(change) / (accel * dt)))
-        if excess > 1.0:
-            change /= excess
-        qd = self._within_range(self.qd + change)
-        q = self.q + qd * dt
+        self.tip.set_tool(self.tool_offset)
+        if self._frame == "joint":
+            self._reference = None
+            qd = self._joint_step(stopping)
+        else:
+            qd = self._cartesian_step(stopping)
+        limited = self._within_range(qd)
+        if not np.array_equal(limited, qd):
+            self._reference = None    # a joint range decides: the tip leaves its line
+        q = self.q + limited * dt
         if self.keep_out is not None and (why := self.keep_out(q)) is not None:
             self.end("aborted", why)
-        self.q, self.qd = np.clip(q, limits.lower, limits.upper), qd
+        self.q, self.qd = np.clip(q, limits.lower, limits.upper), limited
         return self.q, self.qd
 
-    def _wanted(self) -> np.ndarray:
-        """Joint velocities for the request, within the speed limits, direction kept."""
-        limits = self.limits
-        if self._frame == "joint":
-            qd = self._velocity.copy()
-        else:
-            twist = self._velocity
-            tip = self.tip
-            tip.set_tool(self.tool_offset)
-            if self._frame == "world":
-                rotation = self._world
-            elif self._frame == "tool":
-                rotation = tip.forward(self.q)[:3, :3]
-            else:
-                rotation = np.eye(3)
-            twist = np.concatenate([rotation @ twist[:3], rotation @ twist[3:]])
-            qd = damped_solve(tip.jacobian(self.q), twist)
-        tip_speed = float(np.linalg.norm(self._tip_jacobian()[:3] @ qd))
-        scale = max(1.0, float(np.max(np.abs(qd) / limits.velocity)),
-                    tip_speed / limits.tip_speed)
-        return qd / scale
+    # ---- joint jogs -------------------------------------------------------------------------
 
-    def _tip_jacobian(self) -> np.ndarray:
-        self.tip.set_tool(self.tool_offset)
-        return self.tip.jacobian(self.q)
+    def _joint_step(self, stopping: bool) -> np.ndarray:
+        limits = self.limits
+        wanted = np.zeros(6) if stopping else self._velocity / self._scale(self._velocity)
+        accel = limits.stop_acceleration if stopping else limits.acceleration
+        return self.qd + _limited(wanted - self.qd, accel * self.dt)
+
+    # ---- Cartesian jogs ---------------------------------------------------------------------
+
+    def _cartesian_step(self, stopping: bool) -> np.ndarray:
+        limits, dt, tip = self.limits, self.dt, self.tip
+        jacobian = tip.jacobian(self.q).copy()
+        if self._reference is None:   # (re)anchored where the tip is, moving as it moves
+            self._reference = tip.forward(self.q).copy()
+            self._twist = jacobian @ self.qd
+        if stopping:
+            if not np.any(self._twist):
+                return np.zeros(6)    # at rest on the reference
+            wanted, accel = np.zeros(6), limits.cartesian_stop
+        else:
+            wanted = self._base_twist()
+            wanted = wanted / self._scale(damped_solve(jacobian, wanted))
+            accel = limits.cartesian_acceleration
+        self._twist = self._twist + _limited(wanted - self._twist, np.repeat(accel, 3) * dt)
+        reference = self._reference
+        correction = TRACKING / dt * tip.pose_error(reference, self.q)   # before it moves on
+        reference[:3, 3] += self._twist[:3] * dt
+        reference[:3, :3] = pin.exp3(self._twist[3:] * dt) @ reference[:3, :3]
+        return damped_solve(jacobian, self._twist + correction)
+
+    def _base_twist(self) -> np.ndarray:
+        """The request's twist in base axes."""
+        if self._frame == "world":
+            rotation = self._world
+        elif self._frame == "tool":
+            rotation = self.tip.forward(self.q)[:3, :3]
+        else:
+            rotation = np.eye(3)
+        return np.concatenate([rotation @ self._velocity[:3], rotation @ self._velocity[3:]])
+
+    # ---- limits -----------------------------------------------------------------------------
+
+    def _scale(self, qd: np.ndarray) -> float:
+        """How much a joint velocity is too fast for the joint jog speeds and the manual tip
+        speed (1: not at all)."""
+        limits = self.limits
+        tip_speed = float(np.linalg.norm(self.tip.jacobian(self.q)[:3] @ qd))
+        return max(1.0, float(np.max(np.abs(qd) / limits.velocity)),
+                   tip_speed / limits.tip_speed)
 
     def _within_range(self, qd: np.ndarray) -> np.ndarray:
         """Each joint slow enough to stop before its range ends (at the arm's deceleration)."""
         limits = self.limits
         room = np.where(qd > 0, limits.upper - RANGE_MARGIN - self.q,
                         self.q - (limits.lower + RANGE_MARGIN))
-        # Reaching the limit within this cycle's move: as fast as still stops in the room.
         top = np.sqrt(2.0 * limits.stop_acceleration * np.maximum(room, 0.0))
         return np.clip(qd, -top, top)
+
+
+def _limited(change: np.ndarray, most: np.ndarray) -> np.ndarray:
+    """`change` scaled down as a whole so that no component exceeds its `most` (>= 0)."""
+    excess = float(np.max(np.abs(change) / most))
+    return change / excess if excess > 1.0 else change

@@ -54,8 +54,10 @@ class ManualControl:
             raise OutOfRange(f"the deadman timeout must be {DEADMAN_RANGE[0] * 1000:g} to "
                              f"{DEADMAN_RANGE[1] * 1000:g} ms")
         settings, arm = device.settings, device.arm
+        cartesian = np.array([arm.max_linear_acceleration, arm.max_angular_acceleration])
         limits = JogLimits(settings.joint_velocities, settings.joint_accelerations,
                            np.asarray(arm.max_acceleration), arm.lower, arm.upper,
+                           cartesian * settings.accel_percent / 100.0, cartesian,
                            MANUAL_TIP_SPEED, math.ceil(timeout / device.link.cycle_time))
         motion = device.motions.start_jog({"limits": limits,
                                            "tool_offset": settings.tool_offset})
