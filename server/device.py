@@ -306,7 +306,10 @@ class Device:
         """Press or release the e-stop, open or close the door, as a person at the cell would
         (`action` names a Panel method); returns (e-stop pressed, door open)."""
         log.warning("operator panel: %s", action)
-        return self.link.between_cycles(_operate_panel, action)
+        estop, door_open = self.link.between_cycles(_operate_panel, action)
+        # Returns once the device has seen the e-stop as it is now (the next cycle's report).
+        self._wait_controller(lambda: self._estop == estop or self.link.lost is not None, 1.0)
+        return estop, door_open
 
     def _command_controller(self, method: str) -> None:
         try:
