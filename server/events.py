@@ -21,7 +21,9 @@ that resumes "after the last sequence I saw" resumes correctly after a loss too.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import enum
+import functools
 import itertools
 import threading
 import time
@@ -31,6 +33,8 @@ from dataclasses import dataclass
 
 DEFAULT_HISTORY = 10_000   # events kept for resuming subscribers
 DEFAULT_BUFFER = 1_024     # events a subscriber may fall behind before it loses some
+MAX_TEXT = 1_024           # characters of any one string of an event; longer ones are cut
+                           # (with "…"), so no event exceeds a few kilobytes
 
 _INT32 = range(-2**31, 2**31)
 _UINT32 = range(2**32)
@@ -134,6 +138,13 @@ class RsvpAnswer:
 
 
 @dataclass(frozen=True, slots=True)
+class OperatorMessage:
+    """A message for the operator, posted by the lock holder `source`."""
+    text: str
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
 class EventsLost:
     """Events first_sequence..last_sequence (inclusive) that this subscriber will not get."""
     first_sequence: int
@@ -141,9 +152,10 @@ class EventsLost:
 
 
 Detail = (CommandEvent | Alarm | StateChange | DigitalIOSignal | RsvpRequest | RsvpAnswer
-          | EventsLost)
+          | OperatorMessage | EventsLost)
 # What the device publishes; EventsLost is made by the bus for one subscriber only.
-_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer)
+_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer,
+              OperatorMessage)
 
 
 @dataclass(frozen=True, slots=True)
@@ -291,6 +303,30 @@ class Subscription:
         return self._closed or self._draining or bool(self._replay) or bool(self._live)
 
 
+def _clip(text: str) -> str:
+    return text if len(text) <= MAX_TEXT else text[:MAX_TEXT - 1] + "…"
+
+
+def _clipped(detail):
+    """`detail` with every string field (and every string of a tuple field) clipped."""
+    changes = None
+    for name in _text_fields(type(detail)):
+        value = getattr(detail, name)
+        if isinstance(value, str):
+            if len(value) > MAX_TEXT:
+                changes = {**(changes or {}), name: _clip(value)}
+        elif any(len(v) > MAX_TEXT for v in value):
+            changes = {**(changes or {}), name: tuple(_clip(v) for v in value)}
+    return dataclasses.replace(detail, **changes) if changes else detail
+
+
+@functools.cache
+def _text_fields(kind: type) -> tuple[str, ...]:
+    """The fields of a detail record that hold text (str, or tuples of str)."""
+    return tuple(f.name for f in dataclasses.fields(kind)
+                 if f.type in ("str", "tuple[str, ...]"))
+
+
 def _resolve(waiter: asyncio.Future) -> None:
     if not waiter.done():
         waiter.set_result(None)
@@ -377,10 +413,15 @@ class EventBus:
         detail = RsvpAnswer(rsvp_id, choice, tuple(data), timed_out)
         return self.publish("rsvp_answer", (rsvp_id, choice, *data), detail)
 
+    def operator_message(self, text: str, source: str) -> Event:
+        """A message for the operator; data: [text, source]."""
+        return self.publish("operator_message", (text, source), OperatorMessage(text, source))
+
     def publish(self, event_id: str, data: Sequence[str], detail: Detail) -> Event:
         """Number, stamp, keep and fan out one event. Prefer the typed helpers above."""
         _check(isinstance(detail, _PUBLISHED), f"cannot publish a {type(detail).__name__}")
-        data = tuple(data)
+        data = tuple(_clip(d) for d in data[:16])
+        detail = _clipped(detail)
         with self._lock:
             # Numbered and stamped under the lock, so sequence order is time order.
             self._last_sequence += 1

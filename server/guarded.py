@@ -17,6 +17,9 @@ What the seed leaves open, decided as a cell integrator would expect:
   weight; 0 and 1: none); the others are ignored, as in the seed. `envelope_max[i] > 0`: a
   component beyond it ends the move as failed (an alarm); `envelope_min` is ignored, as in the
   seed. The compliance vector and speed must be zero ("mov-til-touch"; Comply complies).
+- Both are meant to touch something: the collision check before they start leaves out the
+  bodies the tool, or the part it holds, would meet on the way (the surface searched for, the
+  table slid along); the arm's links stay checked against everything.
 - comply controls the force along the tool axes where `compliance` is non-zero (hybrid force /
   position control; |compliance| is the furthest the tool may give along that axis) and
   follows `motion` along the others (it must be zero on the compliant axes). Set-points are
@@ -39,6 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from landscape.server import alarms
+from landscape.server.collision import check_motion
 from landscape.server.errors import OutOfRange, ParamError, WrongState
 from landscape.server.force_control import (FORCE, PANIC_DRIVES_OFF, PANIC_HOLD, ComplySpec,
                                             GuardSpec, vector)
@@ -51,6 +55,7 @@ if TYPE_CHECKING:
     from landscape.server.device import Device
 
 MAX_COMPLY_TIMEOUT = 600.0    # s
+MAX_TOUCHED = 3               # bodies a guarded or compliant motion may be meant to touch
 PANIC_CODES = {PANIC_HOLD: "stop and hold", PANIC_DRIVES_OFF: "stop, then drives off"}
 
 
@@ -83,10 +88,11 @@ class GuardedMotion:
         settings = self.device.settings
         guard = GuardSpec(kind, tuple(thresholds), tuple(envelope_max),
                           float(gains[0]) or 1.0, settings.tool_offset)
+        exclude = self._meant_to_touch(trajectory)
         if kind == FORCE:
             self.sensors.tare(sensor)
         return self.device.motions.start(
-            "MoveReact", sensor, [trajectory], loops={"guard": guard},
+            "MoveReact", sensor, [trajectory], exclude=exclude, loops={"guard": guard},
             finish=lambda report: self._react_outcome(report, kind))
 
     def _react_outcome(self, report: dict, kind: str) -> str:
@@ -165,6 +171,7 @@ class GuardedMotion:
                                  np.zeros((1, 6))) if hold_only
                       else self._tool_move(motion, speed))
         return self.device.motions.start("Comply", sensor, [trajectory],
+                                         exclude=self._meant_to_touch(trajectory),
                                          loops={"comply": spec}, finish=finish)
 
     def _join_running(self, spec: ComplySpec, finish) -> str:
@@ -200,6 +207,21 @@ class GuardedMotion:
         return f"{why}; {held}" if why else held
 
     # ---- helpers ----------------------------------------------------------------------------
+
+    def _meant_to_touch(self, trajectory) -> tuple[str, ...]:
+        """The bodies a guarded or compliant motion is meant to touch, left out of its collision
+        check: each one the tool, or the part it holds, would come within the margin of, in
+        the order met. The arm's own links never are: their contacts are refused as usual."""
+        scene = self.device.collisions
+        carried = {scene.mounted, scene.held} - {None}
+        model, exclude = scene.model(), []
+        for _ in range(MAX_TOUCHED):
+            contact = check_motion(model, trajectory.positions, trajectory.dt,
+                                   exclude=exclude).contact
+            if contact is None or not carried & set(contact.bodies):
+                break
+            exclude += [b for b in contact.bodies if b not in carried]
+        return tuple(exclude)
 
     def _ring_sensor(self, sensor: str) -> str:
         info = self.sensors.info(sensor)

@@ -22,7 +22,9 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from landscape.server import alarms, aux_commands, path_planning, states
-from landscape.server.errors import ControllerFailure, ManualControlMode, NotFound, WrongState
+from landscape.server.collision import check_motion
+from landscape.server.errors import (Collision, ControllerFailure, ManualControlMode, NotFound,
+                                     WrongState)
 from landscape.server.events import Phase, Severity
 from landscape.server.executor import pack_run
 from landscape.server.moves import Planner
@@ -116,6 +118,11 @@ class MotionControl:
         path = path_planning.load(self.planner, self.paths.get(name), name, frame, straight,
                                   relative, specs, self.device.settings, self.outputs,
                                   self.planning_start(), total)
+        # The whole path, as it would run from its first point, is checked against the cell
+        # now: a bad path is refused at load, naming the segment (the point it heads to).
+        self.check_collisions(path_planning.plan_run(
+            self.planner, path, np.array(path.points[0].joints), self.device.settings, 1),
+            what=f"path {name!r}")
         self.paths.put(path)
         return len(specs), len(path.points)
 
@@ -139,19 +146,39 @@ class MotionControl:
 
     # ---- starting ----------------------------------------------------------------------------
 
+    def check_collisions(self, trajectories: list, what: str = "the motion", *,
+                         allow=(), exclude=()) -> None:
+        """Refuse trajectories (played back to back) that would bring two bodies of the cell
+        within the safety margin (collision/); `allow` names contacts meant to happen (a tool
+        coupling), `exclude` bodies the motion is meant to touch (a guarded move's surface)."""
+        model = self.device.collisions.model()
+        offset = 0.0
+        for trajectory in trajectories:
+            result = check_motion(model, trajectory.positions, trajectory.dt, trajectory.marks,
+                                  allow=allow, exclude=exclude)
+            contact = result.contact
+            if contact is not None:
+                where = contact.metadata()
+                where["time"] = f"{offset + contact.time:.3f}"
+                raise Collision(f"{what} would collide: {contact}", **where)
+            offset += trajectory.duration
+
     def start(self, command: str, point_name: str, trajectories: list,
-              tags: dict | None = None, aux: dict | None = None, loops: dict | None = None,
-              finish: Callable[[dict], str] | None = None) -> str:
+              tags: dict | None = None, aux: dict | None = None, *, allow=(), exclude=(),
+              loops: dict | None = None, finish: Callable[[dict], str] | None = None) -> str:
         """Hand planned trajectories to the executor, to play back to back; Resting -> Moving.
         `tags` maps mark labels to (tag name, tag index) for tag events, `aux` to the aux
-        commands run there; `loops` adds the sensor loops of the run message (executor.py:
-        "guard", "comply") and `finish(report) -> message` words its end. Returns the command
-        id that the started / tag / done / failed events name (seed: CMD_STARTED_OK)."""
-        return self._start(command, point_name, trajectories, tags, aux, loops,
-                           finish).command_id
+        commands run there; `allow` and `exclude` as in check_collisions, which runs first;
+        `loops` adds the sensor loops of the run message (executor.py: "guard", "comply") and
+        `finish(report) -> message` words its end. Returns the command id that the started /
+        tag / done / failed events name (seed: CMD_STARTED_OK)."""
+        return self._start(command, point_name, trajectories, tags, aux, allow=allow,
+                           exclude=exclude, loops=loops, finish=finish).command_id
 
-    def _start(self, command, point_name, trajectories, tags=None, aux=None, loops=None,
-               finish=None) -> RunningMotion:
+    def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
+               exclude=(), loops=None, finish=None) -> RunningMotion:
+        self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow,
+                              exclude=exclude)
         arrays = self.device.link.share(pack_run(trajectories, self.planner.dt))
         motion = RunningMotion(f"{command}-{next(self._ids)}", command, point_name, tags or {},
                                aux or {}, arrays, finish=finish)
@@ -169,10 +196,11 @@ class MotionControl:
         self._begin(motion, {**message, "op": "jog", "id": motion.command_id})
         return motion
 
-    def play(self, command: str, point_name: str, trajectory, timeout: float) -> RunningMotion:
+    def play(self, command: str, point_name: str, trajectory, timeout: float, *,
+             allow=()) -> RunningMotion:
         """Start one planned motion and wait until it ends or pauses (for commands that move
         the arm in steps, tooling.py); the motion says how it ended."""
-        motion = self._start(command, point_name, [trajectory])
+        motion = self._start(command, point_name, [trajectory], allow=allow)
         self._wait(motion, AT_REST, timeout)
         return motion
 

@@ -50,6 +50,7 @@ CLEARANCE = 0.05           # m between a carried tool's tip and the rack, leavin
 TOOL_CHANGE_SPEED = 10.0   # % of maximum speed: the fine moves in and out of the slot
 COUPLE_TIMEOUT = 0.5       # s (controller time) for the changer to report the tool
 CLOSE_TIMEOUT = 2.0        # s for a gripper to report closed
+GRASP_REACH = 0.03         # m: a part whose centre is this close to the tip is the one taken
 
 
 @dataclass(frozen=True)
@@ -69,11 +70,13 @@ FUNCTIONS = {
 
 
 class Tooling:
-    def __init__(self, device: "Device", tools: tuple[ToolSpec, ...], base: Pose):
+    def __init__(self, device: "Device", tools: tuple[ToolSpec, ...], parts, base: Pose):
         self.device = device
+        self._parts = {p.name: p for p in parts}     # BoxSpec of the cell's parts
         self.tools = {t.name: t for t in tools}
         self._by_id = {t.id: t for t in tools}
         world_base = pose_matrix(base.xyz, base.rpy)        # base_link in the cell's world
+        self._world_base = world_base
         self._slots = {t.name: np.linalg.inv(world_base) @ pose_matrix(t.slot.xyz, t.slot.rpy)
                        for t in tools}
         self._signals: dict[str, tuple[int, int]] = {}   # name -> (unit, bit)
@@ -144,17 +147,20 @@ class Tooling:
         if mounted is not None:
             raise WrongState(f"the {mounted.name} is on the flange: PutTool it first",
                              tool=mounted.name)
-        slot = self._slots[name]
+        slot, scene = self._slots[name], self.device.collisions
+        coupling = scene.coupling(name)      # the flange on the plate, the tool on its rack
         self._write(FUNCTIONS[tool.kind].output, False)
         self._move("GetTool", f"{name}: approach", _above(slot, APPROACH), joint=True)
-        self._move("GetTool", f"{name}: into the slot", slot)
+        self._move("GetTool", f"{name}: into the slot", slot, allow=coupling)
         self._write(LOCK, True)
         if not self._wait(lambda: self.mounted() is tool, COUPLE_TIMEOUT):
             self._write(LOCK, False)
             raise ControllerFailure(f"the tool changer did not report the {name} coupled "
                                     f"within {COUPLE_TIMEOUT:g} s; the lock is released")
+        scene.mount_tool(name)
         self._set_tool_offset(_along_z(tool.length))
-        self._move("GetTool", f"{name}: out of the rack", _above(slot, tool.length + CLEARANCE))
+        self._move("GetTool", f"{name}: out of the rack", _above(slot, tool.length + CLEARANCE),
+                   allow=coupling)
         return f"the {name} is on the flange"
 
     def put_tool(self, name: str) -> str:
@@ -163,42 +169,79 @@ class Tooling:
         if mounted is not tool:
             what = f"the {mounted.name} is" if mounted else "no tool is"
             raise WrongState(f"{what} on the flange, not the {name}", tool=name)
-        slot = self._slots[name]
+        slot, scene = self._slots[name], self.device.collisions
+        coupling = scene.coupling(name)
         self._move("PutTool", f"{name}: above the slot", _above(slot, tool.length + CLEARANCE),
                    joint=True)
-        self._move("PutTool", f"{name}: into the slot", slot)
-        self._write(FUNCTIONS[tool.kind].output, False)
+        self._move("PutTool", f"{name}: into the slot", slot, allow=coupling)
+        self._switch(tool, False)
         self._write(LOCK, False)
         if not self._wait(lambda: self.mounted() is None, COUPLE_TIMEOUT):
             raise ControllerFailure(f"the tool changer still reports the {name} after "
                                     f"{COUPLE_TIMEOUT:g} s")
+        scene.unmount_tool()
         self._set_tool_offset(np.eye(4))
-        self._move("PutTool", f"{name}: away", _above(slot, APPROACH))
+        self._move("PutTool", f"{name}: away", _above(slot, APPROACH), allow=coupling)
         return f"the {name} is in the rack"
 
     # ---- seed 3.8.1 activateTool / deactivateTool -------------------------------------------
 
     def activate(self, name: str, bits: int) -> str:
-        tool, functions = self._functions(name, bits)
-        self._write(functions.output, True)
-        if tool.kind == "parallel_gripper":
-            if not self._wait(lambda: self.state()[1] == "closed", CLOSE_TIMEOUT):
-                raise ControllerFailure(f"the {name} did not report closed within "
-                                        f"{CLOSE_TIMEOUT:g} s")
-            return "closed"
-        self._wait_cycles(2)
-        return "suction on, holding a part" if self.state()[1] == "holding" else \
-            "suction on, no part held"
+        tool, _ = self._functions(name, bits)
+        return self._switch(tool, True)
 
     def deactivate(self, name: str, bits: int) -> str:
-        tool, functions = self._functions(name, bits)
-        self._write(functions.output, False)
-        if tool.kind == "parallel_gripper":
-            # Its rated opening time: there is no input saying it is open.
-            self._wait_cycles(tool.stroke / 2 / tool.finger_speed / self.device.link.cycle_time)
-            return "open"
-        self._wait_cycles(2)
-        return "suction off"
+        tool, _ = self._functions(name, bits)
+        return self._switch(tool, False)
+
+    def _switch(self, tool: ToolSpec, on: bool) -> str:
+        """The tool's function on or off, once done; the collision scene follows (a part taken
+        moves with the tool, a part let go lies where it is)."""
+        self._write(FUNCTIONS[tool.kind].output, on)
+        gripper = tool.kind == "parallel_gripper"
+        if gripper and on and not self._wait(lambda: self.state()[1] == "closed", CLOSE_TIMEOUT):
+            raise ControllerFailure(f"the {tool.name} did not report closed within "
+                                    f"{CLOSE_TIMEOUT:g} s")
+        # A gripper opens in its rated time (no input says it is open); suction acts at once.
+        self._wait_cycles(tool.stroke / 2 / tool.finger_speed / self.device.link.cycle_time
+                          if gripper and not on else 2)
+        held = self._follow_in_scene(tool, on)
+        if gripper:
+            return "closed" + (f" on {held}" if held else "") if on else "open"
+        if not on:
+            return "suction off"
+        return f"suction on, holding {held}" if held else "suction on, no part held"
+
+    def _follow_in_scene(self, tool: ToolSpec, on: bool) -> str | None:
+        """Tell the collision scene what the tool took or let go; the part taken, if any."""
+        scene = self.device.collisions
+        q = self.device.feedback().position
+        if not on:
+            if scene.held is not None:
+                scene.forbid(f"grasp {scene.held}")
+                scene.release_part(q)
+            if tool.kind == "parallel_gripper":
+                scene.set_finger_gap(tool.stroke)
+            return None
+        holding = tool.kind == "parallel_gripper" or self.state()[1] == "holding"
+        part = self._part_at_tip(q, tool) if holding else None
+        if tool.kind == "parallel_gripper":   # closed on the part, or all the way
+            scene.set_finger_gap(min(self._parts[part].size[:2]) if part else 0.0)
+        if part is not None and scene.held is None:
+            scene.allow(scene.grasp(part))
+            scene.attach_part(part, q)
+        return part
+
+    def _part_at_tip(self, q: np.ndarray, tool: ToolSpec) -> str | None:
+        """The part of the collision scene whose centre is nearest the tool's tip, within
+        GRASP_REACH of it (what the tool just took), if any."""
+        tip = (self._world_base @ self.device.kinematics.forward(q) @ _along_z(tool.length))
+        nearest, best = None, GRASP_REACH
+        for name in self._parts:
+            pose = self.device.collisions.part_pose(name)
+            if pose is not None and (d := float(np.linalg.norm(pose[:3, 3] - tip[:3, 3]))) < best:
+                nearest, best = name, d
+        return nearest
 
     def _functions(self, name: str, bits: int) -> tuple[ToolSpec, Functions]:
         tool = self._tool(name)
@@ -227,8 +270,8 @@ class Tooling:
         if status is not Status.OK:
             raise ControllerFailure(f"the controller refused to set {signal} to {int(on)}")
 
-    def _move(self, command: str, step: str, flange_goal: np.ndarray, joint: bool = False
-              ) -> None:
+    def _move(self, command: str, step: str, flange_goal: np.ndarray, joint: bool = False,
+              allow=()) -> None:
         """One step of a tool change: the flange to `flange_goal` (4x4 in base_link)."""
         motions = self.device.motions
         planner, settings = motions.planner, self.device.settings
@@ -240,7 +283,8 @@ class Tooling:
         else:
             limits = planner.limits(settings, min(settings.speed_percent, TOOL_CHANGE_SPEED))
             trajectory = planner.straight_move(q_now, flange_goal, limits, np.eye(4))
-        motion = motions.play(command, step, trajectory, trajectory.duration + 10.0)
+        motion = motions.play(command, step, trajectory, trajectory.duration + 10.0,
+                              allow=allow)
         if motion.phase != "done":
             why = motion.report.get("message", "")
             raise ControllerFailure(f"{command} stopped at the step '{step}' ({motion.phase}"

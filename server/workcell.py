@@ -30,7 +30,7 @@ class Workcell:
 
 def build_workcell(device: Device, cell: Cell) -> Workcell:
     sensors = Sensors(device)
-    tools = Tooling(device, cell.world.tools, cell.base)
+    tools = Tooling(device, cell.world.tools, cell.world.parts, cell.base)
     io = DigitalIO(device, tools)
     device.on_controller_start.extend([sensors.controller_started, tools.controller_started,
                                        io.controller_started])

@@ -73,14 +73,15 @@ def test_stop_motion_does_not_wait_for_an_open_path_load(arm):
 def test_stop_motion_does_not_wait_for_long_planning(arm):
     _moving(arm)
     tags = [types_pb2.TagStruct(x=0.5 + 0.1 * math.cos(i / 500), y=0.1 * math.sin(i / 500),
-                                z=0.6, roll=math.pi) for i in range(50_000)]
+                                z=0.6, roll=math.pi) for i in range(5_000)]
     header = motion_pb2.PathHeader(
         path_name="long", frame=types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME,
         motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
         offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
-    loading = arm.device.PathLoad.future(iter([motion_pb2.PathLoadRequest(
-        header=header, tags=tags)]), timeout=120)
-    time.sleep(0.3)   # resolving 50,000 Cartesian points holds the command turn for a while
+    chunks = [motion_pb2.PathLoadRequest(header=header)] + [
+        motion_pb2.PathLoadRequest(tags=tags[i:i + 10_000]) for i in range(0, len(tags), 10_000)]
+    loading = arm.device.PathLoad.future(iter(chunks), timeout=120)
+    time.sleep(0.3)   # resolving, planning and checking 5,000 points takes a while
     assert not loading.done()
     began = time.monotonic()
     arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=5)

@@ -4,12 +4,14 @@ pressing on the real (simulated) table."""
 from __future__ import annotations
 
 import threading
+import time
 
 import grpc
 import numpy as np
 import pytest
 
 from landscape.server import alarms
+from landscape.server.feedback import SENSORS, SEQ, WALL
 from landscape.server.states import State
 from landscape.v1 import (control_pb2, motion_pb2, sensing_pb2, settings_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
@@ -163,35 +165,59 @@ def _comply(arm, **fields):
 def test_comply_slides_along_the_table_holding_the_force(cup):
     _touch(cup)
     start = cup.tool_tip()[:3, 3]
-    stream = state_service_pb2_grpc.StateServiceStub(cup.session.channel).StreamState(
-        state_service_pb2.StreamStateRequest(sensors=["force_sensor"]))
-    samples, first = [], next(stream)
-    assert first.HasField("started")
-
-    def read():
-        try:
-            samples.extend((m.sample.command_id, m.sample.sensors[0].values[2], m.sample.skipped)
-                           for m in stream)
-        except grpc.RpcError as error:
-            assert error.code() is grpc.StatusCode.CANCELLED
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    try:
-        reply = _comply(cup, motion=Z(x=0.1), speed=1)
-        events = cup.wait_command(reply.ret_val.command_id)
-    finally:
-        stream.cancel()
-        reader.join(5)
+    rows = _RingReader(cup)
+    reply = _comply(cup, motion=Z(x=0.1), speed=1)
+    events = cup.wait_command(reply.ret_val.command_id)
+    slide = rows.stop()
     assert events[-1].event_id == "command_done", events[-1]
     moved = cup.tool_tip()[:3, 3] - start
     assert moved[0] == pytest.approx(0.1, abs=1e-3)   # pointing down: the tool's x is the world's
-    slide = np.array([fz for command, fz, skipped in samples
-                      if command == reply.ret_val.command_id])
-    assert len(slide) > 1000 and not any(s for c, _, s in samples
-                                         if c == reply.ret_val.command_id)
-    print(f"\ncomply: {len(slide)} cycles over 0.1 m, fz {slide.min():.2f} to "
-          f"{slide.max():.2f} N (set-point -20 N)")
-    assert np.all(np.abs(slide + 20.0) <= 5.0)
+    sensors = cup.server.workcell.sensors
+    began, ended = (e.time.ToNanoseconds() / 1e9 for e in (events[0], events[-1]))
+    during = slide[(slide[:, WALL] >= began) & (slide[:, WALL] <= ended)]
+    fz = np.array([sensors.from_row("force_sensor", row[SENSORS])[2] for row in during])
+    print(f"\ncomply: {len(fz)} cycles over 0.1 m, fz {fz.min():.2f} to {fz.max():.2f} N "
+          f"(set-point -20 N)")
+    assert len(fz) > 1000 and np.all(np.diff(during[:, SEQ]) == 1)   # every cycle
+    assert np.all(np.abs(fz + 20.0) <= 5.0)
+
+
+class _RingReader:
+    """Every cycle's feedback row from now on, read from the ring as it fills."""
+
+    def __init__(self, arm):
+        self.ring, self.rows = arm.server.link.feedback, {}
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self):
+        seen = self.ring.head
+        while not self._done.is_set():
+            head = self.ring.head
+            for sequence in range(seen + 1, head + 1):
+                row = self.ring.row(sequence)
+                assert row is not None, "the ring overtook the reader"
+                self.rows[sequence] = row
+            seen = head
+            time.sleep(0.005)
+
+    def stop(self) -> np.ndarray:
+        self._done.set()
+        self._thread.join(5)
+        return np.array([self.rows[s] for s in sorted(self.rows)])
+
+
+def test_a_state_stream_carries_the_sensors_asked_for(cup):
+    stream = state_service_pb2_grpc.StateServiceStub(cup.session.channel).StreamState(
+        state_service_pb2.StreamStateRequest(sensors=["force_sensor", "laser_standoff_sensor"]))
+    assert next(stream).HasField("started")
+    sample = next(stream).sample
+    stream.cancel()
+    assert [s.name for s in sample.sensors] == ["force_sensor", "laser_standoff_sensor"]
+    assert sample.sensors[0].values[2] == pytest.approx(CUP_MASS * 9.81, abs=0.05)
+    assert sample.sensors[1].values[0] == pytest.approx(0.03, abs=0.002)
+    assert (sample.end_effector, sample.end_effector_state) == ("vacuum", "off")
 
 
 def test_comply_in_place_holds_the_force_for_its_timeout(cup):

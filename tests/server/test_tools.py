@@ -10,7 +10,7 @@ import pytest
 from landscape.server.states import State
 from landscape.v1 import digital_io_service_pb2 as io_pb
 from landscape.v1 import end_effector_pb2 as ee
-from landscape.v1 import motion_pb2, types_pb2
+from landscape.v1 import motion_pb2, sensing_pb2, types_pb2
 
 from support import Arm, error_info, stubs
 
@@ -58,13 +58,28 @@ def _lift(arm, dz: float) -> None:
     assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
 
 
+def _touch_down(arm) -> None:
+    """MoveReact down until the tool, or what it holds, presses 5 N on what is below."""
+    reply = arm.device.MoveReact(sensing_pb2.MoveReactRequest(
+        sensor_type="force_sensor", motion=types_pb2.Vector3(z=0.05), speed=0.5,
+        thresholds=types_pb2.Vector3(z=-5)), timeout=30)
+    events = arm.wait_command(reply.ret_val.command_id)
+    assert events[-1].command.message.startswith("triggered"), events[-1]
+
+
 def _pick_and_place(arm, tool: str, part: str, grip_height: float, held_state: str) -> None:
     """Over the part, down, take it, lift, over the place zone, down, let go, lift; the part
-    must lie within 5 mm of the place point and the zone inputs follow it."""
+    must lie within 5 mm of the place point and the zone inputs follow it. A gripper goes down
+    around its part by a plain move (with room on every side); a cup searches down for its
+    part, and the part held searches down for the table (MoveReact), both meant to touch."""
     start = _part(arm, part)
     assert _inputs(arm) & (PICK_BIT | PLACE_BIT) == PICK_BIT
-    arm.move_down_to(start[0], start[1], start[2] + grip_height + 0.1)
-    _lift(arm, -0.1)
+    if tool == "gripper":
+        arm.move_down_to(start[0], start[1], start[2] + grip_height + 0.1)
+        _lift(arm, -0.1)
+    else:
+        arm.move_down_to(start[0], start[1], start[2] + grip_height + 0.02)
+        _touch_down(arm)
     reply = arm.device.ActivateTool(ee.ActivateToolRequest(tool_id=tool, bit_field=1))
     assert _state(arm) == (tool, held_state), reply.ret_val.ret_msg
     _lift(arm, 0.1)
@@ -72,8 +87,8 @@ def _pick_and_place(arm, tool: str, part: str, grip_height: float, held_state: s
     assert lifted == pytest.approx(start + [0, 0, 0.1], abs=2e-3)   # it came along
     assert _inputs(arm) & (PICK_BIT | PLACE_BIT) == 0               # out of the pick zone
 
-    arm.move_down_to(PLACE_X, start[1], start[2] + grip_height + 0.1)
-    _lift(arm, -0.099)                                               # 1 mm above the table
+    arm.move_down_to(PLACE_X, start[1], start[2] + grip_height + 0.02)
+    _touch_down(arm)
     assert _inputs(arm) & PLACE_BIT
     arm.device.DeactivateTool(ee.DeactivateToolRequest(tool_id=tool, bit_field=1))
     assert _state(arm)[1] in ("open", "off")
@@ -122,8 +137,7 @@ def test_pick_and_place_with_the_vacuum_cup(arm):
     arm.device.ActivateTool(ee.ActivateToolRequest(tool_id="vacuum", bit_field=1))
     assert _state(arm) == ("vacuum", "suction_on")              # on, nothing held yet
     arm.device.DeactivateTool(ee.DeactivateToolRequest(tool_id="vacuum", bit_field=1))
-    # The cup's face 1 mm above the plate's top (plate 10 mm thick).
-    _pick_and_place(arm, "vacuum", "plate_1", grip_height=0.005 + 0.001, held_state="holding")
+    _pick_and_place(arm, "vacuum", "plate_1", grip_height=0.005, held_state="holding")
     arm.device.PutTool(ee.PutToolRequest(tool_id="vacuum"), timeout=120)
     assert _state(arm) == ("", "none")
 
