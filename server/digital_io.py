@@ -4,9 +4,10 @@ Units of up to 32 bits, each all inputs or all outputs, come from the controller
 cell file). What the seed leaves open, decided as a cell integrator would expect:
 - `type` is "input" or "output" and must be the unit's direction; only outputs are set. Bits
   are the unit's bit field (bit i is the value 1 << i); a bit no signal is declared at, or one
-  set and cleared at once, is refused and nothing changes. The tool changer's lock is the tool
-  commands' (GetTool, PutTool: the tool offset must follow it) and is refused here. The
-  description goes to the server's log with the change.
+  set and cleared at once, is refused and nothing changes. Outputs wired to the world act on
+  it: the tool changer's lock couples the tool at the flange (the tool offset and the
+  collision scene follow, as after GetTool) and opens only with the tool in its rack slot (a
+  changer does not drop a tool). The description goes to the server's log with the change.
 - signalDigitalIO watches bits of a unit in the cycle (cycle_inputs.py): polled every
   pollingCycleTime ms (0: every cycle), it fires once, at the first poll that finds all of the
   bits set (bits set already fire at once), then it is done; not fired within pollingTimeOut
@@ -74,14 +75,15 @@ class DigitalIO:
         if bits_on & bits_off:
             raise ParamError(f"bits {bits_on & bits_off:#x} are both set and cleared")
         self._declared(unit, bits_on | bits_off)
-        reserved = (bits_on | bits_off) & self.tooling.reserved(unit)
-        if reserved:
-            raise ParamError(f"bits {reserved:#x} of unit {unit_id} drive the tool changer: "
-                             f"GetTool and PutTool switch it (the tool offset follows)")
+        changer = self.tooling.changer_bits(unit)
+        if (bits_on | bits_off) & changer:
+            self.tooling.check_changer(release=bool(bits_off & changer))
         log.info("setDigitalIO unit %d (%s): on %#x off %#x: %s", unit_id, unit.name, bits_on,
                  bits_off, description)
         if self.device.controller.write_io_unit(unit_id, bits_on, bits_off) is not Status.OK:
             raise ControllerFailure(f"the controller refused to write unit {unit_id}")
+        if (bits_on | bits_off) & changer:
+            self.tooling.follow_changer()
 
     def get(self, type: str, unit_id: int) -> int:
         self._unit(type, unit_id)

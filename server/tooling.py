@@ -50,6 +50,7 @@ CLEARANCE = 0.05           # m between a carried tool's tip and the rack, leavin
 TOOL_CHANGE_SPEED = 10.0   # % of maximum speed: the fine moves in and out of the slot
 COUPLE_TIMEOUT = 0.5       # s (controller time) for the changer to report the tool
 CLOSE_TIMEOUT = 2.0        # s for a gripper to report closed
+SLOT_REACH = 0.005         # m: the flange this close to a slot has its tool in the rack
 GRASP_REACH = 0.03         # m: a part whose centre is this close to the tip is the one taken
 
 
@@ -96,8 +97,8 @@ class Tooling:
         self._image = sorted(masks.items())
         self.device.link.send({"op": "io_image", "units": self._image})
 
-    def reserved(self, unit: IoUnit) -> int:
-        """The bits of `unit` that only the tool commands may write (the changer's lock)."""
+    def changer_bits(self, unit: IoUnit) -> int:
+        """The bits of `unit` that drive the tool changer (its lock)."""
         where = self._signals.get(LOCK)
         return 1 << where[1] if where is not None and where[0] == unit.id else 0
 
@@ -157,8 +158,7 @@ class Tooling:
             self._write(LOCK, False)
             raise ControllerFailure(f"the tool changer did not report the {name} coupled "
                                     f"within {COUPLE_TIMEOUT:g} s; the lock is released")
-        scene.mount_tool(name)
-        self._set_tool_offset(_along_z(tool.length))
+        self.follow_changer()
         self._move("GetTool", f"{name}: out of the rack", _above(slot, tool.length + CLEARANCE),
                    allow=coupling)
         return f"the {name} is on the flange"
@@ -179,10 +179,37 @@ class Tooling:
         if not self._wait(lambda: self.mounted() is None, COUPLE_TIMEOUT):
             raise ControllerFailure(f"the tool changer still reports the {name} after "
                                     f"{COUPLE_TIMEOUT:g} s")
-        scene.unmount_tool()
-        self._set_tool_offset(np.eye(4))
+        self.follow_changer()
         self._move("PutTool", f"{name}: away", _above(slot, APPROACH), allow=coupling)
         return f"the {name} is in the rack"
+
+    # ---- the changer written directly (setDigitalIO) -----------------------------------------
+
+    def check_changer(self, release: bool) -> None:
+        """Before the changer's lock is written directly: it opens only with the tool in its
+        rack slot (elsewhere it would drop it)."""
+        mounted = self.mounted()
+        if not release or mounted is None:
+            return
+        flange = self.device.kinematics.forward(self.device.feedback().position)
+        if np.linalg.norm(flange[:3, 3] - self._slots[mounted.name][:3, 3]) > SLOT_REACH:
+            raise WrongState(f"the tool changer opens only with the {mounted.name} in its rack "
+                             f"slot (PutTool takes it there)", tool=mounted.name)
+
+    def follow_changer(self) -> None:
+        """After the changer's lock was written: the tool offset and the collision scene
+        follow the tool the changer reports (the tool's tip, or the flange)."""
+        self._wait_cycles(2)
+        mounted, scene = self.mounted(), self.device.collisions
+        if scene.mounted is not None and (mounted is None or mounted.name != scene.mounted):
+            if scene.held is not None:
+                scene.forbid(f"grasp {scene.held}")
+                scene.release_part(self.device.feedback().position)
+            scene.unmount_tool()
+            self._set_tool_offset(np.eye(4))
+        if mounted is not None and scene.mounted is None:
+            scene.mount_tool(mounted.name)
+            self._set_tool_offset(_along_z(mounted.length))
 
     # ---- seed 3.8.1 activateTool / deactivateTool -------------------------------------------
 

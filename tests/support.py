@@ -133,6 +133,17 @@ class Arm:
             pass
         self._received.put(None)
 
+    def next_event(self, timeout: float = 60.0):
+        """The next event of the subscription (landscape.v1 Event); AssertionError after
+        `timeout` or if the stream ended."""
+        try:
+            event = self._received.get(timeout=timeout)
+        except queue.Empty:
+            raise AssertionError(f"no event within {timeout} s") from None
+        if event is None:
+            raise AssertionError("event stream ended")
+        return event
+
     def wait_command(self, command_id, phases=("command_done", "command_failed"),
                      timeout: float = 120.0) -> list:
         """The events of `command_id` up to one of `phases`; AssertionError after `timeout`."""

@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 
 import grpc
+import numpy as np
 import pytest
 
 from landscape.client import Session
@@ -65,8 +66,6 @@ def test_outputs_are_set_and_cleared_by_bit_field(arm):
     ({"type": "output", "unit_id": OUTPUTS, "bits_on": 1 << 9}, grpc.StatusCode.OUT_OF_RANGE),
     ({"type": "output", "unit_id": OUTPUTS, "bits_on": LAMP_RED, "bits_off": LAMP_RED},
      grpc.StatusCode.INVALID_ARGUMENT),
-    ({"type": "output", "unit_id": OUTPUTS, "bits_on": CHANGER_LOCK},
-     grpc.StatusCode.INVALID_ARGUMENT),                 # GetTool / PutTool drive the changer
     ({"type": "wobble", "unit_id": OUTPUTS, "bits_on": LAMP_RED},
      grpc.StatusCode.INVALID_ARGUMENT),
 ])
@@ -99,6 +98,24 @@ def test_a_wired_output_acts_on_the_world_and_its_input_follows(arm):
     assert (reply.current_ee, reply.ee_state) == ("gripper", "closed")
 
 
+def test_the_changer_closes_on_nothing_and_opens_only_with_its_tool_in_the_rack(arm):
+    arm.io.SetDigitalIO(pb.SetDigitalIORequest(type="output", unit_id=OUTPUTS,
+                                               bits_on=CHANGER_LOCK))
+    assert _get(arm, OUTPUTS, "output") & CHANGER_LOCK        # locked on air: no tool
+    reply = arm.device.GetEndEffectorState(ee.GetEndEffectorStateRequest())
+    assert reply.current_ee == "" and np.allclose(arm.server.device.settings.tool_offset,
+                                                  np.eye(4))
+    arm.io.SetDigitalIO(pb.SetDigitalIORequest(type="output", unit_id=OUTPUTS,
+                                               bits_off=CHANGER_LOCK))
+    arm.get_tool("vacuum")
+    error = _refused(lambda: arm.io.SetDigitalIO(pb.SetDigitalIORequest(
+        type="output", unit_id=OUTPUTS, bits_off=CHANGER_LOCK)))
+    assert error.code() is grpc.StatusCode.FAILED_PRECONDITION and "rack" in error.details()
+    assert _get(arm, OUTPUTS, "output") & CHANGER_LOCK        # still locked, the tool still on
+    reply = arm.device.GetEndEffectorState(ee.GetEndEffectorStateRequest())
+    assert reply.current_ee == "vacuum"
+
+
 # ---- signalDigitalIO ------------------------------------------------------------------------
 
 def _watch(arm, **fields) -> str:
@@ -111,8 +128,8 @@ def _watch(arm, **fields) -> str:
 
 def _events(arm, command_id: str, until=("command_done", "command_failed")) -> list:
     seen = []
-    for reply in arm.events:
-        event = reply.event
+    while True:
+        event = arm.next_event()
         names_it = (event.HasField("command") and event.command.command_id == command_id
                     or event.HasField("digital_io") and event.digital_io.command_id == command_id
                     or event.HasField("alarm") and event.alarm.command_id == command_id
@@ -121,7 +138,6 @@ def _events(arm, command_id: str, until=("command_done", "command_failed")) -> l
             seen.append(event)
             if event.event_id in until:
                 return seen
-    raise AssertionError("event stream ended")
 
 
 def _place_part_in_the_zone(arm) -> int:
