@@ -23,7 +23,7 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
 (picklable, so they cross the process boundary):
   server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2 (ramps that start and
                     resume), "stop_acceleration": (6,) rad/s^2 (stops: the arm's own),
-                    "arrays": SharedArrays of `pack_run`, optional "guard": GuardSpec,
+                    "arrays": SharedArrays of run_arrays.pack_run, optional "guard": GuardSpec,
                     "comply": ComplySpec}: segments played in order; a mark reports its label
                     when its sample is passed
                    {"op": "comply", "id", "spec": ComplySpec}: compliance for the running motion
@@ -48,6 +48,7 @@ from landscape.server.feedback import (CMD, ENABLE, ESTOP, IO, QD, SENSORS, SEQ,
                                        WIDTH, Q, FeedbackRing)
 from landscape.server.force_control import RANGE_KIND, Admittance, ThresholdMonitor, vector
 from landscape.server.jog_control import JogIntegrator
+from landscape.server.run_arrays import Segments
 from landscape.sim.arm import ArmModel
 from landscape.sim.controller import Controller, EnableState, EstopState, JointCmd
 from landscape.sim.shared_array import SharedArrays
@@ -332,7 +333,7 @@ class Executor:
             if motion is not None:
                 self._end("aborted")
             self._arrays = msg["arrays"]
-            self._motion = _Motion({**msg, "segments": _Segments(self._arrays.open())},
+            self._motion = _Motion({**msg, "segments": Segments(self._arrays.open())},
                                    self.cycle_time)
             self._motion.stop_limit = np.asarray(msg["stop_acceleration"], dtype=float)
             self._reports.append({"op": "started", "id": msg["id"], "wall_time": time.time()})
@@ -398,42 +399,3 @@ def _brake(motion: _Motion, end_as: str) -> None:
     motion.limit = motion.stop_limit
     motion.target_rate = 0.0
     motion.end_as = end_as
-
-
-
-class _Segments:
-    """The segments of a run, read from its shared arrays when played (not all at once: a run
-    may have many): "positions", "velocities", "accelerations" (N, 6), "marks" (M, 2) as
-    (sample in its segment, label), and "segments" (S, 4): row start, row end, first mark,
-    end of marks."""
-
-    def __init__(self, arrays: dict):
-        self._a = arrays
-
-    def __len__(self) -> int:
-        return len(self._a["segments"])
-
-    def __getitem__(self, index: int) -> dict:
-        start, end, m0, m1 = (int(v) for v in self._a["segments"][index])
-        return {"positions": self._a["positions"][start:end],
-                "velocities": self._a["velocities"][start:end],
-                "accelerations": self._a["accelerations"][start:end],
-                "marks": self._a["marks"][m0:m1]}
-
-
-def pack_run(trajectories, dt: float) -> dict[str, np.ndarray]:
-    """The arrays of a run of back-to-back trajectories, for `_Segments` (server side)."""
-    rows = [0]
-    marks, segments = [], []
-    for t in trajectories:
-        m0 = len(marks)
-        marks.extend(t.marks)
-        segments.append((rows[-1], rows[-1] + len(t), m0, len(marks)))
-        rows.append(rows[-1] + len(t))
-    positions = np.concatenate([t.positions for t in trajectories])
-    velocities = np.concatenate([t.velocities for t in trajectories])
-    accelerations = np.concatenate([
-        np.diff(t.velocities, axis=0, append=t.velocities[-1:]) / dt for t in trajectories])
-    return {"positions": positions, "velocities": velocities, "accelerations": accelerations,
-            "marks": np.array(marks, dtype=np.int64).reshape(-1, 2),
-            "segments": np.array(segments, dtype=np.int64).reshape(-1, 4)}

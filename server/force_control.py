@@ -25,17 +25,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from landscape.server.feedback import FORCE_TORQUE, RANGE
-from landscape.server.tip_model import TipModel, damped_solve, wrench_at_tip
+from landscape.server.tip_model import TipModel, damped_solve, wrench_map
 
 FORCE, RANGE_KIND = "force_torque", "laser_range"
 PANIC_HOLD, PANIC_DRIVES_OFF = 0, 1
 
 
-def components(kind: str, sensors: np.ndarray, tool_offset: np.ndarray) -> np.ndarray:
+def components(kind: str, sensors: np.ndarray, at_tip: np.ndarray) -> np.ndarray:
     """(3,) the components a guard or a compliance loop looks at, from the ring's sensor
-    values (7,)."""
+    values (7,); at_tip: the (6, 6) map of the flange's wrench to the tip (wrench_map)."""
     if kind == FORCE:
-        return wrench_at_tip(sensors[FORCE_TORQUE], tool_offset)[:3]
+        return (at_tip @ sensors[FORCE_TORQUE])[:3]
     distance = sensors[RANGE]
     return np.array([math.inf if math.isnan(distance) else distance, math.nan, math.nan])
 
@@ -62,10 +62,11 @@ class ThresholdMonitor:
         self.envelope = np.array(spec.envelope, dtype=float)
         self.filtered: np.ndarray | None = None
         self.side: np.ndarray | None = None     # sign of (value - threshold) at the start
+        self._at_tip = wrench_map(spec.tool_offset)
 
     def check(self, sensors: np.ndarray) -> tuple[str, np.ndarray] | None:
         """None while nothing happened; ("triggered", values) or ("envelope", values)."""
-        value = components(self.spec.kind, sensors, self.spec.tool_offset)
+        value = components(self.spec.kind, sensors, self._at_tip)
         if self.filtered is None:
             self.filtered = value.copy()
         else:
@@ -134,6 +135,7 @@ class Admittance:
         self._error: np.ndarray | None = None
         self._derivative = np.zeros(3)
         self._start: np.ndarray | None = None   # the tip (4, 4) where the compliance began
+        self._at_tip = wrench_map(spec.tool_offset)
 
     @property
     def holding(self) -> bool:
@@ -154,19 +156,20 @@ class Admittance:
         target = planned.copy()
         target[:3, 3] += self._start[:3, :3] @ self.offset
         q = nominal + self.dq
-        self.dq += damped_solve(tip.jacobian(q), tip.pose_error(target, q))
+        jacobian = tip.jacobian(q)
+        self.dq += damped_solve(jacobian, tip.pose_error(target))
         return nominal + self.dq
 
     def summary(self, sensors: np.ndarray) -> dict:
         """What the motion's final report says about its compliance."""
         return {"offset": self.offset.tolist(),
-                "force": components(FORCE, sensors, self.spec.tool_offset).tolist(),
+                "force": components(FORCE, sensors, self._at_tip).tolist(),
                 "panic": self.spec.panic if self.problem is not None and self.panic else None}
 
     def _update(self, sensors: np.ndarray, planned: np.ndarray) -> None:
         spec, dt = self.spec, self.dt
         self.cycles += 1
-        raw = components(FORCE, sensors, spec.tool_offset)
+        raw = components(FORCE, sensors, self._at_tip)
         bounded = self.envelope > 0
         if np.any(np.abs(raw[bounded]) > self.envelope[bounded]):
             self.problem = (f"panic: force {vector(raw)} N beyond the envelope "

@@ -140,11 +140,12 @@ class JogIntegrator:
             wanted, accel = np.zeros(6), limits.cartesian_stop
         else:
             wanted = self._base_twist()
-            wanted = wanted / self._scale(damped_solve(jacobian, wanted))
+            wanted = wanted / self._scale(damped_solve(jacobian, wanted), jacobian)
             accel = limits.cartesian_acceleration
         self._twist = self._twist + _limited(wanted - self._twist, np.repeat(accel, 3) * dt)
         reference = self._reference
-        correction = TRACKING / dt * tip.pose_error(reference, self.q)   # before it moves on
+        # The tip model's last pose is the tip's now (every call above was at self.q).
+        correction = TRACKING / dt * tip.pose_error(reference)   # before it moves on
         reference[:3, 3] += self._twist[:3] * dt
         reference[:3, :3] = pin.exp3(self._twist[3:] * dt) @ reference[:3, :3]
         return damped_solve(jacobian, self._twist + correction)
@@ -161,11 +162,13 @@ class JogIntegrator:
 
     # ---- limits -----------------------------------------------------------------------------
 
-    def _scale(self, qd: np.ndarray) -> float:
+    def _scale(self, qd: np.ndarray, jacobian: np.ndarray | None = None) -> float:
         """How much a joint velocity is too fast for the joint jog speeds and the manual tip
         speed (1: not at all)."""
         limits = self.limits
-        tip_speed = float(np.linalg.norm(self.tip.jacobian(self.q)[:3] @ qd))
+        if jacobian is None:
+            jacobian = self.tip.jacobian(self.q)
+        tip_speed = float(np.linalg.norm(jacobian[:3] @ qd))
         return max(1.0, float(np.max(np.abs(qd) / limits.velocity)),
                    tip_speed / limits.tip_speed)
 

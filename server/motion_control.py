@@ -26,7 +26,7 @@ from landscape.server.collision import check_motion
 from landscape.server.errors import (Collision, ControllerFailure, ManualControlMode, NotFound,
                                      WrongState)
 from landscape.server.events import Phase, Severity
-from landscape.server.executor import pack_run
+from landscape.server.run_arrays import pack_run
 from landscape.server.moves import Planner
 from landscape.server.paths import PathLibrary, PathStore
 from landscape.server.states import State

@@ -23,6 +23,11 @@ def wrench_at_tip(wrench: np.ndarray, tool_offset: np.ndarray) -> np.ndarray:
     return tip.actInv(pin.Force(wrench[:3], wrench[3:])).vector
 
 
+def wrench_map(tool_offset: np.ndarray) -> np.ndarray:
+    """(6, 6): wrench_at_tip as a matrix, for loops that apply it every cycle."""
+    return np.column_stack([wrench_at_tip(e, tool_offset) for e in np.eye(6)])
+
+
 class TipModel:
     """The arm's kinematics at its tool tip. Not thread-safe (one pinocchio Data)."""
 
@@ -34,12 +39,17 @@ class TipModel:
                                                  flange.placement, pin.FrameType.OP_FRAME))
         self.data = self.model.createData()
         self._flange_placement = flange.placement.copy()
-        self.tool_offset = np.eye(4)
+        self.tool_offset: np.ndarray | None = None
+        self.set_tool(np.eye(4))
 
     def set_tool(self, tool_offset: np.ndarray) -> None:
-        """The tip is `tool_offset` (4x4, m) in the flange frame."""
-        self.tool_offset = np.array(tool_offset, dtype=float)
-        offset = pin.SE3(self.tool_offset[:3, :3], self.tool_offset[:3, 3])
+        """The tip is `tool_offset` (4x4, m) in the flange frame (the same array again costs
+        nothing: loops call this every cycle)."""
+        if tool_offset is self.tool_offset:
+            return
+        self.tool_offset = tool_offset
+        offset = pin.SE3(np.asarray(tool_offset[:3, :3], dtype=float),
+                         np.asarray(tool_offset[:3, 3], dtype=float))
         self.model.frames[self.tip].placement = self._flange_placement * offset
 
     def forward(self, q: np.ndarray) -> np.ndarray:
@@ -49,14 +59,20 @@ class TipModel:
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """(6, 6): the tip's linear (m/rad) and angular (rad/rad) velocity per joint, in
-        base_link axes, at the tip (pinocchio's LOCAL_WORLD_ALIGNED)."""
+        base_link axes, at the tip (pinocchio's LOCAL_WORLD_ALIGNED). The tip's pose at q is
+        `last_pose` afterwards."""
         return pin.computeFrameJacobian(self.model, self.data, q, self.tip,
                                         pin.LOCAL_WORLD_ALIGNED)
 
-    def pose_error(self, target: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """(6,): how far the tip at q is from `target` (4x4): position (m) and rotation vector
-        (rad), in base_link axes; zero when there."""
-        now = self.forward(q)
+    @property
+    def last_pose(self) -> np.ndarray:
+        """The tip (4, 4) at the q of the last forward() or jacobian()."""
+        return self.data.oMf[self.tip].homogeneous
+
+    def pose_error(self, target: np.ndarray, q: np.ndarray | None = None) -> np.ndarray:
+        """(6,): how far the tip at q (None: at the last forward or jacobian) is from `target`
+        (4x4): position (m) and rotation vector (rad), in base_link axes; zero when there."""
+        now = self.forward(q) if q is not None else self.last_pose
         rotation = pin.log3(target[:3, :3] @ now[:3, :3].T)
         return np.concatenate([target[:3, 3] - now[:3, 3], rotation])
 
