@@ -153,6 +153,9 @@ class GuardedMotion:
         arm, dt = self.device.arm, self.device.link.cycle_time
         moving = self.device.state is State.MOVING
         hold_only = not np.any(motion)
+        if moving and not hold_only:
+            raise ParamError("while moving, Comply adds its compliance to the running motion: "
+                             "its own motion must be zero")
         if hold_only and not moving and max_timeout == 0:
             raise ParamError("Comply without a motion holds the force for max_timeout "
                              "seconds: give one")
@@ -176,8 +179,6 @@ class GuardedMotion:
 
     def _join_running(self, spec: ComplySpec, finish) -> str:
         """Comply from Moving: compliance for the running motion."""
-        if spec.hold_only or not np.any(spec.axes):
-            raise ParamError("while moving, Comply complies along the running motion")
         motions = self.device.motions
         with self.device._state_lock:
             running = motions.running
