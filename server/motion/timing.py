@@ -14,7 +14,8 @@
 3. Between gridpoints u is constant (toppra's ParametrizeConstAccel), so s(t) is known in
    closed form and is sampled every dt, vectorised.
 4. The samples are CHECKED: joint velocities, forward-difference accelerations (what
-   Trajectory.accelerations() gives), and with a tool path the tool tip's forward-difference
+   Trajectory.accelerations() gives), second differences of the positions (what the drives
+   follow, the arm held at rest before and after), and with a tool path the tool tip's forward-difference
    linear and angular speeds, must not exceed the limits (relative slack 1e-9, rounding only).
    Where they do (constraints hold at gridpoints, the samples fall between them), the section
    is slowed uniformly in time, which scales velocities by 1/k and accelerations by 1/k^2, and
@@ -161,6 +162,11 @@ def _excess(q, v, dt, limits: Limits, tool_path) -> float:
     ratio = float(np.max(np.abs(v) / limits.velocity))
     if len(v) > 1:
         acc = np.abs(np.diff(v, axis=0)) / dt
+        ratio = max(ratio, math.sqrt(float(np.max(acc / limits.acceleration))))
+        # What the drives follow: the second difference of the positions, held at rest before
+        # the first sample and after the last.
+        held = np.concatenate([q[:1], q, q[-1:]])
+        acc = np.abs(held[2:] - 2.0 * held[1:-1] + held[:-2]) / (dt * dt)
         ratio = max(ratio, math.sqrt(float(np.max(acc / limits.acceleration))))
     if tool_path is not None and len(q) > 1 and (limits.linear_velocity or limits.angular_velocity):
         poses = tool_path(q)
