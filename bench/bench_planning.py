@@ -32,7 +32,7 @@ import numpy as np
 
 from landscape.server.motion.cartesian import straight_line, tool_pose
 from landscape.server.motion.timing import (ConstAccelProfile, chord_parameters, gridpoints,
-                                            speed_caps, time_path, topp_ra, toppra_reference)
+                                            time_path, tool_constraints, topp_ra, toppra_reference)
 from landscape.server.motion.trajectory import JointPath, Limits, PlanningError
 from landscape.server.units import pose_matrix
 from landscape.sim.arm import arm_model
@@ -121,8 +121,8 @@ def main() -> None:
         s_times, (s, keep) = timed(lambda: chord_parameters(W), repeat)
         p_times, path = timed(lambda: JointPath(s, W[keep]), repeat)
         g_times, (grid, _) = timed(lambda: gridpoints(path), repeat)
-        c_times, caps = timed(lambda: speed_caps(path, grid, lim, tool), repeat)
-        x_times, xs = timed(lambda: topp_ra(path, grid, lim.acceleration, caps), repeat)
+        c_times, (caps, rows) = timed(lambda: tool_constraints(path, grid, lim, tool), repeat)
+        x_times, xs = timed(lambda: topp_ra(path, grid, lim.acceleration, caps, rows), repeat)
         parts = [min(s_times) + min(p_times), min(g_times), min(c_times), min(x_times)]
         best = min(total)
         plan_rows.append((name, len(W), len(grid), best * 1e3, statistics.median(total) * 1e3,

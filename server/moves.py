@@ -30,9 +30,11 @@ class Planner:
             raise ParamError(f"move speed must be a finite number, got {speed}")
         if not 0 < speed <= 100:
             raise OutOfRange(f"move speed must be above 0 and at most 100 %, got {speed}")
+        # Seed 3.2.1: the percents apply to joint and Cartesian moves alike; the absolute
+        # Cartesian speeds and accelerations are caps of their own, not scaled by them.
         return Limits.scaled(self.arm, speed, settings.accel_percent,
-                             settings.linear_speed * speed / 100.0,
-                             settings.angular_speed * speed / 100.0)
+                             settings.linear_speed, settings.angular_speed,
+                             settings.linear_accel, settings.angular_accel)
 
     def move(self, q_now, settings: MotionSettings, frame: Frame, values: np.ndarray,
              relative: bool, straight: bool, speed_percent: float | None) -> Trajectory:

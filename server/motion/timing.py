@@ -40,7 +40,8 @@ import numpy as np
 
 from .trajectory import JointPath, Limits, PlanningError, Trajectory
 
-__all__ = ["time_path", "chord_parameters", "gridpoints", "speed_caps", "topp_ra",
+__all__ = ["time_path", "chord_parameters", "gridpoints", "speed_caps", "tool_constraints",
+           "topp_ra",
            "ConstAccelProfile", "toppra_reference", "GRID_CHORD_TOL", "GRID_MAX_STEP",
            "GRID_MIN_POINTS", "LIMIT_SLACK"]
 
@@ -58,6 +59,8 @@ _FD_STEP = 1e-6           # rad of s: central differences of the tool path
 _A_FLOOR = 1e-9           # |dq_j/ds| below this: the joint's acceleration row ignores u
 _PAIR_I, _PAIR_J = np.triu_indices(12, 1)   # the 66 pairs of a stage's 12 acceleration rows
 _BLOCK = 8192             # stages per block of the pair computation (~4 MB per temporary)
+_TOOL_FD_STEP = 1e-4      # rad of s: second differences of the tool path (acceleration rows)
+_FACES = 8                # faces of the polygon standing for a tool acceleration disk
 
 
 def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | None = None,
@@ -112,7 +115,8 @@ def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, t
         return W[:1].copy(), np.zeros((1, 6)), [0] * len(W)
     path = JointPath(s, W[keep])
     grid, knot_at = gridpoints(path)
-    xs = topp_ra(path, grid, limits.acceleration, speed_caps(path, grid, limits, tool_path))
+    caps, rows = tool_constraints(path, grid, limits, tool_path)
+    xs = topp_ra(path, grid, limits.acceleration, caps, rows)
     profile = ConstAccelProfile(grid, xs)
     knot_times = profile.times[knot_at]
     # The waypoint a dropped (repeated) point belongs to: the last kept one at or before it.
@@ -176,7 +180,33 @@ def _excess(q, v, dt, limits: Limits, tool_path) -> float:
         if limits.angular_velocity:
             angle = _rotation_angle(poses[:-1, :3, :3], poses[1:, :3, :3])
             ratio = max(ratio, float(angle.max()) / (dt * limits.angular_velocity))
+    if tool_path is not None and len(q) > 1 and (limits.linear_acceleration
+                                                 or limits.angular_acceleration):
+        poses = tool_path(q)
+        # Per-cycle steps of the tip, at rest before the first sample and after the last; the
+        # change of step over dt^2 is the tip's acceleration as the drives make it.
+        for limit, steps in ((limits.linear_acceleration, np.diff(poses[:, :3, 3], axis=0)),
+                             (limits.angular_acceleration,
+                              _rotation_vectors(poses[:-1, :3, :3], poses[1:, :3, :3]))):
+            if limit:
+                held = np.concatenate([np.zeros((1, 3)), steps, np.zeros((1, 3))])
+                acc = np.linalg.norm(np.diff(held, axis=0), axis=1) / (dt * dt)
+                ratio = max(ratio, math.sqrt(float(acc.max()) / limit))
     return ratio
+
+
+def _rotation_vectors(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
+    """(K, 3) rotation vectors (axis times angle, rad, base axes) turning Ra into Rb, (K, 3, 3)
+    each, for angles below pi: the axis from the skew part of Rb Ra^T, the angle from the
+    chord (accurate for the small steps of a path)."""
+    R = Rb @ np.swapaxes(Ra, -1, -2)
+    skew = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]],
+                    axis=1)                                  # 2 sin(angle) axis
+    norm = np.linalg.norm(skew, axis=1)
+    angle = _rotation_angle(Ra, Rb)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(norm > 0.0, angle / norm, 0.5)
+    return skew * scale[:, None]
 
 
 def _rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
@@ -238,24 +268,78 @@ def speed_caps(path: JointPath, grid: np.ndarray, limits: Limits, tool_path=None
         return np.where(rate > 0, 1.0 / rate**2, _HUGE)
 
 
+def tool_constraints(path: JointPath, grid: np.ndarray, limits: Limits, tool_path=None
+                     ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
+    """The velocity bounds on x (G,) (speed_caps) and, with a tool path and a Cartesian
+    acceleration limit, the tool's acceleration as one-sided rows at each gridpoint:
+    (ku (G, R), kx (G, R), h (R,)) with ku u + kx x <= h, u = d2s/dt2, x = (ds/dt)^2.
+
+    The tip's acceleration is p' u + p'' x (p' = dp/ds, p'' = d2p/ds2, from second
+    differences of the tool path); the tool's angular acceleration likewise with the angular
+    rates. With T = |p'| u + (e . p'') x along the tangent e and N = |p''_perp| x >= 0 across it,
+    |a| <= A is the half disk T^2 + N^2 <= A^2, held by a polygon: faces at angles
+    phi_k = k pi / (2 K), |T| cos phi + N sin phi <= A cos(pi / 4K) (the polygon inscribed in
+    the disk), but the tangential face (phi = 0) at A itself, so that a straight line keeps
+    exactly A; the disk is then exceeded by at most 0.3 % (K = 8) where N is about 7 % of A,
+    which the sample check of time_path catches. The face phi = pi / 2 caps x. The curved
+    faces are left out where the speed caps keep N too small for them to bind."""
+    xcap = speed_caps(path, grid, limits, tool_path)
+    if tool_path is None or not (limits.linear_acceleration or limits.angular_acceleration):
+        return xcap, None
+    h = _TOOL_FD_STEP
+    poses = [tool_path(path(grid + d)) for d in (-h, 0.0, h)]   # the spline extends past its ends
+    parts = []
+    if limits.linear_acceleration:
+        before, here, after = (T[:, :3, 3] for T in poses)
+        parts.append(((after - before) / (2.0 * h), (after - 2.0 * here + before) / (h * h),
+                      limits.linear_acceleration))
+    if limits.angular_acceleration:
+        w0 = _rotation_vectors(poses[0][:, :3, :3], poses[1][:, :3, :3]) / h
+        w1 = _rotation_vectors(poses[1][:, :3, :3], poses[2][:, :3, :3]) / h
+        parts.append((0.5 * (w0 + w1), (w1 - w0) / h, limits.angular_acceleration))
+    ku, kx, bound = [], [], []
+    inner = math.cos(math.pi / (4 * _FACES))
+    for first, second, limit in parts:
+        alpha = np.linalg.norm(first, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tangent = np.where(alpha[:, None] > 0.0, first / alpha[:, None], 0.0)
+        gamma = np.einsum("ij,ij->i", tangent, second)
+        nu = np.linalg.norm(second - gamma[:, None] * tangent, axis=1)
+        with np.errstate(divide="ignore"):
+            xcap = np.minimum(xcap, np.where(nu > 0.0, limit * inner / nu, _HUGE))
+        # The first curved face is implied by the others while N <= A (cos(d/2) - cos d) / sin d.
+        d = math.pi / (2 * _FACES)
+        curved = np.any(nu * xcap > limit * (inner - math.cos(d)) / math.sin(d))
+        for k in range(_FACES if curved else 1):
+            c, s = math.cos(k * d), math.sin(k * d)
+            for sign in (1.0, -1.0):
+                ku.append(sign * c * alpha)
+                kx.append(sign * c * gamma + s * nu)
+                bound.append(limit if k == 0 else limit * inner)
+    return xcap, (np.stack(ku, axis=1), np.stack(kx, axis=1), np.array(bound))
+
+
 # ---- TOPP-RA ---------------------------------------------------------------------------------
 
 def topp_ra(path: JointPath, grid: np.ndarray, acceleration: np.ndarray,
-            xcap: np.ndarray) -> np.ndarray:
+            xcap: np.ndarray, rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+            ) -> np.ndarray:
     """Squared path speeds x (G,) of the time-optimal rest-to-rest motion along `path`.
 
     grid (G,): gridpoints from path_interval[0] to [1]; acceleration (6,) rad/s^2 (symmetric);
-    xcap (G,): the velocity bounds on x (speed_caps). Raises PlanningError("LIMITS") when the
-    path cannot be followed (a stage with no admissible motion).
+    xcap (G,): the velocity bounds on x (speed_caps); rows: more second-order constraints, one
+    sided, per gridpoint: (ku (G, R), kx (G, R), h (R,)) with ku u + kx x <= h (the tool's
+    acceleration, tool_constraints). Raises PlanningError("LIMITS") when the path cannot be
+    followed (a stage with no admissible motion).
 
     Stage i (from s_i to s_{i+1}, length D) has the path acceleration u constant and
-    x_{i+1} = x_i + 2 D u. Each joint-acceleration row r (joint j at s_i, or at s_{i+1} where
-    it reads a_j u + b_j x_{i+1}) is |a_r u + b_r x| <= h_r, i.e.
-        beta_r x - w_r <= u <= beta_r x + w_r,   beta_r = -b_r / a_r,  w_r = h_r / |a_r|.
-    Eliminating u: the rows alone allow x up to min over pairs (w_r + w_q) / |beta_r - beta_q|
-    (the acceleration limit curve), and x_{i+1} <= K means x d_r <= K + c_r for every row
-    (d_r = 1 + 2 D beta_r, c_r = 2 D w_r; a bound only where d_r > 0). Going forward,
-    the greatest next x is min(K_{i+1}, min_r (d_r x_i + c_r)).
+    x_{i+1} = x_i + 2 D u. Each row, at s_i or at s_{i+1} (where its x is x_i + 2 D u), bounds
+    u from above (u <= beta x + w) or from below (u >= beta x + w); a joint-acceleration row
+    |a_r u + b_r x| <= h_r does both, with beta_r = -b_r / a_r and w_r = +-h_r / |a_r|.
+    Eliminating u: every lower line must stay below every upper line, which caps x (the
+    acceleration limit curve); x_{i+1} <= K bounds x_i through the lower lines
+    (x (1 + 2 D beta) <= K - 2 D w), and going forward the greatest next x is the least
+    upper line's x_i + 2 D (beta x_i + w).
     """
     G = len(grid)
     D = np.diff(grid)[:, None]                              # (G-1, 1)
@@ -277,19 +361,24 @@ def topp_ra(path: JointPath, grid: np.ndarray, acceleration: np.ndarray,
             wb, bb = w[lo:lo + _BLOCK], beta[lo:lo + _BLOCK]
             xhi[lo:lo + _BLOCK] = np.min((wb[:, _PAIR_I] + wb[:, _PAIR_J])
                                          / np.abs(bb[:, _PAIR_I] - bb[:, _PAIR_J]), axis=1)
-        # u >= -x / 2D (x_{i+1} >= 0) against each row's upper bound.
-        g = -1.0 / (2.0 * D) - beta
-        xhi = np.minimum(xhi, np.min(np.where(g > 0, w / g, np.inf), axis=1))
+        lower_beta, lower_w, upper_beta, upper_w = beta, -w, beta, w
+        if rows is not None:
+            lower_beta, lower_w, upper_beta, upper_w, xhi = _with_rows(
+                rows, D, beta, w, xhi)
+        # u >= -x / 2D (x_{i+1} >= 0) against each upper line.
+        g = -1.0 / (2.0 * D) - upper_beta
+        xhi = np.minimum(xhi, np.min(np.where(g > 0, upper_w / g, np.inf), axis=1))
         xhi = np.minimum(xhi, xcap[:-1])
-        d = 1.0 + 2.0 * D * beta                                         # x' <= d x + c
-        c = 2.0 * D * w
-        back_p = np.where(d > 0, 1.0 / d, 0.0)                           # x <= K p + q
-        back_q = np.where(d > 0, c * back_p, _HUGE)
+        d = 1.0 + 2.0 * D * lower_beta                                    # x d <= K - 2 D w
+        back_p = np.where(d > 0, 1.0 / d, 0.0)                            # x <= K p + q
+        back_q = np.where(d > 0, np.minimum(-2.0 * D * lower_w * back_p, _HUGE), _HUGE)
+        d = 1.0 + 2.0 * D * upper_beta                                    # x' <= d x + c
+        c = np.minimum(2.0 * D * upper_w, _HUGE)
     if not np.all(xhi >= 0):
         raise PlanningError("LIMITS", "the path cannot be followed within the limits")
 
     # Backward pass: the controllable sets [0, K_i], K_{G-1} = 0 (at rest at the end). Each
-    # stage's bound is the lower envelope of 12 lines in K_{i+1}; the loop visits only the
+    # stage's bound is the lower envelope of its lines in K_{i+1}; the loop visits only the
     # lines that can be on it (_binding_rows), mostly one or two, and skips stages with none.
     keep = _binding_rows(back_p, back_q, np.append(xhi[1:], 0.0), xhi)
     K = np.append(xhi, 0.0)
@@ -305,6 +394,39 @@ def topp_ra(path: JointPath, grid: np.ndarray, acceleration: np.ndarray,
         raise PlanningError("LIMITS", "the path speed drops to zero at s = "
                             f"{grid[1 + int(np.argmax(stalled))]:.4g} rad")
     return xs
+
+
+def _with_rows(rows, D: np.ndarray, beta: np.ndarray, w: np.ndarray, xhi: np.ndarray):
+    """The joint rows' lines (beta, +-w, (S, 12)) with the one-sided rows added: (lower beta,
+    lower w, upper beta, upper w) (S, 12 + 2R) and xhi (S,) capped by every new pair of a
+    lower and an upper line (lower must stay below upper: (bl - bu) x <= wu - wl)."""
+    ku, kx, h = rows
+    # At both ends of each stage; at the end x_{i+1} = x_i + 2 D u.
+    cu = np.concatenate([ku[:-1], ku[1:] + 2.0 * D * kx[1:]], axis=1)    # (S, 2R)
+    cx = np.concatenate([kx[:-1], kx[1:]], axis=1)
+    bound = np.broadcast_to(np.concatenate([h, h]), cu.shape)
+    cu = np.where(np.abs(cu) < _A_FLOOR, np.copysign(_A_FLOOR, cu), cu)
+    new_beta, offset = -cx / cu, bound / cu
+    up = cu > 0
+    new_upper = np.where(up, offset, np.inf)          # lines a row does not set never bind
+    new_lower = np.where(up, -np.inf, offset)
+    for lo in range(0, len(xhi), _BLOCK):
+        part = slice(lo, lo + _BLOCK)
+        bu = np.concatenate([beta[part], new_beta[part]], axis=1)
+        wu = np.concatenate([w[part], new_upper[part]], axis=1)
+        bl, wl = new_beta[part], new_lower[part]
+        # New lower lines against every upper line, then the joint lower lines against the
+        # new upper lines (joint against joint is done).
+        gap = bl[:, :, None] - bu[:, None, :]
+        room = wu[:, None, :] - wl[:, :, None]
+        cap = np.min(np.where(gap > 0, room / gap, np.inf), axis=(1, 2))
+        gap = beta[part][:, :, None] - new_beta[part][:, None, :]
+        room = new_upper[part][:, None, :] + w[part][:, :, None]
+        cap = np.minimum(cap, np.min(np.where(gap > 0, room / gap, np.inf), axis=(1, 2)))
+        xhi[part] = np.minimum(xhi[part], cap)
+    return (np.concatenate([beta, new_beta], axis=1), np.concatenate([-w, new_lower], axis=1),
+            np.concatenate([beta, new_beta], axis=1), np.concatenate([w, new_upper], axis=1),
+            xhi)
 
 
 def _binding_rows(slope: np.ndarray, intercept: np.ndarray, upper: np.ndarray,
@@ -404,15 +526,32 @@ def toppra_reference(path: JointPath, grid: np.ndarray, limits: Limits, tool_pat
             self.dof = 6
 
         def compute_constraint_params(self, path_, grid_, *args, **kwargs):
-            caps = speed_caps(path_, grid_, limits, tool_path)
+            caps = tool_constraints(path_, grid_, limits, tool_path)[0]
             return (None, None, None, None, None, None,
                     np.stack([np.zeros_like(caps), caps], axis=1))
+
+    class ToolRows(toppra.constraint.LinearConstraint):
+        """tool_constraints' one-sided rows: ku u + kx x <= h at each gridpoint."""
+
+        def __init__(self):
+            super().__init__()
+            self.dof = 6
+            self.identical = True
+            self.discretization_type = interpolation
+
+        def compute_constraint_params(self, path_, grid_, *args, **kwargs):
+            ku, kx, h = tool_constraints(path_, grid_, limits, tool_path)[1]
+            # A LinearConstraint discretises itself (as JointAccelerationConstraint does).
+            return toppra.constraint.canlinear_colloc_to_interpolate(
+                ku, kx, np.zeros_like(ku), np.eye(len(h)), h, None, None, grid_, identical=True)
 
     interpolation = toppra.constraint.DiscretizationType.Interpolation
     acc = toppra.constraint.JointAccelerationConstraint(limits.acceleration,
                                                         discretization_scheme=interpolation)
-    algo = toppra.algorithm.TOPPRA([SpeedCaps(), acc], path, gridpoints=grid,
-                                   solver_wrapper="seidel")
+    constraints = [SpeedCaps(), acc]
+    if tool_constraints(path, grid[:2], limits, tool_path)[1] is not None:
+        constraints.append(ToolRows())
+    algo = toppra.algorithm.TOPPRA(constraints, path, gridpoints=grid, solver_wrapper="seidel")
     _, sd, _ = algo.compute_parameterization(0.0, 0.0)[:3]
     if sd is None:
         raise PlanningError("LIMITS", "toppra found no parametrization")

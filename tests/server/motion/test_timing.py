@@ -212,8 +212,15 @@ def test_limits_scaled():
     np.testing.assert_allclose(limits.acceleration, 0.25 * np.array(ARM.max_acceleration))
     assert limits.linear_velocity == pytest.approx(0.5 * ARM.max_linear_velocity)
     assert Limits.scaled(ARM, 50, 25, linear_velocity=0.1).linear_velocity == 0.1
+    # An absolute Cartesian limit is a cap of its own, not scaled; the percent still holds.
     capped = Limits.scaled(ARM, 50, 25, linear_velocity=99.0)
-    assert capped.linear_velocity == ARM.max_linear_velocity
+    assert capped.linear_velocity == 0.5 * ARM.max_linear_velocity
+    assert Limits.scaled(ARM, 60, 25, linear_velocity=0.2).linear_velocity == 0.2
+    assert Limits.scaled(ARM, 50, 25).linear_acceleration == 0.25 * ARM.max_linear_acceleration
+    both = Limits.scaled(ARM, 50, 40, angular_velocity=0.3, linear_acceleration=0.5,
+                         angular_acceleration=0.7)
+    assert (both.angular_velocity, both.linear_acceleration, both.angular_acceleration) == (
+        0.3, 0.5, 0.7)
     for bad in (0, -5, 101, math.nan):
         with pytest.raises(ValueError):
             Limits.scaled(ARM, bad, 50)
@@ -239,3 +246,29 @@ def test_planning_error_carries_reason_and_place():
     assert isinstance(err, ValueError)
     with pytest.raises(ValueError):
         PlanningError("NOT_A_REASON")
+
+
+def test_the_stage_solver_with_tool_acceleration_rows_returns_what_toppra_returns():
+    """The one-sided rows of the tool's acceleration (an arc: tangential and centripetal
+    faces), ours against toppra's on the same grid."""
+    pytest.importorskip("toppra")
+    from landscape.server.motion.cartesian import arc, tool_pose
+    from landscape.server.motion.timing import tool_constraints
+    from landscape.sim.kinematics import Kinematics
+    kin = Kinematics(ARM)
+    q0 = np.array([0.0, 0.3, 1.4, 0.0, 1.4, 0.0])
+    tip = tool_pose(kin)
+    p0 = tip(q0)
+    via, goal = p0.copy(), p0.copy()
+    via[:3, 3] += [0.1, 0.1, 0.0]
+    goal[:3, 3] += [0.2, 0.0, 0.0]
+    W = arc(kin, q0, via, goal)
+    limits = Limits.scaled(ARM, 100, 100, linear_acceleration=1.0, angular_acceleration=3.0)
+    s, keep = chord_parameters(W)
+    path = JointPath(s, W[keep])
+    grid, _ = gridpoints(path)
+    caps, rows = tool_constraints(path, grid, limits, tip)
+    assert rows is not None and rows[0].shape[1] > 4      # the curved faces are in
+    ours = topp_ra(path, grid, limits.acceleration, caps, rows)
+    theirs = toppra_reference(path, grid, limits, tip)
+    assert np.abs(ours - theirs).max() < 1e-6 * ours.max()
