@@ -40,7 +40,7 @@ import numpy as np
 
 from .trajectory import JointPath, Limits, PlanningError, Trajectory
 
-__all__ = ["time_path", "chord_parameters", "gridpoints", "speed_caps", "tool_constraints",
+__all__ = ["time_path", "duration_lower_bound", "chord_parameters", "gridpoints", "speed_caps", "tool_constraints",
            "topp_ra",
            "ConstAccelProfile", "toppra_reference", "GRID_CHORD_TOL", "GRID_MAX_STEP",
            "GRID_MIN_POINTS", "LIMIT_SLACK"]
@@ -64,7 +64,8 @@ _FACES = 8                # faces of the polygon standing for a tool acceleratio
 
 
 def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | None = None,
-              tool_path: Callable[[np.ndarray], np.ndarray] | None = None) -> Trajectory:
+              tool_path: Callable[[np.ndarray], np.ndarray] | None = None,
+              max_duration: float = math.inf) -> Trajectory:
     """Time-optimal timing with TOPP-RA of the geometric joint path through the waypoints.
 
     waypoints (M, 6) rad, M >= 1 (a straight line in joint space for M = 2); limits: joint
@@ -77,10 +78,14 @@ def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | N
     cartesian.tool_pose(kin, tcp)); with it limits.linear_velocity / angular_velocity bound the
     tool tip's speed. Pass it for dense Cartesian paths (straight lines, arcs).
 
+    max_duration (s): a bound checked on the timing before anything is sampled, so that
+    the samples (duration / dt of them) stay bounded whatever the limits.
+
     Returns a Trajectory starting and ending at rest exactly at the first and last waypoints,
     with marks (sample, waypoint) for every waypoint. Raises PlanningError("OUT_OF_JNT_RANGE",
-    index=i) if waypoint i, or the spline after it, leaves the joint range, and
-    PlanningError("LIMITS") if no timing meets the limits; ValueError for malformed input.
+    index=i) if waypoint i, or the spline after it, leaves the joint range,
+    PlanningError("LIMITS") if no timing meets the limits, PlanningError("TOO_LONG") past
+    max_duration; ValueError for malformed input.
     """
     W = np.array(waypoints, dtype=float)
     if W.ndim != 2 or W.shape[1] != 6 or len(W) < 1:
@@ -98,9 +103,11 @@ def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | N
 
     positions, velocities, marks = [W[:1]], [np.zeros((1, 6))], [(0, 0)]
     ends = np.flatnonzero(stop)
+    budget = max_duration
     for a, b in zip(ends[:-1], ends[1:]):
         q, v, knot_samples = _time_section(W[a:b + 1], np.arange(a, b + 1), limits, dt,
-                                           tool_path)
+                                           tool_path, budget)
+        budget -= (len(q) - 1) * dt
         offset = sum(len(p) for p in positions) - 1
         positions.append(q[1:])
         velocities.append(v[1:])
@@ -108,7 +115,8 @@ def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | N
     return Trajectory(dt, np.concatenate(positions), np.concatenate(velocities), tuple(marks))
 
 
-def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, tool_path):
+def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, tool_path,
+                  max_duration: float = math.inf):
     """One rest-to-rest section: (positions (n, 6), velocities (n, 6), sample of each waypoint)."""
     s, keep = chord_parameters(W)
     if len(s) < 2:                                          # all one point: no motion
@@ -118,12 +126,20 @@ def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, t
     caps, rows = tool_constraints(path, grid, limits, tool_path)
     xs = topp_ra(path, grid, limits.acceleration, caps, rows)
     profile = ConstAccelProfile(grid, xs)
+    if profile.duration > max_duration:
+        raise PlanningError("TOO_LONG", f"the motion would last {profile.duration:.4g} s, "
+                            f"longer than the {max(max_duration, 0.0):.4g} s allowed",
+                            index=int(index[0]))
     knot_times = profile.times[knot_at]
     # The waypoint a dropped (repeated) point belongs to: the last kept one at or before it.
     of_waypoint = np.cumsum(keep) - 1
 
     stretch = 1.0
     for _ in range(_MAX_RETIMES):
+        if profile.duration * stretch > max_duration + dt:
+            raise PlanningError("TOO_LONG", "the motion, slowed to keep the limits, would last "
+                                f"longer than the {max_duration:.4g} s allowed",
+                                index=int(index[0]))
         n = max(1, math.ceil(profile.duration * stretch / dt - 1e-9))
         stretch = n * dt / profile.duration                 # a whole number of cycles
         s_k, sd_k = profile.sample(np.arange(n + 1) * (dt / stretch))
@@ -139,6 +155,35 @@ def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, t
         stretch *= excess * (1.0 + 1e-4)   # the margin saves a round most times
     raise PlanningError("LIMITS", "the sampled motion stays above the limits after re-timing",
                         index=int(index[0]))
+
+
+def duration_lower_bound(waypoints, limits: Limits, stops: Sequence[bool] | None = None,
+                         tool_path=None) -> tuple[float, str]:
+    """A cheap lower bound (s) on time_path's duration for the same arguments, and what sets
+    it ("speed" or "acceleration"): no joint outruns its velocity limit between waypoints, each
+    rest-to-rest section takes every joint at least 2 sqrt(|displacement| / acceleration), and
+    the tool tip covers the waypoints' chords no faster than its speed limits. For refusing a
+    motion that would last too long before planning it (O(M) work, no allocation past M x 6).
+    """
+    W = np.asarray(waypoints, dtype=float)
+    if len(W) < 2:
+        return 0.0, "speed"
+    with np.errstate(over="ignore"):
+        speed = float(np.sum(np.max(np.abs(np.diff(W, axis=0)) / limits.velocity, axis=1)))
+        if tool_path is not None and (limits.linear_velocity or limits.angular_velocity):
+            poses = tool_path(W)
+            if limits.linear_velocity:
+                tip = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
+                speed = max(speed, float(tip.sum()) / limits.linear_velocity)
+            if limits.angular_velocity:
+                turn = _rotation_angle(poses[:-1, :3, :3], poses[1:, :3, :3])
+                speed = max(speed, float(turn.sum()) / limits.angular_velocity)
+        stop = np.zeros(len(W), dtype=bool) if stops is None else np.array(stops, dtype=bool)
+        stop[0] = stop[-1] = True
+        ends = np.flatnonzero(stop)
+        shift = np.abs(W[ends[1:]] - W[ends[:-1]])              # per rest-to-rest section
+        accel = float(np.sum(np.max(2.0 * np.sqrt(shift / limits.acceleration), axis=1)))
+    return (speed, "speed") if speed >= accel else (accel, "acceleration")
 
 
 def path_piece(path: JointPath, s: np.ndarray) -> np.ndarray:
