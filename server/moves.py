@@ -102,13 +102,14 @@ class Planner:
         return self.timed(path, limits, tool_pose(self.kinematics, tool_offset))
 
     def timed(self, waypoints: np.ndarray, limits: Limits, tool_path=None, *, stops=None,
-              max_duration: float = MAX_MOTION_SECONDS) -> Trajectory:
+              max_duration: float = MAX_MOTION_SECONDS,
+              pass_speeds: dict[int, float] | None = None) -> Trajectory:
         """time_path, refused before any planning if it cannot end within max_duration (s),
         and bounded by it while it plans."""
         check_duration(waypoints, limits, max_duration, stops, tool_path)
         try:
             return time_path(waypoints, limits, self.dt, stops=stops, tool_path=tool_path,
-                             max_duration=max_duration)
+                             max_duration=max_duration, pass_speeds=pass_speeds)
         except PlanningError as error:
             raise _unreachable(error) from None
 

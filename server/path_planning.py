@@ -11,6 +11,14 @@ approach; from the last point for later cycles), then the points. The arm stops 
 point and at every point whose transition speed is 0 or that has a dwell; it passes through the
 others on a blended path. A point's speed and acceleration (percent; 0 keeps the set one) apply
 to the stretch that ends at the next stop (the lowest there wins). Dwells are held setpoints.
+
+A blended point is passed at its transition speed, a percent of the arm's maximum (seed 3.5.1;
+types.proto TagStruct), held for a cycle either side of it: on a joint path, the fastest
+joint's speed against its own maximum velocity (joints reaching their limits at different
+speeds, the one nearest its limit sets the pace); on a straight path, the tool tip's linear
+speed against the arm's maximum linear speed. Where the path or the set limits do not allow
+that speed (too short a stretch to reach it, or above the set speed), the arm passes as fast
+as they allow.
 """
 from __future__ import annotations
 
@@ -225,15 +233,18 @@ def _time_stretch(planner: Planner, path: StoredPath, stretch, limits, first_lab
         if path.straight:
             dense, rows = straight_path(kin, joints[0], [kin.forward(q) @ tcp for q in joints[1:]],
                                         tcp=tcp)
-            label_of = {int(row): first_label + 1 + i for i, row in enumerate(rows)}
+            row_of = [0, *(int(row) for row in rows)]   # the dense row of each point
         else:
-            dense = joints
-            label_of = {i: first_label + i for i in range(1, len(joints))}
+            dense, row_of = joints, list(range(len(joints)))
+        label_of = {row: first_label + i for i, row in enumerate(row_of) if i > 0}
+        # The points between the stretch's ends are passed at their transition speed.
+        passing = {row_of[i]: p.transition_speed / 100.0 for i, p in enumerate(stretch)
+                   if 0 < i < len(stretch) - 1}
     except PlanningError as error:
         raise Unreachable(f"path {path.name!r}: {error}", reason_code=str(error.reason)) from None
     try:
         timed = planner.timed(dense, limits, tool_pose(kin, tcp) if path.straight else None,
-                              max_duration=max_duration)
+                              max_duration=max_duration, pass_speeds=passing)
     except CommandError as error:
         error.message = f"path {path.name!r}: {error.message}"
         error.args = (error.message,)

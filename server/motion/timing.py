@@ -65,7 +65,8 @@ _FACES = 8                # faces of the polygon standing for a tool acceleratio
 
 def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | None = None,
               tool_path: Callable[[np.ndarray], np.ndarray] | None = None,
-              max_duration: float = math.inf) -> Trajectory:
+              max_duration: float = math.inf,
+              pass_speeds: dict[int, float] | None = None) -> Trajectory:
     """Time-optimal timing with TOPP-RA of the geometric joint path through the waypoints.
 
     waypoints (M, 6) rad, M >= 1 (a straight line in joint space for M = 2); limits: joint
@@ -80,6 +81,12 @@ def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | N
 
     max_duration (s): a bound checked on the timing before anything is sampled, so that
     the samples (duration / dt of them) stay bounded whatever the limits.
+    pass_speeds: {waypoint index: fraction in (0, 1]} for waypoints passed without stopping:
+    the speed there is at most that fraction of the arm's maximum, and exactly it when the
+    path and the limits allow reaching it (TOPP-RA takes the greatest speed the cap admits).
+    The speed is the tool tip's linear speed against limits.max_linear_velocity with a tool
+    path (when the tip moves there), else the fastest joint against its maximum velocity
+    (limits.max_velocity; without them, against the limits themselves).
 
     Returns a Trajectory starting and ending at rest exactly at the first and last waypoints,
     with marks (sample, waypoint) for every waypoint. Raises PlanningError("OUT_OF_JNT_RANGE",
@@ -106,7 +113,7 @@ def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | N
     budget = max_duration
     for a, b in zip(ends[:-1], ends[1:]):
         q, v, knot_samples = _time_section(W[a:b + 1], np.arange(a, b + 1), limits, dt,
-                                           tool_path, budget)
+                                           tool_path, budget, pass_speeds or {})
         budget -= (len(q) - 1) * dt
         offset = sum(len(p) for p in positions) - 1
         positions.append(q[1:])
@@ -116,14 +123,26 @@ def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | N
 
 
 def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, tool_path,
-                  max_duration: float = math.inf):
+                  max_duration: float = math.inf, pass_speeds: dict[int, float] | None = None):
     """One rest-to-rest section: (positions (n, 6), velocities (n, 6), sample of each waypoint)."""
     s, keep = chord_parameters(W)
     if len(s) < 2:                                          # all one point: no motion
         return W[:1].copy(), np.zeros((1, 6)), [0] * len(W)
     path = JointPath(s, W[keep])
     grid, knot_at = gridpoints(path)
+    # The waypoint a dropped (repeated) point belongs to: the last kept one at or before it.
+    of_waypoint = np.cumsum(keep) - 1
+    passing = [(path.s[of_waypoint[i]], f) for i, f in
+               ((int(w) - int(index[0]), f) for w, f in (pass_speeds or {}).items())
+               if 0 < i < len(W) - 1]
+    plateau = None
+    if passing:
+        grid, plateau = _pass_plateaus(path, grid, passing, limits, tool_path, dt)
+        knot_at = np.searchsorted(grid, path.s)
     caps, rows = tool_constraints(path, grid, limits, tool_path)
+    if plateau is not None:
+        at, xcap = plateau
+        caps[at] = np.minimum(caps[at], xcap)
     xs = topp_ra(path, grid, limits.acceleration, caps, rows)
     profile = ConstAccelProfile(grid, xs)
     if profile.duration > max_duration:
@@ -131,8 +150,6 @@ def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, t
                             f"longer than the {max(max_duration, 0.0):.4g} s allowed",
                             index=int(index[0]))
     knot_times = profile.times[knot_at]
-    # The waypoint a dropped (repeated) point belongs to: the last kept one at or before it.
-    of_waypoint = np.cumsum(keep) - 1
 
     stretch = 1.0
     for _ in range(_MAX_RETIMES):
@@ -184,6 +201,43 @@ def duration_lower_bound(waypoints, limits: Limits, stops: Sequence[bool] | None
         shift = np.abs(W[ends[1:]] - W[ends[:-1]])              # per rest-to-rest section
         accel = float(np.sum(np.max(2.0 * np.sqrt(shift / limits.acceleration), axis=1)))
     return (speed, "speed") if speed >= accel else (accel, "acceleration")
+
+
+def _pass_plateaus(path: JointPath, grid: np.ndarray, passing: list[tuple[float, float]],
+                   limits: Limits, tool_path, dt: float) -> tuple[np.ndarray, tuple]:
+    """For waypoints passed at a fraction of the maximum speed ((s, fraction) pairs, see
+    time_path's pass_speeds): the grid with gridpoints added 1.5 cycles of travel before and
+    after each, and (grid indices, caps on x) holding the speed at the fraction over that
+    stretch. The plateau makes the samples on either side of the waypoint show the speed
+    asked for, not a V of the deceleration and acceleration around it."""
+    s = np.array([p for p, _ in passing])
+    fraction = np.array([f for _, f in passing])
+    reach = 1.5 * dt * fraction / _pass_rate(path, s, limits, tool_path)   # rad of s
+    lo, hi = path.path_interval
+    ends = np.clip(np.concatenate([s - reach, s + reach]), lo, hi)
+    grid = np.union1d(grid, ends)
+    inside = (grid[:, None] >= (s - reach)[None]) & (grid[:, None] <= (s + reach)[None])
+    at = np.flatnonzero(inside.any(axis=1))
+    which = np.argmax(inside[at], axis=1)
+    with np.errstate(divide="ignore"):
+        xcap = (fraction[which] / _pass_rate(path, grid[at], limits, tool_path)) ** 2
+    return grid, (at, np.minimum(xcap, _HUGE))
+
+
+def _pass_rate(path: JointPath, s: np.ndarray, limits: Limits, tool_path) -> np.ndarray:
+    """(K,) the speed at path positions s (K,), as a fraction of the arm's maximum, per unit
+    of ds/dt: the tip's linear speed with a tool path (where the tip moves), else the
+    fastest joint against its maximum velocity."""
+    joint_max = limits.velocity if limits.max_velocity is None else limits.max_velocity
+    rate = np.max(np.abs(path(s, 1)) / joint_max, axis=1)
+    if tool_path is not None:
+        lo, hi = path.path_interval
+        sa, sb = np.maximum(s - _FD_STEP, lo), np.minimum(s + _FD_STEP, hi)
+        tip = np.linalg.norm(tool_path(path(sb))[:, :3, 3] - tool_path(path(sa))[:, :3, 3],
+                             axis=1) / (sb - sa)
+        linear_max = limits.max_linear_velocity or limits.linear_velocity or math.inf
+        rate = np.where(tip > 1e-9, tip / linear_max, rate)
+    return rate
 
 
 def path_piece(path: JointPath, s: np.ndarray) -> np.ndarray:

@@ -75,6 +75,10 @@ class Limits:
     angular_acceleration: float | None = None    # rad/s^2 of the tool
     position_min: np.ndarray | None = field(default=None)
     position_max: np.ndarray | None = field(default=None)
+    # The arm's own maxima (rad/s (6,), m/s), unscaled: what a waypoint's pass speed (see
+    # timing.time_path) is a fraction of. None: the limits above.
+    max_velocity: np.ndarray | None = field(default=None)
+    max_linear_velocity: float | None = None
 
     def __post_init__(self):
         for name in ("velocity", "acceleration"):
@@ -87,7 +91,7 @@ class Limits:
             v = getattr(self, name)
             if v is not None and not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive and finite, or None; got {v!r}")
-        for name in ("position_min", "position_max"):
+        for name in ("position_min", "position_max", "max_velocity"):
             v = getattr(self, name)
             if v is not None:
                 v = np.asarray(v, dtype=float)
@@ -123,7 +127,8 @@ class Limits:
                    cap(arm.max_angular_velocity, k_v, angular_velocity),
                    cap(arm.max_linear_acceleration, k_a, linear_acceleration),
                    cap(arm.max_angular_acceleration, k_a, angular_acceleration),
-                   np.asarray(arm.joint_min, dtype=float), np.asarray(arm.joint_max, dtype=float))
+                   np.asarray(arm.joint_min, dtype=float), np.asarray(arm.joint_max, dtype=float),
+                   np.asarray(arm.max_velocity, dtype=float), float(arm.max_linear_velocity))
 
 
 class Reason(enum.StrEnum):

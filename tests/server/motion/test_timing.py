@@ -272,3 +272,20 @@ def test_the_stage_solver_with_tool_acceleration_rows_returns_what_toppra_return
     ours = topp_ra(path, grid, limits.acceleration, caps, rows)
     theirs = toppra_reference(path, grid, limits, tip)
     assert np.abs(ours - theirs).max() < 1e-6 * ours.max()
+
+
+@pytest.mark.parametrize("fraction", [0.02, 0.1, 0.25, 0.4])
+def test_a_waypoint_is_passed_at_its_pass_speed(fraction):
+    """The fastest joint, against its maximum velocity, at the waypoint's mark."""
+    W = np.array([Q_HOME, Q_HOME + [1.0, 0.2, -0.3, 0.5, 0.2, 0.4],
+                  Q_HOME + [2.0, 0.5, 0.0, 0.0, 0.5, 0.9]])
+    limits = Limits.scaled(ARM, 80, 100)
+    tr = time_path(W, limits, DT, pass_speeds={1: fraction})
+    assert_within_limits(tr, limits)
+    sample = dict((i, k) for k, i in tr.marks)[1]
+    # At the waypoint's sample and the cycles either side: the speed holds for a moment.
+    for k in (sample - 1, sample, sample + 1):
+        speed = np.max(np.abs(tr.velocities[k]) / np.array(ARM.max_velocity))
+        assert speed == pytest.approx(fraction, rel=0.01), k - sample
+    free = time_path(W, limits, DT)
+    assert tr.duration >= free.duration
