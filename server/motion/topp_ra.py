@@ -106,15 +106,22 @@ def _limit_curve(lower_beta: np.ndarray, lower_w: np.ndarray, upper_beta: np.nda
     x = np.minimum(cap, np.where(spread > 0, (upper_w[rows, bottom] - lower_w[rows, top])
                                  / spread, np.inf))
     active = np.flatnonzero(np.isfinite(x))
+    lines = (lower_beta, lower_w, upper_beta, upper_w)
     for _ in range(_NEWTON_STEPS):
         if not active.size:
             return x
-        bl, wl, bu, wu = (a[active] for a in (lower_beta, lower_w, upper_beta, upper_w))
-        at, here = x[active, None], np.arange(len(active))
+        # While most stages still move, work on the whole arrays rather than gather them.
+        whole = 2 * len(active) > len(x)
+        bl, wl, bu, wu = lines if whole else (a[active] for a in lines)
+        at = np.where(np.isfinite(x), x, 0.0)[:, None] if whole else x[active, None]
+        here = np.arange(len(at))
         r = np.argmax(bl * at + wl, axis=1)          # the highest lower line at x
         q = np.argmin(bu * at + wu, axis=1)          # the lowest upper line at x
         gap = bl[here, r] - bu[here, q]
         cross = (wu[here, q] - wl[here, r]) / gap
+        if whole:
+            cross = cross[active]
+            gap = gap[active]
         moving = (gap > 0) & (cross < x[active])
         x[active[moving]] = cross[moving]
         active = active[moving]
