@@ -17,17 +17,10 @@ from landscape.sim.arm import arm_model
 from landscape.sim.kinematics import Kinematics
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
-from support import Arm, error_info
+from support import error_info
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 ABSOLUTE = types_pb2.OFFSET_TYPE_ABSOLUTE_DATA
-
-
-@pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
-    yield a
-    a.close()
 
 
 def assert_refused(arm, call, field: str, bound: str) -> None:

@@ -10,18 +10,10 @@ import pytest
 
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
-from support import Arm
 
 BASE = types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
 STRAIGHT = types_pb2.MOTION_TYPE_STRAIGHT_MOTION
 DT = 0.004
-
-
-@pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
-    yield a
-    a.close()
 
 
 def set_speed(arm, attribute, value):
