@@ -53,7 +53,7 @@ class _Motion:
         self.settle_cycles = 0
 
     def _load(self, index: int) -> None:
-        if index == 0:
+        if index == 0 or self.before is None:
             self.join_step = np.zeros(6)   # rad: the last step before this segment's start
         else:   # the segment before ended where this one starts: remember its last step
             self.join_step = self.positions[-1] - self._position_at(self.before)
