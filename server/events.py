@@ -20,6 +20,8 @@ that resumes "after the last sequence I saw" resumes correctly after a loss too.
 """
 from __future__ import annotations
 
+import asyncio
+import dataclasses
 import enum
 import itertools
 import threading
@@ -30,6 +32,8 @@ from dataclasses import dataclass
 
 DEFAULT_HISTORY = 10_000   # events kept for resuming subscribers
 DEFAULT_BUFFER = 1_024     # events a subscriber may fall behind before it loses some
+MAX_TEXT = 1_024           # characters of any one string of an event; longer ones are cut
+                           # (with "…"), so no event exceeds a few kilobytes
 
 _INT32 = range(-2**31, 2**31)
 _UINT32 = range(2**32)
@@ -183,10 +187,11 @@ class SequenceOutOfRange(ValueError):
 # -- Subscriptions ---------------------------------------------------------------------------
 
 class Subscription:
-    """One reader of the bus: `get()` or iterate; `close()` (or leave the `with`) to stop.
+    """One reader of the bus: `get()` or iterate, or `await next_async()` on an event loop;
+    `close()` (or leave the `with`) to stop.
 
     Made by `EventBus.subscribe`. Thread-safe; closing it from another thread wakes a
-    waiting `get`.
+    waiting `get` or `next_async`.
     """
 
     def __init__(self, bus: EventBus, capacity: int, replay: Sequence[Event]):
@@ -196,6 +201,8 @@ class Subscription:
         self._replay = deque(replay)   # resumed events; not bounded, the history bounds it
         self._live: deque[Event] = deque()
         self._closed = False
+        self._draining = False     # the bus closed: what is pending still goes out, then end
+        self._waiter: asyncio.Future | None = None   # an async reader waiting, on its loop
 
     def get(self, timeout: float | None = None) -> Event | None:
         """The next event, waiting up to `timeout` seconds (None: forever).
@@ -203,19 +210,34 @@ class Subscription:
         Returns None on timeout or once the subscription is closed.
         """
         with self._cond:
-            if not self._cond.wait_for(self._ready, timeout):
+            if not self._cond.wait_for(self._ready, timeout) or self._closed:
                 return None
-            if self._closed:
-                return None
-            return (self._replay or self._live).popleft()
+            return self._next()
 
     def __iter__(self) -> Iterator[Event]:
         while (event := self.get()) is not None:
             yield event
 
+    async def next_async(self) -> Event | None:
+        """The next event, awaited on the running loop; None once closed. Publishers on any
+        thread wake it through the loop (no thread waits for it)."""
+        loop = asyncio.get_running_loop()
+        while True:
+            with self._cond:
+                if self._closed:
+                    return None
+                if self._replay or self._live or self._draining:
+                    return self._next()
+                waiter = self._waiter = loop.create_future()
+            try:
+                await waiter
+            finally:
+                self._waiter = None
+
     @property
     def closed(self) -> bool:
-        return self._closed
+        """Closed, or the bus closed and everything pending has been taken."""
+        return self._closed or (self._draining and not (self._replay or self._live))
 
     def close(self) -> None:
         """Stop receiving; pending events are discarded. Idempotent."""
@@ -242,16 +264,56 @@ class Subscription:
                 live.append(_lost(first, event.sequence - 1, clock()))
             live.append(event)
             self._cond.notify()
+            self._wake()
 
-    def _end(self) -> None:
+    def _end(self, drain: bool = False) -> None:
+        """No more events; with `drain`, the pending ones are still delivered first."""
         with self._cond:
-            self._closed = True
-            self._replay.clear()
-            self._live.clear()
+            if drain:
+                self._draining = True
+            else:
+                self._closed = True
+                self._replay.clear()
+                self._live.clear()
             self._cond.notify_all()
+            self._wake()
+
+    def _next(self) -> Event | None:
+        # With _cond held: the next pending event, or None once a drained bus has none left.
+        if self._replay or self._live:
+            return (self._replay or self._live).popleft()
+        return None
+
+    def _wake(self) -> None:
+        # With _cond held: hand the async reader's wake-up to its loop.
+        waiter, self._waiter = self._waiter, None
+        if waiter is not None:
+            waiter.get_loop().call_soon_threadsafe(_resolve, waiter)
 
     def _ready(self) -> bool:
-        return self._closed or bool(self._replay) or bool(self._live)
+        return self._closed or self._draining or bool(self._replay) or bool(self._live)
+
+
+def _clip(text: str) -> str:
+    return text if len(text) <= MAX_TEXT else text[:MAX_TEXT - 1] + "…"
+
+
+def _clipped(detail):
+    """`detail` with every string field (and every string of a tuple field) clipped."""
+    changes = {}
+    for field in dataclasses.fields(detail):
+        value = getattr(detail, field.name)
+        if isinstance(value, str) and len(value) > MAX_TEXT:
+            changes[field.name] = _clip(value)
+        elif isinstance(value, tuple) and any(len(v) > MAX_TEXT for v in value
+                                              if isinstance(v, str)):
+            changes[field.name] = tuple(_clip(v) if isinstance(v, str) else v for v in value)
+    return dataclasses.replace(detail, **changes) if changes else detail
+
+
+def _resolve(waiter: asyncio.Future) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 def _lost(first: int, last: int, now: float) -> Event:
@@ -338,7 +400,8 @@ class EventBus:
     def publish(self, event_id: str, data: Sequence[str], detail: Detail) -> Event:
         """Number, stamp, keep and fan out one event. Prefer the typed helpers above."""
         _check(isinstance(detail, _PUBLISHED), f"cannot publish a {type(detail).__name__}")
-        data = tuple(data)
+        data = tuple(_clip(d) for d in data[:16])
+        detail = _clipped(detail)
         with self._lock:
             # Numbered and stamped under the lock, so sequence order is time order.
             self._last_sequence += 1
@@ -366,7 +429,8 @@ class EventBus:
             return subscription
 
     def close(self) -> None:
-        """End every subscription (their get returns None); later ones start closed.
+        """End every subscription once it has delivered what is pending (then their get
+        returns None); later ones start closed.
 
         Publishing still works, so a device core shutting down need not check.
         """
@@ -374,7 +438,7 @@ class EventBus:
             self._closed = True
             subscribers, self._subscribers = self._subscribers, set()
             for subscription in subscribers:
-                subscription._end()
+                subscription._end(drain=True)
 
     def _replay_after(self, after: int) -> list[Event]:
         # Called with the lock held; kept sequences are contiguous, oldest first.

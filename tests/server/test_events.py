@@ -212,12 +212,13 @@ def test_closing_the_bus_ends_every_subscription():
     bus = EventBus()
     sub = bus.subscribe()
     bus.state_change("A", "B")
-    ended = threading.Event()
-    waiter = threading.Thread(target=lambda: (list(sub), ended.set()))
+    ended, got = threading.Event(), []
+    waiter = threading.Thread(target=lambda: (got.extend(sub), ended.set()))
     waiter.start()
     bus.close()
     waiter.join(DEADLINE_S)
     assert ended.is_set() and sub.closed and sub.get(timeout=0) is None
+    assert [e.event_id for e in got] == ["state_changed"]   # what was pending still went out
     assert bus.subscriber_count == 0
     assert bus.subscribe().get(timeout=0) is None       # later ones start closed
     assert bus.state_change("A", "B").sequence == 2     # publishing still works
