@@ -128,37 +128,42 @@ class _Motion:
         frac = s - i
         split = 1.0 - frac
         # The changes over the two sample intervals ahead (none past the end: the play stops).
-        P, V = self.positions, self.velocities
-        j, k = min(i + 1, n), min(i + 2, n)
-        dp = np.array([P[j] - P[i], P[k] - P[j]])
-        dv = np.array([V[j] - V[i], V[k] - V[j]])
-        here = V[i] + frac * dv[0]
+        rows = [i, min(i + 1, n), min(i + 2, n)]
+        P, V = self.positions[rows], self.velocities[rows]            # (3, 6)
+        dp, dv = P[1:] - P[:-1], V[1:] - V[:-1]                       # (2, 6)
+        here = V[0] + frac * dv[0]
         if self.before is None:
             step = self.join_step
         else:
-            step = P[i] + frac * dp[0] - self._position_at(self.before)
+            step = P[0] + frac * dp[0] - self._position_at(self.before)
         # Per piece (axis 0: before and after the next sample): step(x) = p0 + dp x,
-        # velocity(x) = x (w0 + dv x); bounds on both sides (axis 0 of `sides`).
-        p0 = np.array([np.zeros(6), (dp[0] - dp[1]) * split])
-        w0 = np.array([here, V[j] - dv[1] * split])
-        sides = np.array([[[-1.0]], [[1.0]]])
+        # velocity(x) = x (w0 + dv x); each bound on both sides (axis 0 of _SIDES).
+        p0 = dp * _PIECE_START
+        p0[1] = (dp[0] - dp[1]) * split
+        w0 = np.array([here, V[1] - dv[1] * split])
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            linear = (step + sides * (self.limit * self.dt * self.dt) - p0) / dp
-            c = here * r + sides * (self.limit * self.dt)          # dv x^2 + w0 x - c = 0
+            linear = (step + _SIDES * (self.limit * (self.dt * self.dt)) - p0) / dp
+            c = here * r + _SIDES * (self.limit * self.dt)           # dv x^2 + w0 x - c = 0
             q = -0.5 * (w0 + np.copysign(np.sqrt(w0 * w0 + 4.0 * dv * c), w0))
-            quadratic = np.stack([q / dv, -c / q])   # -c / q is also the root when dv = 0
-            roots = np.concatenate([linear[None], quadratic])     # (3, 2 sides, 2 pieces, 6)
+            first, second = q / dv, -c / q    # -c / q is also the root when dv = 0
             # How each bound's margin changes with x at its root: a bound is left, going
             # towards the target, where the margin shrinks that way.
-            slope = sides * np.concatenate([np.broadcast_to(dp, linear.shape)[None],
-                                            w0 + 2.0 * dv * quadratic])
+            roots = np.stack([linear, first, second])             # (3, 2 sides, 2 pieces, 6)
+            slope = _SIDES * np.stack([np.broadcast_to(dp, linear.shape),
+                                       w0 + 2.0 * dv * first, w0 + 2.0 * dv * second])
         # The first root towards the target, within its own piece, where a bound is left.
-        inside = (roots >= [[0.0], [split]]) & (roots <= [[split], [1.0]])
         if target < r:
-            valid = inside & (roots >= target) & (roots <= r) & (slope < 0.0)
+            valid = (slope < 0.0) & (roots >= max(target, 0.0)) & (roots <= min(r, 1.0))
+        else:
+            valid = (slope > 0.0) & (roots >= r) & (roots <= target)
+        valid &= (roots >= [[0.0], [split]]) & (roots <= [[split], [1.0]])
+        if target < r:
             return float(np.max(roots, where=valid, initial=target))
-        valid = inside & (roots >= r) & (roots <= target) & (slope > 0.0)
         return float(np.min(roots, where=valid, initial=target))
+
+
+_SIDES = np.array([[[-1.0]], [[1.0]]])          # a bound's two sides, -limit and +limit
+_PIECE_START = np.zeros((2, 1))                 # p0 of the first piece: the step starts at 0
 
 
 class Executor:
