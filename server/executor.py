@@ -9,7 +9,9 @@ sample per cycle. Stopping and resuming scale time, not space: a play rate r in 
 the sample index by r per cycle, so the arm slows down and speeds up along the planned path and
 never leaves it (seed 3.6). Played at rate r, joint j moves at v_j r and accelerates at
 a_j r^2 + v_j dr/dt (v, a: the trajectory's at rate 1); each cycle the rate changes as fast as
-keeping every joint's acceleration within its limit allows. Keeping the rate always qualifies
+keeping every joint's acceleration within its limit allows, measured as the drives see it: the
+second difference of the commanded positions (played piecewise linearly between samples) and
+the change of the commanded velocity (_Motion._next_rate). Keeping the rate always qualifies
 (the trajectory is within the limits at r = 1, so at any r <= 1), so a stop or a restart never
 asks more of a joint than its limit.
 
