@@ -158,9 +158,8 @@ def main() -> None:
     echo.terminate()
     with spawned_server() as target:
         gateway = subprocess.Popen(
-            [sys.executable, "-m", "landscape.gateway", "--device", target, "--port", "0",
-             "--temporary-poll-fallback"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-            text=True)
+            [sys.executable, "-m", "landscape.gateway", "--device", target, "--port", "0"],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         try:
             for line in gateway.stdout:
                 if "CRCL gateway listening on" in line:

@@ -35,9 +35,6 @@ def arguments(argv=None) -> argparse.Namespace:
                         help="the gripper's opening in m, for GripperStatus")
     parser.add_argument("--state-rate", type=float, default=100.0,
                         help="samples per second asked of the device's state stream")
-    parser.add_argument("--temporary-poll-fallback", action="store_true",
-                        help="TEMPORARY, until StateService.StreamState is built: keep the "
-                             "live state from GetRobotPosition polled in the background")
     return parser.parse_args(argv)
 
 
@@ -49,7 +46,7 @@ def schema_set(option: str | None) -> SchemaSet | None:
 
 
 async def serve(args: argparse.Namespace, ready=None) -> None:
-    link = DeviceLink(args.device, args.temporary_poll_fallback, args.state_rate)
+    link = DeviceLink(args.device, args.state_rate)
     await link.start()
     options = GatewayOptions(schema_set(args.schemas), args.max_document, args.gripper_stroke)
     gateway = await Gateway(link, options).serve(args.host, args.port)

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import asyncio
-import logging
 
 import numpy as np
 
@@ -10,9 +9,7 @@ from landscape.gateway import model as m
 from landscape.gateway.errors import CrclError
 from landscape.gateway.motions import push_rates
 from landscape.gateway.settings import JOINTS, rate_si, tolerance_si
-from landscape.v1 import settings_pb2, types_pb2
-
-log = logging.getLogger(__name__)
+from landscape.v1 import event_service_pb2, settings_pb2, types_pb2
 
 _RATE_FIELDS = {"TransSpeed": ("trans_speed", "length", "max_world_linear_velocity", "limits"),
                 "RotSpeed": ("rot_speed", "angle", "max_world_angular_velocity", "limits"),
@@ -99,10 +96,11 @@ async def dwell(session, cmd: m.Dwell) -> str:
 
 
 async def message(session, cmd: m.Message) -> str:
-    # The gateway's console is the operator console: landscape.v1 has no call that posts an
-    # operator message on the device's event stream.
-    log.warning("CRCL message from %s: %s", session.name, cmd.text)
-    return "shown on the gateway's console"
+    # On the device's event stream, where every supervisor (the dashboard) shows it.
+    control = session.control
+    await control.call("PostMessage", event_service_pb2.PostMessageRequest(text=cmd.text),
+                       stub=control.link.event_service)
+    return "posted on the device's event stream"
 
 
 async def loop_block(session, cmd: m.Command) -> str:

@@ -19,7 +19,7 @@ from landscape.client import AsyncSession
 from landscape.gateway.events import EventRouter
 from landscape.gateway.state_feed import StateFeed
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
-                          settings_pb2, types_pb2)
+                          event_service_pb2_grpc, settings_pb2, types_pb2)
 
 CALL_TIMEOUT = 30.0     # s; blocking device calls (activate, stop) finish well within
 
@@ -51,12 +51,13 @@ def refused(rpc: str, error: grpc.aio.AioRpcError) -> DeviceRefused:
 class DeviceLink:
     """The gateway's channel to one device server, shared by all its CRCL connections."""
 
-    def __init__(self, target: str, poll_fallback: bool = False, state_rate_hz: float = 100.0):
+    def __init__(self, target: str, state_rate_hz: float = 100.0):
         self.target = target
         self.channel = grpc.aio.insecure_channel(target)
         self.device = device_service_pb2_grpc.DeviceServiceStub(self.channel)
         self.digital_io = digital_io_service_pb2_grpc.DigitalIOServiceStub(self.channel)
-        self.feed = StateFeed(self.channel, self.device, poll_fallback, state_rate_hz)
+        self.event_service = event_service_pb2_grpc.EventServiceStub(self.channel)
+        self.feed = StateFeed(self.channel, state_rate_hz)
         self.events = EventRouter(self.channel)
 
     async def start(self) -> None:

@@ -1,11 +1,9 @@
 """The device's live state, kept current for every CRCL connection of the gateway.
 
 GetStatus is answered from the latest sample of StateService.StreamState (one stream per
-gateway, in the world frame, m and rad), never by a round trip per poll. While the device
-answers StreamState with UNIMPLEMENTED (it is being built), the temporary switch
-`poll_fallback` (`--temporary-poll-fallback`) keeps the same latest sample current from
-GetRobotPosition and GetDeviceState in the background instead; without it, status carries no
-joints or pose and says why. Remove the switch once StreamState lands everywhere.
+gateway, in the world frame, m and rad), never by a round trip per poll. While the stream is
+down, status carries no joints or pose and says why; the stream is reopened every
+RETRY_PERIOD.
 """
 from __future__ import annotations
 
@@ -17,13 +15,11 @@ from dataclasses import dataclass, field
 import grpc
 import numpy as np
 
-from landscape.v1 import (control_pb2, settings_pb2, state_service_pb2, state_service_pb2_grpc,
-                          types_pb2)
+from landscape.v1 import state_service_pb2, state_service_pb2_grpc, types_pb2
 
 log = logging.getLogger(__name__)
 
 RETRY_PERIOD = 2.0          # s between attempts to (re)open the stream
-POLL_PERIOD = 0.02          # s, the temporary fallback's poll period
 
 _LINEAR_M = {types_pb2.LINEAR_UNIT_INCHES: 0.0254, types_pb2.LINEAR_UNIT_FEET: 0.3048,
              types_pb2.LINEAR_UNIT_METERS: 1.0, types_pb2.LINEAR_UNIT_CENTIMETERS: 0.01,
@@ -74,10 +70,8 @@ def _from_sample(sample: state_service_pb2.StateSample) -> LiveState:
 class StateFeed:
     """The newest LiveState (None until the first arrives), and a way to wait for a newer one."""
 
-    def __init__(self, channel, device_stub, poll_fallback: bool, rate_hz: float):
+    def __init__(self, channel, rate_hz: float):
         self.stub = state_service_pb2_grpc.StateServiceStub(channel)
-        self.device = device_stub
-        self.poll_fallback = poll_fallback
         self.rate_hz = rate_hz
         self.latest: LiveState | None = None
         self.unavailable = "no state from the device yet"
@@ -123,14 +117,7 @@ class StateFeed:
             except grpc.aio.AioRpcError as error:
                 if error.code() is grpc.StatusCode.CANCELLED:
                     continue   # restarted for a new sensor set
-                if error.code() is grpc.StatusCode.UNIMPLEMENTED:
-                    if self.poll_fallback:
-                        await self._poll()
-                        continue
-                    self.unavailable = ("the device does not stream its state yet "
-                                        "(StateService.StreamState is UNIMPLEMENTED)")
-                else:
-                    self.unavailable = f"state stream: {error.code().name}: {error.details()}"
+                self.unavailable = f"state stream: {error.code().name}: {error.details()}"
                 log.warning("%s", self.unavailable)
             await asyncio.sleep(RETRY_PERIOD)
 
@@ -147,19 +134,3 @@ class StateFeed:
                     await self._publish(_from_sample(message.sample))
         finally:
             self._call = None
-
-    async def _poll(self) -> None:
-        """TEMPORARY (--temporary-poll-fallback): the same samples from two read-only calls in
-        the background, until StreamState is built."""
-        sequence = 0
-        while True:
-            position = await self.device.GetRobotPosition(settings_pb2.GetRobotPositionRequest(),
-                                                          timeout=5.0)
-            state = await self.device.GetDeviceState(control_pb2.GetDeviceStateRequest(),
-                                                     timeout=5.0)
-            joints, pose = _si(position.units, position.joint_position, position.world_position)
-            sequence += 1
-            await self._publish(LiveState(
-                sequence=sequence, joint_positions=joints, tool_pose=pose, device_state=state.state, command_id=state.command_id,
-                received=time.monotonic()))
-            await asyncio.sleep(POLL_PERIOD)

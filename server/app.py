@@ -135,7 +135,8 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs,
                     reset_settings=config.reset_settings,
                     collisions=CollisionScene(cell, config.collision_margin))
-    hub, dispatch, limits = StateHub(device), Dispatch(), StreamLimits(config.stream_caps)
+    hub = StateHub(device, max_lag=250 if config.clock == "realtime" else 8)
+    dispatch, limits = Dispatch(), StreamLimits(config.stream_caps)
     try:
         if config.start_device:
             device.start()

@@ -244,6 +244,10 @@ def _rsvp_answer(d: events.RsvpAnswer):
                                         timed_out=d.timed_out)
 
 
+def _operator_message(d: events.OperatorMessage):
+    return "operator_message", event_service_pb2.OperatorMessage(text=d.text, source=d.source)
+
+
 def _events_lost(d: events.EventsLost):
     return "events_lost", event_service_pb2.EventsLost(first_sequence=d.first_sequence,
                                         last_sequence=d.last_sequence)
@@ -253,5 +257,6 @@ def _events_lost(d: events.EventsLost):
 _DETAILS = {
     events.CommandEvent: _command, events.Alarm: _alarm, events.StateChange: _state_change,
     events.DigitalIOSignal: _digital_io, events.RsvpRequest: _rsvp_request,
-    events.RsvpAnswer: _rsvp_answer, events.EventsLost: _events_lost,
+    events.RsvpAnswer: _rsvp_answer, events.OperatorMessage: _operator_message,
+    events.EventsLost: _events_lost,
 }

@@ -294,6 +294,11 @@ class Device:
             self._error = ""
             return target
 
+    def post_message(self, text: str):
+        """A message for the operator on the event stream, from the lock holder."""
+        holder = self._holder
+        return self.bus.operator_message(text, holder.client_name if holder else "")
+
     def operate_panel(self, action: str) -> tuple[bool, bool]:
         """Press or release the e-stop, open or close the door, as a person at the cell would
         (`action` names a Panel method); returns (e-stop pressed, door open)."""

@@ -23,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import enum
+import functools
 import itertools
 import threading
 import time
@@ -137,6 +138,13 @@ class RsvpAnswer:
 
 
 @dataclass(frozen=True, slots=True)
+class OperatorMessage:
+    """A message for the operator, posted by the lock holder `source`."""
+    text: str
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
 class EventsLost:
     """Events first_sequence..last_sequence (inclusive) that this subscriber will not get."""
     first_sequence: int
@@ -144,9 +152,10 @@ class EventsLost:
 
 
 Detail = (CommandEvent | Alarm | StateChange | DigitalIOSignal | RsvpRequest | RsvpAnswer
-          | EventsLost)
+          | OperatorMessage | EventsLost)
 # What the device publishes; EventsLost is made by the bus for one subscriber only.
-_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer)
+_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer,
+              OperatorMessage)
 
 
 @dataclass(frozen=True, slots=True)
@@ -300,15 +309,22 @@ def _clip(text: str) -> str:
 
 def _clipped(detail):
     """`detail` with every string field (and every string of a tuple field) clipped."""
-    changes = {}
-    for field in dataclasses.fields(detail):
-        value = getattr(detail, field.name)
-        if isinstance(value, str) and len(value) > MAX_TEXT:
-            changes[field.name] = _clip(value)
-        elif isinstance(value, tuple) and any(len(v) > MAX_TEXT for v in value
-                                              if isinstance(v, str)):
-            changes[field.name] = tuple(_clip(v) if isinstance(v, str) else v for v in value)
+    changes = None
+    for name in _text_fields(type(detail)):
+        value = getattr(detail, name)
+        if isinstance(value, str):
+            if len(value) > MAX_TEXT:
+                changes = {**(changes or {}), name: _clip(value)}
+        elif any(len(v) > MAX_TEXT for v in value):
+            changes = {**(changes or {}), name: tuple(_clip(v) for v in value)}
     return dataclasses.replace(detail, **changes) if changes else detail
+
+
+@functools.cache
+def _text_fields(kind: type) -> tuple[str, ...]:
+    """The fields of a detail record that hold text (str, or tuples of str)."""
+    return tuple(f.name for f in dataclasses.fields(kind)
+                 if f.type in ("str", "tuple[str, ...]"))
 
 
 def _resolve(waiter: asyncio.Future) -> None:
@@ -396,6 +412,10 @@ class EventBus:
         """How an RSVP was answered; data: [rsvp_id, choice, *data]."""
         detail = RsvpAnswer(rsvp_id, choice, tuple(data), timed_out)
         return self.publish("rsvp_answer", (rsvp_id, choice, *data), detail)
+
+    def operator_message(self, text: str, source: str) -> Event:
+        """A message for the operator; data: [text, source]."""
+        return self.publish("operator_message", (text, source), OperatorMessage(text, source))
 
     def publish(self, event_id: str, data: Sequence[str], detail: Detail) -> Event:
         """Number, stamp, keep and fan out one event. Prefer the typed helpers above."""

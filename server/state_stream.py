@@ -7,9 +7,11 @@ written; every waiting stream then takes what it is due:
   cycles it is due, with no gaps, even when several arrive at once.
 - A stream that falls more than `max_lag` cycles behind (a slow reader: its writes wait on
   flow control) jumps to the newest cycle and says how many it skipped: latest sample wins,
-  nothing is queued for it, and nobody else waits for it. `max_lag` (1 s) lets a reader that
-  stalls for a moment (a busy machine) catch up without a gap. (What a stalled reader finds
-  queued in the transport besides is bounded by its own HTTP/2 flow-control window.)
+  nothing is queued for it, and nobody else waits for it. On the real-time clock `max_lag`
+  (250 cycles, 1 s) lets a reader that stalls for a moment (a busy machine) catch up without a
+  gap; on the lock-step clock, whose cycles outrun any reader, it is a few cycles, so a reader
+  always sees the arm as it is now. (What a stalled reader finds queued in the transport
+  besides is bounded by its own HTTP/2 flow-control window.)
 
 Watchers cost no thread: they wait on one shared future that each wake-up replaces.
 """
@@ -40,6 +42,7 @@ class View:
 
 class StateHub:
     def __init__(self, device, max_lag: int = 250, conversions: int = 64):
+        """max_lag: cycles a stream may fall behind before it jumps to the newest."""
         self.device = device
         self.ring = device.link.feedback
         self.max_lag = max_lag

@@ -9,7 +9,7 @@ import pytest
 
 from landscape.server.states import State
 
-from crcl_support import EXAMPLES, RawClient, command, field, pose
+from crcl_support import EXAMPLES, RawClient, command, field, pose, needs_examples
 
 MOVE = "<MoveStraight>{}</MoveStraight>"
 
@@ -78,6 +78,7 @@ def test_commands_before_init_canon_and_after_end_canon_are_errors(client):
     assert "after EndCanon" in field(after, "StateDescription")
 
 
+@needs_examples
 def test_an_invalid_document_is_an_error_and_the_connection_goes_on(client):
     client.send((EXAMPLES / "commandConfigureStatusReport.xml").read_bytes())
     status = client.status()
@@ -200,3 +201,15 @@ def test_settings_status_reports_what_was_set_in_current_units(client):
     assert float(field(field(status, "TransSpeedAbsolute"), "Setting")) == pytest.approx(200.0)
     assert float(field(status, "XPointTolerance")) == pytest.approx(1.0)
     assert field(status, "LengthUnitName") == "millimeter"
+
+
+def test_a_message_reaches_every_supervisor_on_the_device_event_stream(client, server):
+    subscription = server.bus.subscribe()
+    client.run("InitCanon", 1)
+    done = client.run("Message", 2, "<Message>check the fixture</Message>")
+    assert field(done, "CommandState") == "CRCL_Done"
+    posted = [e for e in iter(lambda: subscription.get(timeout=2), None)
+              if e.event_id == "operator_message"]
+    subscription.close()
+    assert posted and posted[0].detail.text == "check the fixture"
+    assert posted[0].detail.source   # the gateway's session, which holds the lock

@@ -8,7 +8,7 @@ from landscape.gateway.grpc_face import serve_grpc
 from landscape.v1 import crcl_service_pb2 as pb
 from landscape.v1 import crcl_service_pb2_grpc
 
-from crcl_support import EXAMPLES, check_status, command, reachable_program
+from crcl_support import EXAMPLES, check_status, command, reachable_program, needs_examples
 
 
 @pytest.fixture
@@ -42,6 +42,7 @@ def test_commands_one_at_a_time_and_get_status(crcl):
     assert (1, "CRCL_Done") in finished and (4, "CRCL_Done") == finished[-1]
 
 
+@needs_examples
 def test_a_failing_program_ends_with_the_error_naming_the_command(crcl):
     replies = execute(crcl, (EXAMPLES / "programAll.xml").read_bytes())
     assert replies[-1].command_state == "CRCL_Error"

@@ -8,13 +8,14 @@ from landscape.gateway import parse, xmlsafe
 from landscape.gateway.handlers import HANDLERS, SESSION_COMMANDS
 from landscape.gateway.schemas import SchemaInvalid, SchemaSet
 
-from crcl_support import EXAMPLES, XSD, command, pose
+from crcl_support import EXAMPLES, XSD, command, pose, needs_examples
 
 INVALID = "commandConfigureStatusReport.xml"   # lacks ReportSensorsStatus (2021 schemas)
 DOCUMENTS = sorted(p for p in EXAMPLES.glob("*.xml") if not p.name.startswith(("status", "crcl4")))
 needs_xsd = pytest.mark.skipif(XSD is None, reason="the CRCL schemas (../shared/crcl/xsd) are absent")
 
 
+@needs_examples
 @pytest.mark.parametrize("path", DOCUMENTS, ids=lambda p: p.name)
 def test_every_example_command_and_program_is_parsed(path):
     tree = xmlsafe.parse(path.read_bytes())
@@ -40,6 +41,7 @@ def test_the_schemas_agree_with_the_typed_parser_on_the_examples(path):
         schemas.validate(tree)
 
 
+@needs_examples
 def test_the_example_program_reads_in_order():
     program = parse.document(xmlsafe.parse((EXAMPLES / "programExample.xml").read_bytes()))
     ids = [c.command_id for c in program.commands]
@@ -49,6 +51,7 @@ def test_the_example_program_reads_in_order():
     assert move.waypoints[1].point == m.Point(1.5, 1.0, 0.0001)
 
 
+@needs_examples
 def test_pose_and_set_settings_are_read():
     tree = xmlsafe.parse((EXAMPLES / "commandMoveThroughTo.xml").read_bytes())
     waypoint = parse.document(tree).command.waypoints[0]

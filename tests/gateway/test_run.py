@@ -11,7 +11,7 @@ from lxml import etree
 
 from landscape.gateway.run import ProgramFailed, run
 
-from crcl_support import EXAMPLES, reachable_program
+from crcl_support import EXAMPLES, reachable_program, needs_examples
 
 
 def test_a_reachable_program_runs_to_completion_with_progress_per_command(gateway, tmp_path):
@@ -24,6 +24,7 @@ def test_a_reachable_program_runs_to_completion_with_progress_per_command(gatewa
     assert lines[7].startswith("[8/13] MoveThroughTo (CommandID 8): CRCL_Done")
 
 
+@needs_examples
 def test_the_example_program_stops_at_the_first_command_the_device_cannot_do(gateway):
     out = io.StringIO()
     with pytest.raises(ProgramFailed) as failure:
@@ -37,6 +38,7 @@ def test_the_example_program_stops_at_the_first_command_the_device_cannot_do(gat
                                                       "CRCL_Error")
 
 
+@needs_examples
 def test_the_example_program_without_tool_commands_fails_where_the_arm_cannot_reach(gateway, tmp_path):
     tree = etree.parse(str(EXAMPLES / "programExample.xml"))
     for element in tree.getroot().findall("MiddleCommand"):
@@ -50,12 +52,14 @@ def test_the_example_program_without_tool_commands_fails_where_the_arm_cannot_re
         run(path, f"127.0.0.1:{gateway.port}", out=io.StringIO())
 
 
+@needs_examples
 def test_program_all_stops_at_its_first_command(gateway):
     with pytest.raises(ProgramFailed, match=r"command 1 \(ActuateJoints, CommandID 2\) failed: "
                                             r"joint 3: force/torque control"):
         run(EXAMPLES / "programAll.xml", f"127.0.0.1:{gateway.port}", out=io.StringIO())
 
 
+@needs_examples
 def test_the_command_line_runner(gateway, tmp_path):
     path = tmp_path / "program.xml"
     path.write_bytes(reachable_program())

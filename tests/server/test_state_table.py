@@ -57,6 +57,7 @@ EXPECTED = {
     "ActivateTool": LOCKED, "DeactivateTool": LOCKED,           # 3.8.1
     "SetDigitalIO": LOCKED,                                     # 4.1
     "Reset": {State.ERROR},
+    "PostMessage": ALL,
 }
 # A joint move slow enough to last the whole sweep of a state (about a minute at real time).
 SLOW_MOVE = motion_pb2.MoveAbsoluteRequest(frame=types_pb2.REFERENCE_FRAME_JOINT_FRAME,
