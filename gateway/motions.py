@@ -133,11 +133,19 @@ async def _run(session, rpc: str, request, accel: float | None = None) -> None:
                         f"{': ' + outcome.message if outcome.message else ''}")
 
 
-async def _settled(session):
-    """The live state once the motion has ended (a sample newer than the done event)."""
+async def _settled(session, timeout: float = 1.0):
+    """The live state once the motion has ended: a sample newer than the done event that no
+    longer shows the device moving (the stream may deliver the done event before its last
+    samples of the motion, which a fast motion leaves centimetres short)."""
     feed = session.link.feed
     latest = feed.latest
-    return await feed.newer_than(latest.sequence if latest else -1)
+    clock = asyncio.get_running_loop().time
+    deadline = clock() + timeout
+    live = await feed.newer_than(latest.sequence if latest else -1, timeout)
+    while live is not None and live.device_state == types_pb2.DEVICE_STATE_MOVING \
+            and clock() < deadline:
+        live = await feed.newer_than(live.sequence, deadline - clock())
+    return live
 
 
 def _check_pose(session, goal: np.ndarray, tolerance: ToleranceSi, live) -> str:
