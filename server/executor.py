@@ -9,7 +9,9 @@ sample per cycle. Stopping and resuming scale time, not space: a play rate r in 
 the sample index by r per cycle, so the arm slows down and speeds up along the planned path and
 never leaves it (seed 3.6). Played at rate r, joint j moves at v_j r and accelerates at
 a_j r^2 + v_j dr/dt (v, a: the trajectory's at rate 1); each cycle the rate changes as fast as
-keeping every joint's acceleration within its limit allows. Keeping the rate always qualifies
+keeping every joint's acceleration within its limit allows, measured as the drives see it: the
+second difference of the commanded positions (played piecewise linearly between samples) and
+the change of the commanded velocity (_Motion._next_rate). Keeping the rate always qualifies
 (the trajectory is within the limits at r = 1, so at any r <= 1), so a stop or a restart never
 asks more of a joint than its limit.
 
@@ -30,7 +32,8 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                    {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
                    the jog messages (jog_control.py) and the I/O ones (cycle_inputs.py)
   cycle -> server  {"op": "controller", "enable": EnableState value, "estop": bool} on change
-                   {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label"}
+                   {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label",
+                    "wall_time"} (wall_time: unix s of the cycle)
                    {"op": "paused", "id"}  {"op": "resumed", "id"}  {"op": "done", "id"}
                    {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
                    a guarded motion's end adds "guard": {"event": "triggered" | "envelope" |
@@ -85,16 +88,16 @@ class _Motion:
         self.compliance: Admittance | None = None
 
     def _load(self, index: int) -> None:
+        if index == 0 or self.before is None:
+            self.join_step = np.zeros(6)   # rad: the last step before this segment's start
+        else:   # the segment before ended where this one starts: remember its last step
+            self.join_step = self.positions[-1] - self._position_at(self.before)
+        self.before: float | None = None   # s before the last advance, in this segment
         self.segment = index
         segment = self.segments[index]
+        # Nothing here walks the whole segment: a long one costs the cycle nothing to load.
         self.positions = np.asarray(segment["positions"], dtype=float)
         self.velocities = np.asarray(segment["velocities"], dtype=float)
-        # The trajectory's acceleration at rate 1, sample i to i + 1 (rad/s^2): precomputed by
-        # the server for a run, so that loading a long segment costs the cycle nothing.
-        self.accelerations = segment.get("accelerations")
-        if self.accelerations is None:
-            self.accelerations = np.diff(self.velocities, axis=0,
-                                         append=self.velocities[-1:]) / self.dt
         self.marks = segment.get("marks", ())   # (sample, label) rows, in order
         self.next_mark = 0
         self.s = 0.0
@@ -117,6 +120,11 @@ class _Motion:
             return table[i]
         return table[i] + frac * (table[i + 1] - table[i])
 
+    def _position_at(self, s: float) -> np.ndarray:
+        i = min(int(s), self.last)
+        return self.positions[i] + (s - i) * (self.positions[min(i + 1, self.last)]
+                                              - self.positions[i])
+
     @property
     def ramping(self) -> bool:
         return self.rate != self.target_rate
@@ -124,32 +132,64 @@ class _Motion:
     def advance(self) -> None:
         if self.ramping:
             self.rate = self._next_rate()
+        self.before = self.s
         self.s = min(self.s + self.rate, float(self.last))
 
     def _next_rate(self) -> float:
-        """The rate one cycle on, moving towards the target as fast as the limits allow.
+        """The rate for the next cycle, as near the target as keeping every joint's commanded
+        acceleration within its limit allows: both the second difference of the commanded
+        positions over dt^2 (what the drives follow) and the change of the commanded velocity
+        over dt.
 
-        Joint j's commanded velocity goes from v r to about v r' + a dt r'^2 (the path's own
-        change over the r' samples played), so its acceleration is A r'^2 + B (r' - r) with
-        B = |v| / dt and A = a sign(v); the next rate is the root of that equal to -limit
-        (stopping) or +limit (resuming), taken over the joints that bind.
+        The play is piecewise linear between samples: the next step p(s + x) - p(s) is linear
+        in the next rate x on [0, 1 - frac] and on [1 - frac, 1], the next commanded velocity
+        v(s + x) x quadratic. Keeping the rate qualifies (the trajectory keeps the limits at
+        rate 1, and a piecewise-linear play at a rate r <= 1 averages its differences), and no
+        bound changes side between r and the nearest root of any bound towards the target:
+        that root (or the target, if nearer) is the next rate. So a stop or a restart never
+        asks more of a joint than its limit.
         """
-        i = min(int(self.s), self.last)
-        v, r = self.sample(self.velocities), self.rate
-        moving = np.abs(v) > 1e-9
-        if not np.any(moving):   # nothing moves here: the rate can jump
-            return self.target_rate
-        stopping = self.target_rate < r
-        b = np.abs(v[moving]) / self.dt
-        # The step may cross into the next sample interval: take the less favourable of the two.
-        signed = self.accelerations[i:i + 2, moving] * np.sign(v[moving])
-        a = signed.min(axis=0) if stopping else signed.max(axis=0)
-        c = b * r + (-self.limit[moving] if stopping else self.limit[moving])
-        # Root of a x^2 + b x - c = 0 in the form that stays exact as a goes to 0.
-        roots = 2 * c / (b + np.sqrt(np.maximum(b * b + 4 * a * c, 0.0)))
-        if stopping:
-            return min(max(float(np.max(roots)), self.target_rate), r)
-        return max(min(float(np.min(roots)), self.target_rate), r)
+        r, target, s, n = self.rate, self.target_rate, self.s, self.last
+        i = min(int(s), n)
+        frac = s - i
+        split = 1.0 - frac
+        # The changes over the two sample intervals ahead (none past the end: the play stops).
+        rows = [i, min(i + 1, n), min(i + 2, n)]
+        P, V = self.positions[rows], self.velocities[rows]            # (3, 6)
+        dp, dv = P[1:] - P[:-1], V[1:] - V[:-1]                       # (2, 6)
+        here = V[0] + frac * dv[0]
+        if self.before is None:
+            step = self.join_step
+        else:
+            step = P[0] + frac * dp[0] - self._position_at(self.before)
+        # Per piece (axis 0: before and after the next sample): step(x) = p0 + dp x,
+        # velocity(x) = x (w0 + dv x); each bound on both sides (axis 0 of _SIDES).
+        p0 = dp * _PIECE_START
+        p0[1] = (dp[0] - dp[1]) * split
+        w0 = np.array([here, V[1] - dv[1] * split])
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            linear = (step + _SIDES * (self.limit * (self.dt * self.dt)) - p0) / dp
+            c = here * r + _SIDES * (self.limit * self.dt)           # dv x^2 + w0 x - c = 0
+            q = -0.5 * (w0 + np.copysign(np.sqrt(w0 * w0 + 4.0 * dv * c), w0))
+            first, second = q / dv, -c / q    # -c / q is also the root when dv = 0
+            # How each bound's margin changes with x at its root: a bound is left, going
+            # towards the target, where the margin shrinks that way.
+            roots = np.stack([linear, first, second])             # (3, 2 sides, 2 pieces, 6)
+            slope = _SIDES * np.stack([np.broadcast_to(dp, linear.shape),
+                                       w0 + 2.0 * dv * first, w0 + 2.0 * dv * second])
+        # The first root towards the target, within its own piece, where a bound is left.
+        if target < r:
+            valid = (slope < 0.0) & (roots >= max(target, 0.0)) & (roots <= min(r, 1.0))
+        else:
+            valid = (slope > 0.0) & (roots >= r) & (roots <= target)
+        valid &= (roots >= [[0.0], [split]]) & (roots <= [[split], [1.0]])
+        if target < r:
+            return float(np.max(roots, where=valid, initial=target))
+        return float(np.min(roots, where=valid, initial=target))
+
+
+_SIDES = np.array([[[-1.0]], [[1.0]]])          # a bound's two sides, -limit and +limit
+_PIECE_START = np.zeros((2, 1))                 # p0 of the first piece: the step starts at 0
 
 
 class Executor:
@@ -238,7 +278,7 @@ class Executor:
             motion.advance()
             marks = motion.marks
             while motion.next_mark < len(marks) and marks[motion.next_mark][0] <= motion.s:
-                self._reports.append({"op": "mark", "id": motion.id,
+                self._reports.append({"op": "mark", "id": motion.id, "wall_time": time.time(),
                                       "label": int(marks[motion.next_mark][1])})
                 motion.next_mark += 1
             running = motion.target_rate == 1.0 and not motion.paused
