@@ -67,11 +67,11 @@ class ThresholdMonitor:
     def check(self, sensors: np.ndarray) -> tuple[str, np.ndarray] | None:
         """None while nothing happened; ("triggered", values) or ("envelope", values)."""
         value = components(self.spec.kind, sensors, self._at_tip)
-        if self.filtered is None:
-            self.filtered = value.copy()
-        else:
-            self.filtered += self.spec.gain * (value - self.filtered)
-        value = self.filtered
+        if self.filtered is not None:   # (a range to or from nothing in sight: unfiltered)
+            known = np.isfinite(self.filtered) & np.isfinite(value)
+            value = value.copy()
+            value[known] += (1.0 - self.spec.gain) * (self.filtered[known] - value[known])
+        self.filtered = value
         bounded = self.envelope > 0
         if np.any(np.abs(value[bounded]) > self.envelope[bounded]):
             return "envelope", value

@@ -42,6 +42,7 @@ from landscape.server.tip_model import TipModel, damped_solve
 MANUAL_TIP_SPEED = 0.25   # m/s, reduced speed for manual jogging (ISO 10218-1, 5.6)
 RANGE_MARGIN = 1e-3       # rad: jogging stops this far inside the joint range
 TRACKING = 0.2            # of the tip's distance to its reference made good per cycle
+HEADROOM = 0.98           # of the speed limits a Cartesian jog asks for: the rest corrects
 
 
 @dataclass(frozen=True)
@@ -140,7 +141,7 @@ class JogIntegrator:
             wanted, accel = np.zeros(6), limits.cartesian_stop
         else:
             wanted = self._base_twist()
-            wanted = wanted / self._scale(damped_solve(jacobian, wanted), jacobian)
+            wanted = wanted / self._scale(damped_solve(jacobian, wanted), jacobian, HEADROOM)
             accel = limits.cartesian_acceleration
         self._twist = self._twist + _limited(wanted - self._twist, np.repeat(accel, 3) * dt)
         reference = self._reference
@@ -148,7 +149,8 @@ class JogIntegrator:
         correction = TRACKING / dt * tip.pose_error(reference)   # before it moves on
         reference[:3, 3] += self._twist[:3] * dt
         reference[:3, :3] = pin.exp3(self._twist[3:] * dt) @ reference[:3, :3]
-        return damped_solve(jacobian, self._twist + correction)
+        qd = damped_solve(jacobian, self._twist + correction)
+        return qd / self._scale(qd, jacobian)   # the correction too stays within the limits
 
     def _base_twist(self) -> np.ndarray:
         """The request's twist in base axes."""
@@ -162,15 +164,16 @@ class JogIntegrator:
 
     # ---- limits -----------------------------------------------------------------------------
 
-    def _scale(self, qd: np.ndarray, jacobian: np.ndarray | None = None) -> float:
-        """How much a joint velocity is too fast for the joint jog speeds and the manual tip
-        speed (1: not at all)."""
+    def _scale(self, qd: np.ndarray, jacobian: np.ndarray | None = None,
+               share: float = 1.0) -> float:
+        """How much a joint velocity is too fast for `share` of the joint jog speeds and of
+        the manual tip speed (1: not at all)."""
         limits = self.limits
         if jacobian is None:
             jacobian = self.tip.jacobian(self.q)
         tip_speed = float(np.linalg.norm(jacobian[:3] @ qd))
-        return max(1.0, float(np.max(np.abs(qd) / limits.velocity)),
-                   tip_speed / limits.tip_speed)
+        return max(1.0, float(np.max(np.abs(qd) / limits.velocity)) / share,
+                   tip_speed / limits.tip_speed / share)
 
     def _within_range(self, qd: np.ndarray) -> np.ndarray:
         """Each joint slow enough to stop before its range ends (at the arm's deceleration)."""

@@ -119,7 +119,8 @@ def test_a_joint_jog_moves_that_joint_at_its_jog_speed(arm):
     assert np.abs(rows[:, QD][:, 5]).max() == pytest.approx(speed, rel=0.01)
     moved = arm.joints() - start_q
     assert np.abs(moved[:5]).max() < 1e-4
-    assert moved[5] == pytest.approx(speed * 1.0, rel=0.15)   # the client's second, roughly
+    # For about the client's second of requests (the machine's load stretches it a little).
+    assert 0.8 * speed < moved[5] < 1.5 * speed
     assert arm.server.device.state is State.RESTING
     done = [e for e in arm.history() if e.event_id == "command_done" and
             e.detail.command == "Jog"]
