@@ -1,0 +1,88 @@
+// The state at a glance: state machine position, lock holder, power, motion, tag, tool, speed
+// settings, units, cycle health; the joints against their ranges. Values are shown in the
+// device's units (GetUnits); the samples come in the stream's units (StreamStarted / sample).
+import { fmt, fromSI, symbol, toSI } from './units.js';
+
+const $ = (id) => document.getElementById(id);
+const short = (name, prefix) => (name || '').replace(prefix, '').toLowerCase() || '–';
+
+export class StatePanel {
+  constructor(ctx) {
+    this.ctx = ctx;
+    this.limits = [];          // [{name, lower, upper}] in radians, from the URDF
+    this.received = [];        // page clock (ms) of recent samples, for the rate received
+  }
+
+  setLimits(limits) {
+    this.limits = limits;
+    const box = $('joints');
+    box.replaceChildren();
+    for (const limit of limits) {
+      const row = document.createElement('div');
+      row.className = 'joint';
+      row.innerHTML = `<span class="jname">${limit.name}</span><span class="bar"><span class="mark"></span></span><span class="jvalue"></span>`;
+      row.dataset.joint = limit.name;
+      box.append(row);
+    }
+  }
+
+  // Called for every StateSample; `age` is ms from the cycle that produced it (or NaN).
+  sample(sample, age) {
+    const now = performance.now();
+    this.received.push(now);
+    while (this.received[0] < now - 2000) this.received.shift();
+    const units = this.ctx.model.units;
+    const sampleUnits = sample.units || units;
+    const angle = (v) => fromSI(toSI(v, 'angular', sampleUnits), 'angular', units);
+    const length = (v) => fromSI(toSI(v, 'linear', sampleUnits), 'linear', units);
+
+    $('st-state').textContent = short(sample.deviceState, 'DEVICE_STATE_');
+    $('st-power').textContent = sample.controlMode || '–';
+    $('st-motion').textContent = sample.motionControlState || '–';
+    $('st-estop').textContent = sample.estop ? 'PRESSED' : 'released';
+    $('st-estop').className = sample.estop ? 'alert' : '';
+    $('st-command').textContent = sample.commandId || '–';
+    $('st-tag').textContent = `${sample.pointName || '–'} / ${sample.tagName || '–'}`;
+    const p = sample.toolPose || {};
+    const frame = short(this.ctx.model.started?.frame, 'REFERENCE_FRAME_').replace('_cartesian_frame', '');
+    $('st-pose').textContent = `${frame}: ${['x', 'y', 'z'].map((k) => fmt(length(p[k] || 0))).join(' ')} ${symbol(units.linear)}, `
+      + `${['roll', 'pitch', 'yaw'].map((k) => fmt(angle(p[k] || 0))).join(' ')} ${symbol(units.angular)}`;
+    const rate = this.received.length / 2;
+    $('st-cycle').textContent = sample.sequence && sample.sequence !== '0'
+      ? `#${sample.sequence}, t ${fmt(sample.controllerTime, 2)} s, skipped ${sample.skipped}, age ${fmt(age, 1)} ms, ${fmt(rate, 0)}/s`
+      : `no cycle number (polled), ${fmt(rate, 0)}/s`;
+
+    const joints = sample.jointPositions || [];
+    document.querySelectorAll('#joints .joint').forEach((row, i) => {
+      const limit = this.limits[i];
+      const q = toSI(joints[i] ?? 0, 'angular', sampleUnits);
+      const share = (q - limit.lower) / (limit.upper - limit.lower);
+      row.querySelector('.mark').style.left = `${Math.min(100, Math.max(0, share * 100))}%`;
+      row.classList.toggle('near-limit', share < 0.03 || share > 0.97);
+      row.querySelector('.jvalue').textContent = `${fmt(fromSI(q, 'angular', units))} ${symbol(units.angular)}`
+        + ` [${fmt(fromSI(limit.lower, 'angular', units), 2)}, ${fmt(fromSI(limit.upper, 'angular', units), 2)}]`;
+    });
+  }
+
+  // The status reads (GetDeviceState, GetVelocities, ...) after any of them changed.
+  status() {
+    const s = this.ctx.model.status;
+    const d = s.GetDeviceState;
+    if (d?.refused) {
+      $('st-lock').textContent = `unknown (${d.refused.message})`;
+    } else if (d) {
+      $('st-lock').textContent = d.locked ? d.lockHolder : 'nobody';
+      $('st-manual').textContent = d.manualControl || '–';
+      $('st-error').textContent = d.error || '–';
+      if (!this.ctx.model.sample) $('st-state').textContent = short(d.state, 'DEVICE_STATE_');
+    }
+    const ee = s.GetEndEffectorState;
+    $('st-tool').textContent = ee ? (ee.refused ? `not available (${ee.refused.message})` : `${ee.currentEe || 'none'} ${ee.eeState}`) : '–';
+    const v = s.GetVelocities;
+    const a = s.GetAccelerations;
+    if (v && a && !v.refused && !a.refused) $('st-speed').textContent = `${fmt(v.percentVelocity, 0)} % / ${fmt(a.percentAccel, 0)} %`;
+    const u = this.ctx.model.units;
+    $('st-units').textContent = `${symbol(u.linear)}, ${symbol(u.angular)}`;
+    document.querySelectorAll('.unit-angle').forEach((e) => { e.textContent = symbol(u.angular); });
+  }
+}
