@@ -1,8 +1,14 @@
-"""Assemble the device server: the landscape.v1 services, gRPC health checking and reflection."""
+"""Assemble the device server: the landscape.v1 services on grpc.aio, health and reflection.
+
+The server's event loop runs on a thread of its own (`serve` returns a handle at once), so
+`python -m landscape.server` and the tests drive it the same way. Streams cost no thread;
+command bodies run on the guard's thread pools (servicers/guard.py).
+"""
 from __future__ import annotations
 
+import asyncio
 import logging
-from concurrent import futures
+import threading
 from dataclasses import dataclass
 
 import grpc
@@ -11,85 +17,171 @@ from grpc_reflection.v1alpha import reflection
 
 from landscape.server import services
 from landscape.server.config import ServerConfig
-from landscape.server.controller_link import open_link
+from landscape.server.controller_link import ControllerLink
 from landscape.server.device import Device
-from landscape.server.errors import ErrorMappingInterceptor
 from landscape.server.events import EventBus
+from landscape.server.limits import StreamLimits
 from landscape.server.paths import PathStore
 from landscape.server.reflection_pool import MethodResolvingPool
 from landscape.server.servicers.device import DeviceServicer
-from landscape.server.stream_limit import StreamLimitInterceptor
 from landscape.server.servicers.digital_io import DigitalIOServicer
 from landscape.server.servicers.events import EventServicer
+from landscape.server.servicers.guard import Dispatch
 from landscape.server.servicers.session import SessionServicer
 from landscape.server.servicers.state import StateServicer
+from landscape.server.state_stream import StateHub
 from landscape.sim.cell import load_cell
 
 log = logging.getLogger(__name__)
 
 
+class StartupError(RuntimeError):
+    """The server cannot start; the message names the cause and the fix, in one line."""
+
+
+class _LoopThread:
+    """An asyncio event loop on a daemon thread; `run(coro)` runs a coroutine on it and
+    returns its result to the calling thread."""
+
+    def __init__(self):
+        self.loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._main, name="grpc-loop", daemon=True)
+        self._thread.start()
+
+    def _main(self) -> None:
+        asyncio.set_event_loop(self.loop)
+        self.loop.run_forever()
+
+    def run(self, coro, timeout: float | None = 60.0):
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+    def close(self) -> None:
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self._thread.join(5.0)
+        if not self._thread.is_alive():
+            self.loop.close()
+
+
 @dataclass
 class RunningServer:
-    server: grpc.Server
-    health: health.HealthServicer
+    server: grpc.aio.Server
+    health: health.aio.HealthServicer
     port: int
     address: str
     bus: EventBus
     device: Device
-    link: object
+    link: ControllerLink
+    hub: StateHub
+    dispatch: Dispatch
+    limits: StreamLimits
+    runner: _LoopThread
 
     @property
     def target(self) -> str:
         return f"{self.address}:{self.port}"
 
+    def set_serving(self, serving: bool) -> None:
+        """gRPC health of the device's services (thread-safe)."""
+        status = (health_pb2.HealthCheckResponse.SERVING if serving
+                  else health_pb2.HealthCheckResponse.NOT_SERVING)
+
+        async def update():
+            for name in ("", *(spec.full_name for spec in services.ALL)):
+                await self.health.set(name, status)
+        asyncio.run_coroutine_threadsafe(update(), self.runner.loop)
+
     def stop(self, grace: float | None = 1.0) -> None:
-        self.health.enter_graceful_shutdown()
-        self.device.close()  # sessions end: the disconnect handler leaves the arm safe
-        self.bus.close()     # ends the event streams cleanly within the grace period
-        self.server.stop(grace).wait()
+        """Leave the arm safe (the lock holder's session ends: its disconnect handler stops,
+        deactivates and releases), end the streams, stop serving and the controller."""
+        self.runner.run(self.health.enter_graceful_shutdown())
+        self.device.close()
+        self.bus.close()
+        self.hub.close()
+        self.runner.run(self.server.stop(grace), timeout=None)
+        self.dispatch.shutdown()
         self.link.stop()
+        self.runner.close()
 
     def wait(self) -> None:
-        self.server.wait_for_termination()
+        self.runner.run(self.server.wait_for_termination(), timeout=None)
+
+
+def listen_address(address: str, port: int) -> str:
+    """host:port as gRPC wants it: an IPv6 literal in brackets (``::1`` -> ``[::1]``)."""
+    if ":" in address and not address.startswith("["):
+        address = f"[{address}]"
+    return f"{address}:{port}"
 
 
 def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     """Start a device server with its controller; returns once it listens (config.port 0 picks
-    a free port) and, if config.start_device, once the controller is initialised."""
+    a free port) and, if config.start_device, once the controller is initialised. Raises
+    StartupError (one line: cause and fix) if the address cannot be had."""
+    runner = _LoopThread()
+    try:
+        server, port = runner.run(_bind(config))
+    except BaseException:
+        runner.close()
+        raise
     bus = EventBus()
     cell = load_cell(config.cell)
     device: Device | None = None
-    link = open_link(config.clock, config.cell, lambda msg: device and device.on_cycle_message(msg),
-                     config.lockstep_pace)
+    link = ControllerLink(config.clock, config.cell,
+                          on_message=lambda msg: device and device.on_cycle_message(msg),
+                          on_lost=lambda why: device and device.controller_lost(why),
+                          pace=config.lockstep_pace)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
     device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs)
-    if config.start_device:
-        device.start()
+    hub, dispatch, limits = StateHub(device), Dispatch(), StreamLimits(config.stream_caps)
+    try:
+        if config.start_device:
+            device.start()
+        health_servicer = runner.run(_start(server, device, bus, hub, dispatch, limits))
+    except BaseException:
+        device.close()
+        link.stop()
+        runner.run(server.stop(None))
+        runner.close()
+        raise
+    running = RunningServer(server, health_servicer, port, config.address, bus, device, link,
+                            hub, dispatch, limits, runner)
+    device.on_health = running.set_serving
+    log.info("device server listening on %s", listen_address(config.address, port))
+    return running
 
-    server = grpc.server(
-        futures.ThreadPoolExecutor(max_workers=config.max_workers, thread_name_prefix="rpc"),
-        interceptors=[StreamLimitInterceptor(config.max_streams), ErrorMappingInterceptor()],
-        options=[("grpc.max_receive_message_length", config.max_message_bytes),
-                 ("grpc.so_reuseport", 0)],
-    )
-    servicers = {services.DEVICE: DeviceServicer(device), services.DIGITAL_IO: DigitalIOServicer(device),
-                 services.EVENTS: EventServicer(bus), services.SESSIONS: SessionServicer(device),
-                 services.STATE: StateServicer(device)}
+
+async def _bind(config: ServerConfig) -> tuple[grpc.aio.Server, int]:
+    server = grpc.aio.server(options=[("grpc.max_receive_message_length", config.max_message_bytes),
+                                      ("grpc.so_reuseport", 0)])
+    where = listen_address(config.address, config.port)
+    try:
+        port = server.add_insecure_port(where)
+    except RuntimeError:
+        port = 0
+    if port == 0:
+        raise StartupError(f"cannot listen on {where}: the port is in use or the address is not "
+                           f"this machine's; choose another with --port / --address")
+    return server, port
+
+
+async def _start(server, device, bus, hub, dispatch, limits):
+    hub.attach(asyncio.get_running_loop())
+    servicers = {
+        services.DEVICE: DeviceServicer(device, hub, dispatch, limits),
+        services.DIGITAL_IO: DigitalIOServicer(device, dispatch, limits),
+        services.EVENTS: EventServicer(device, bus, dispatch, limits),
+        services.SESSIONS: SessionServicer(device, dispatch, limits),
+        services.STATE: StateServicer(device, hub, dispatch, limits),
+    }
     for spec, servicer in servicers.items():
         spec.add_to_server(servicer, server)
-
-    health_servicer = health.HealthServicer()
+    health_servicer = health.aio.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
+    status = health_pb2.HealthCheckResponse.SERVING
     for name in ("", *(spec.full_name for spec in services.ALL)):
-        health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
-
+        await health_servicer.set(name, status)
     reflection.enable_server_reflection(
         (*(spec.full_name for spec in services.ALL), health.SERVICE_NAME, reflection.SERVICE_NAME),
         server, pool=MethodResolvingPool())
-
-    port = server.add_insecure_port(f"{config.address}:{config.port}")
-    if port == 0:
-        raise OSError(f"cannot listen on {config.address}:{config.port}")
-    server.start()
-    log.info("device server listening on %s:%d", config.address, port)
-    return RunningServer(server, health_servicer, port, config.address, bus, device, link)
+    await server.start()
+    return health_servicer

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from landscape.server.limits import Cap
+
 DEFAULT_ADDRESS = "127.0.0.1"   # loopback unless the operator exposes the server on purpose
 DEFAULT_PORT = 50051
 
@@ -11,10 +13,9 @@ DEFAULT_PORT = 50051
 class ServerConfig:
     address: str = DEFAULT_ADDRESS
     port: int = DEFAULT_PORT          # 0 picks a free port
-    # Worker threads; each open stream (session, subscription, jog) holds one while it lasts,
-    # so streams get at most max_streams of them and commands always find one free.
-    max_workers: int = 128
-    max_streams: int = 96
+    # Open streams a client, and the server, may hold, per kind ("session", "watch"); None:
+    # limits.DEFAULT_CAPS.
+    stream_caps: dict[str, Cap] | None = None
     # Largest request accepted; larger ones fail with RESOURCE_EXHAUSTED. Paths stream in
     # chunks, so no single message needs to be big.
     max_message_bytes: int = 4 * 1024 * 1024

@@ -6,36 +6,151 @@
   can (landscape.sim.clock.ThreadedLockStepClock): deterministic physics, simulated time far
   ahead of the wall clock. For tests.
 
-Both offer the same surface: `proxy` (the asynchronous LLI calls, served between cycles),
-`on_message` (the Executor's posts), `between_cycles` and `stop()`.
+`ControllerLink` offers the same surface on both: `proxy` (the asynchronous LLI calls, served
+between cycles), `send` (messages to the Executor), `between_cycles`, `feedback` (every
+cycle's row, feedback.py) and `share` (large arrays for the cycle, without copying them
+through the pipe). It watches the controller: the cycle process exiting, or its feedback
+falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. `restart()`
+starts a fresh controller (after a loss); the feedback ring survives, so cycle numbers go on.
 """
 from __future__ import annotations
 
 import functools
+import logging
+import threading
+import time
 from typing import Any, Callable
 
 from landscape.server.executor import Executor
+from landscape.server.feedback import FeedbackRing
 from landscape.sim.clock import RealTimeClock, ThreadedLockStepClock
 from landscape.sim.cycle_process import Mailbox
+from landscape.sim.shared_array import SharedArrays
+
+log = logging.getLogger(__name__)
 
 CLOCKS = ("realtime", "lockstep")
 
 
-def build_controller(cell_path: str | None, mailbox: Mailbox):
+def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox):
     """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function."""
     from landscape.sim.bullet_controller import BulletController  # pybullet: only here
     from landscape.sim.cell import load_cell
     cell = load_cell(cell_path)
-    return BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time))
+    return BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time, ring))
 
 
-def open_link(clock: str, cell_path: str | None, on_message: Callable[[Any], None],
-              pace: float | None = None):
-    """pace: lock-step only, at most this many simulated seconds per wall second (None: as
-    fast as possible)."""
-    factory = functools.partial(build_controller, cell_path)
-    if clock == "realtime":
-        return RealTimeClock(factory, on_message=on_message).start()
-    if clock == "lockstep":
-        return ThreadedLockStepClock(factory, on_message, pace)
-    raise ValueError(f"unknown clock {clock!r}; choose one of {', '.join(CLOCKS)}")
+class ControllerLink:
+    """A controller on `clock`, its feedback ring, and a watch on its life.
+
+    on_message(msg): the Executor's reports, in order, on the clock's dispatch thread.
+    on_lost(reason): once per loss, on a thread of the link's (never a gRPC thread).
+    pace: lock-step only, at most this many simulated seconds per wall second (None: flat out).
+    silence_cycles: real time only, cycles without feedback that count as a hung controller.
+    """
+
+    def __init__(self, clock: str, cell_path: str | None, on_message: Callable[[Any], None],
+                 on_lost: Callable[[str], None], pace: float | None = None,
+                 silence_cycles: int = 10):
+        if clock not in CLOCKS:
+            raise ValueError(f"unknown clock {clock!r}; choose one of {', '.join(CLOCKS)}")
+        self.clock_kind = clock
+        self._cell_path = cell_path
+        self._on_message = on_message
+        self._on_lost = on_lost
+        self._pace = pace
+        self.silence_cycles = silence_cycles
+        self.feedback = FeedbackRing()
+        self.lost: str | None = None        # why the controller was lost, until restart()
+        self._lost_lock = threading.Lock()
+        self._closing = False
+        self._clock = self._start_clock()
+        self._watchdog: threading.Thread | None = None
+        if clock == "realtime":
+            self._watchdog = threading.Thread(target=self._watch, name="controller-watchdog",
+                                              daemon=True)
+            self._watchdog.start()
+
+    def _start_clock(self):
+        factory = functools.partial(build_controller, self._cell_path, self.feedback)
+        if self.clock_kind == "realtime":
+            return RealTimeClock(factory, on_message=self._on_message,
+                                 on_failure=lambda why: self._lose(
+                                     f"the cycle process died: {why.strip().splitlines()[-1]}"
+                                     if why else "the cycle process died")).start()
+        return ThreadedLockStepClock(factory, self._on_message, self._pace)
+
+    # -- the clock's surface
+    @property
+    def clock(self):
+        return self._clock
+
+    @property
+    def proxy(self):
+        return self._clock.proxy
+
+    @property
+    def cycle_time(self) -> float:
+        return self._clock.cycle_time
+
+    @property
+    def tuning_problems(self) -> list[str]:
+        """What the cycle process could not tune (real-time priority, timer slack)."""
+        return list(getattr(self._clock, "tuning_problems", []))
+
+    def send(self, msg: Any) -> None:
+        self._clock.send(msg)
+
+    def between_cycles(self, func, *args, timeout: float | None = None):
+        return self._clock.between_cycles(func, *args, timeout=timeout)
+
+    def share(self, arrays: dict) -> SharedArrays:
+        """`arrays` (name -> ndarray) for the cycle: shared memory for a cycle process (the
+        pipe then carries only their names), the arrays themselves on the lock-step thread."""
+        return SharedArrays.create(arrays, shared=self.clock_kind == "realtime")
+
+    def stats(self):
+        return self._clock.stats() if hasattr(self._clock, "stats") else None
+
+    # -- life
+    def restart(self) -> None:
+        """A fresh controller after a loss (the dead one is stopped first)."""
+        with self._lost_lock:
+            self._stop_clock()
+            self._clock = self._start_clock()
+            self.lost = None
+
+    def stop(self) -> None:
+        self._closing = True
+        self._stop_clock()
+        self.feedback.close()
+
+    def _stop_clock(self) -> None:
+        try:
+            self._clock.stop()
+        except Exception:
+            log.exception("stopping the controller failed")
+
+    def _lose(self, reason: str) -> None:
+        with self._lost_lock:
+            if self.lost is not None or self._closing:
+                return
+            self.lost = reason
+        log.error("controller lost: %s", reason)
+        self._on_lost(reason)
+
+    def _watch(self) -> None:
+        """Real time: the ring must advance; `silence_cycles` cycles without a row is a hang."""
+        period = self._clock.cycle_time
+        limit = self.silence_cycles * period
+        seen, since = self.feedback.head, time.monotonic()
+        while not self._closing:
+            time.sleep(period)
+            head, now = self.feedback.head, time.monotonic()
+            if head != seen or self.lost is not None:
+                seen, since = head, now
+            elif now - since > limit and head >= 0:
+                alive = self._clock.alive
+                self._lose(f"the cycle process sent no feedback for {now - since:.3f} s"
+                           + ("" if alive else " and exited"))
+

@@ -107,6 +107,7 @@ FRAMES = {types_pb2.REFERENCE_FRAME_JOINT_FRAME: Frame.JOINT,
           types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME: Frame.BASE,
           types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME: Frame.WORLD,
           types_pb2.REFERENCE_FRAME_TOOL_FRAME: Frame.TOOL}
+FRAMES_PB = {v: k for k, v in FRAMES.items()}
 STRAIGHT = {types_pb2.MOTION_TYPE_JOINT_MOTION: False, types_pb2.MOTION_TYPE_STRAIGHT_MOTION: True}
 
 
@@ -148,28 +149,39 @@ def point_spec(tag: types_pb2.TagStruct, frame: Frame, units: Units) -> PointSpe
                      tuple(tag.aux_commands))
 
 
-def path_load_stream(requests, units: Units, max_points: int):
-    """The PathLoad stream: its header (from the first message) and every point, in SI; a
-    stream of more than `max_points` points is refused as soon as it gets there."""
-    header, specs, frame = None, [], None
-    for index, request in enumerate(requests):
-        if len(specs) + len(request.tags) > max_points:
-            raise OutOfRange(f"a path holds at most {max_points} points")
-        if index == 0:
+class PathLoadStream:
+    """The PathLoad stream, message by message: its header (from the first message) and every
+    point, in SI; a stream of more than `max_points` points is refused as soon as it gets
+    there, before the rest arrives."""
+
+    def __init__(self, units: Units, max_points: int):
+        self.units, self.max_points = units, max_points
+        self.header, self.frame, self.specs = None, None, []
+        self._messages = 0
+
+    def feed(self, request) -> None:
+        if len(self.specs) + len(request.tags) > self.max_points:
+            raise OutOfRange(f"a path holds at most {self.max_points} points")
+        if self._messages == 0:
             if not request.HasField("header"):
                 raise ParamError("the first PathLoad message must carry the header")
-            header = request.header
-            frame = enum_value(PATH_FRAMES, header.frame, "frame (JOINT, BASE or WORLD)")
+            self.header = request.header
+            self.frame = enum_value(PATH_FRAMES, self.header.frame, "frame (JOINT, BASE or WORLD)")
         elif request.HasField("header"):
-            raise ParamError(f"message {index} of the PathLoad stream carries a second header")
+            raise ParamError(f"message {self._messages} of the PathLoad stream carries a "
+                             f"second header")
+        self._messages += 1
         for tag in request.tags:
             try:
-                specs.append(point_spec(tag, frame, units))
+                self.specs.append(point_spec(tag, self.frame, self.units))
             except CommandError as error:
-                raise at_point(len(specs), error) from None
-    if header is None:
-        raise ParamError("the PathLoad stream was empty")
-    return header, frame, specs
+                raise at_point(len(self.specs), error) from None
+
+    def finish(self):
+        """(header, frame, specs) once the stream has ended."""
+        if self.header is None:
+            raise ParamError("the PathLoad stream was empty")
+        return self.header, self.frame, self.specs
 
 
 # ---- events (event_service.proto) ------------------------------------------------------------

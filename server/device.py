@@ -1,76 +1,57 @@
-"""The device: one robot's state machine, lock, settings and safety, above its controller.
+"""The device: one robot's state machine, lock, power and safety, above its controller.
 
 Every transport (gRPC servicers now; the CRCL gateway and the dashboard through gRPC) reaches
-the robot through these methods. They take and return domain values in SI (convert.py does the
-units); they raise CommandError subclasses (errors.py) and change nothing when they do.
+the robot through these methods and `motions` (motion_control.py). They take and return domain
+values in SI (convert.py does the units); they raise CommandError subclasses (errors.py) and
+change nothing when they do.
 
-Concurrency: mutating commands run one at a time under `_command_lock` (held through blocking
-waits such as enabling); the state itself is guarded by the short `_state_lock`. Safety actions
-(lock holder gone, e-stop, controller fault) do not wait for the command lock: they act on the
-controller at once and move the state; a command in flight then finds the state changed.
+Concurrency:
+- Every state change is a compare-and-set against the states it may come from
+  (`_transition`, under the short `_state_lock`), and its event is published under the same
+  lock, so the events come in the order of the changes and no change overwrites another.
+- Mutating commands run one at a time under `_command_lock` (`command()`); the state and the
+  lease are checked (again) once it is held. Commands that stop the arm (`immediate`:
+  StopMotion, AbortMotion, Deactivate) do not wait for that lock.
+- A lock that changes hands bumps `_epoch`; a command admitted under an older epoch cannot
+  start a motion (the disconnect handler may run while it plans).
+- Safety actions (lock holder gone, e-stop, controller lost) do not wait for any command: the
+  controller is told at once, the waiting happens on the safety worker (safety.py).
 """
 from __future__ import annotations
 
 import contextlib
-import itertools
 import logging
 import secrets
 import threading
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import Callable
 
-import numpy as np
 
-from landscape.server import states
-from landscape.server.errors import (ControllerFailure, EstopActive, NotFound, NotLockHolder,
-                                     ParamError, WrongState)
-from landscape.server.events import EventBus, Phase, Severity
-from landscape.server import aux_commands, path_planning
-from landscape.server.moves import Planner
-from landscape.server.paths import PathLibrary, PathStore
-from landscape.server.targets import Frame
+from landscape.server import alarms, states
+from landscape.server.errors import (ControllerFailure, EstopActive, NotLockHolder, ParamError,
+                                     WrongState)
+from landscape.server.events import EventBus, Severity
+from landscape.server.feedback import Sample
+from landscape.server.motion_control import MotionControl
+from landscape.server.paths import PathStore
 from landscape.server.rsvp import RsvpBroker
+from landscape.server.safety import SafetyWorker
 from landscape.server.sessions import Session, SessionRegistry
 from landscape.server.settings import MotionSettings
 from landscape.server.states import Lease, State
 from landscape.sim.arm import ArmModel
-from landscape.sim.controller import DoutValue, EnableState, EstopState, InitState, Status
+from landscape.sim.controller import EnableState, EstopState, InitState, Status
+from landscape.sim.clock import CycleProcessError
 from landscape.sim.kinematics import Kinematics
 
 log = logging.getLogger(__name__)
 
-# Alarm codes of the device (the seed's return codes are the negative ones).
-ALARM_LOCK_HOLDER_LOST = 101
-ALARM_ESTOP = 102
-ALARM_CONTROLLER = 103
-ALARM_MOTION = 104
-
 ESTOP_RELEASED_QUESTION = "estop_released"   # RSVP to the lock holder: reset now?
 RESET, STAY = "reset", "stay"
 
-
-@dataclass(frozen=True)
-class Feedback:
-    """The latest cycle report: time (simulated s), joints (rad, rad/s), controller flags."""
-
-    time: float
-    position: np.ndarray
-    velocity: np.ndarray
-    command: np.ndarray      # the setpoint of that cycle, rad: where planning starts
-    enable: EnableState
-    estop: bool
-
-
-@dataclass
-class RunningMotion:
-    """A non-blocking motion the executor plays; `tags` names its waypoints for tag events."""
-
-    command_id: str
-    command: str
-    point_name: str
-    tags: dict[int, tuple[str, int]]
-    aux: dict[int, tuple[str, ...]] = field(default_factory=dict)   # run at marks
-    phase: str = "running"   # running, paused, done, failed, aborted
+# A safety stop brakes at the arm's full deceleration: the TX90 at full speed stops within
+# max velocity / max acceleration = 1/3 s (main axes) and 1/5 s (wrist), then settles.
+SAFETY_STOP_TIMEOUT = 2.0
 
 
 @dataclass(frozen=True)
@@ -89,50 +70,58 @@ class Device:
                  outputs: set[str] = frozenset(), enable_timeout: float = 5.0,
                  keepalive_interval: float = 0.5, keepalive_timeout: float = 2.0):
         self.link = link
-        self.controller = link.proxy
         self.bus = bus
         self.arm = arm
         self.kinematics = Kinematics(arm)
         self.enable_timeout = enable_timeout
         self.rsvp_timeout = 30.0
         self.rsvp = RsvpBroker(bus)
+        self.safety = SafetyWorker()
         self.sessions = SessionRegistry(self._session_ended, keepalive_interval, keepalive_timeout)
+        self.on_health: Callable[[bool], None] = lambda serving: None
         self._state = State.IDLE
         self._holder: Session | None = None
         self._lease: str | None = None
+        self._epoch = 0                    # +1 whenever the lock changes hands
+        self._local = threading.local()    # the epoch a command was admitted under
         self._settings = MotionSettings(arm)
-        self._feedback: Feedback | None = None
-        self._feedback_changed = threading.Condition()
         self._error = ""
-        self._motion_state = states.ROBOT_IDLE
+        self._power = EnableState.DISABLED   # the controller's last reported power state
+        self._estop = False
+        self._controller_changed = threading.Condition()
         self._state_lock = threading.RLock()
         self._command_lock = threading.Lock()
-        self.planner = Planner(self.kinematics, link.cycle_time)
-        self._motion: RunningMotion | None = None
-        self._motion_changed = threading.Condition()
-        self._command_ids = itertools.count(1)
-        self.last_tag = ("", "")   # (path name, tag name), for getTagId
-        self.outputs = set(outputs)  # digital outputs aux commands may set
-        self.paths = PathLibrary(paths or PathStore())
+        self.motions = MotionControl(self, paths or PathStore(), set(outputs))
+
+    @property
+    def controller(self):
+        return self.link.proxy
 
     # ---- life cycle ------------------------------------------------------------------------
 
     def start(self, timeout: float = 30.0) -> None:
         """Initialise and home the controller (LLI_init); Idle until then, Unlocked after."""
+        self._start_controller(timeout)
+        self._transition({State.IDLE}, State.ERROR if self._estop else State.UNLOCKED,
+                         "e-stop pressed at start-up" if self._estop else "controller initialised")
+        if self._estop:
+            self._error = "e-stop pressed"
+
+    def _start_controller(self, timeout: float) -> None:
         self.controller.plug_event_func(self._controller_event)
         if self.controller.state().init is not InitState.INITIALIZED:
             if self.controller.init() is not Status.OK:
                 raise ControllerFailure("the controller did not initialise")
-        self._wait_for(lambda f: True, timeout, "the first feedback from the controller")
-        estop = self.controller.state().estop is EstopState.ESTOP
-        self._move_to(State.ERROR if estop else State.UNLOCKED,
-                      "e-stop pressed at start-up" if estop else "controller initialised")
-        if estop:
-            self._error = "e-stop pressed"
+        if not self._wait_controller(lambda: self.link.feedback.head >= 0, timeout):
+            raise ControllerFailure("no feedback from the controller")
 
-    def close(self) -> None:
-        self.sessions.close()   # runs the disconnect handler for the lock holder, if any
-        self.paths.close()
+    def close(self, timeout: float = 5.0) -> None:
+        """Leave the arm safe: the lock holder's session ends (the disconnect handler stops,
+        deactivates and releases), then nothing more is accepted."""
+        self.sessions.close()
+        self.safety.wait_idle(timeout)
+        self.safety.close()
+        self.motions.close()
 
     # ---- state -----------------------------------------------------------------------------
 
@@ -144,48 +133,78 @@ class Device:
     def settings(self) -> MotionSettings:
         return self._settings
 
+    @property
+    def error(self) -> str:
+        return self._error
+
     def status(self) -> DeviceStatus:
         with self._state_lock:
-            feedback = self._feedback
-            motion = self._motion
             return DeviceStatus(self._state, self._holder is not None,
                                 self._holder.client_name if self._holder else "", self._error,
-                                bool(feedback and feedback.estop), "off",
-                                motion.command_id if motion else "")
+                                self._estop, "off", self.motions.running_id)
 
-    def _move_to(self, new: State, reason: str) -> None:
+    def _transition(self, expected, new: State, reason: str) -> State:
+        """Compare-and-set: move to `new` if the state is one of `expected` (else WrongState);
+        returns the state it left. The event is published before the lock is let go."""
         with self._state_lock:
-            old, self._state = self._state, new
-        if old is not new:
-            log.info("%s -> %s: %s", old.value, new.value, reason)
-            self.bus.state_change(old.value, new.value, reason)
+            old = self._state
+            if old not in expected:
+                raise WrongState(f"cannot go {old.value} -> {new.value} ({reason}): the state "
+                                 f"changed meanwhile", state=old.value)
+            self._state = new
+            if old is not new:
+                log.info("%s -> %s: %s", old.value, new.value, reason)
+                self.bus.state_change(old.value, new.value, reason)
+            return old
+
+    def admit(self, rpc: str, lease: str | None) -> None:
+        """Refuse `rpc` now if the state or the caller does not allow it (changes nothing)."""
+        rule = states.RULES[rpc]
+        with self._state_lock:
+            self._check_state(rpc, rule)
+            self._check_lease(rpc, rule, lease)
 
     @contextlib.contextmanager
     def command(self, rpc: str, lease: str | None):
         """Run the body of `rpc` if the state table allows it now, for this caller.
 
-        Read-only RPCs run at once. Mutating ones run one at a time; the state and the lease
-        are checked first, so a refused call changes nothing.
+        Read-only RPCs run at once; immediate ones (they stop the arm) without waiting for
+        other commands; the other mutating ones one at a time. The state and the lease are
+        checked once the turn has come, so a refused call changes nothing.
         """
         rule = states.RULES[rpc]
         if rule.lease is Lease.NONE:
             self._check_state(rpc, rule)
             yield
             return
-        with self._command_lock:
+        with contextlib.nullcontext() if rule.immediate else self._command_lock:
             with self._state_lock:
                 self._check_state(rpc, rule)
                 self._check_lease(rpc, rule, lease)
-            yield
+                self._local.epoch = self._epoch
+            try:
+                yield
+            finally:
+                self._local.epoch = None
+
+    def check_epoch(self) -> None:
+        """Called with `_state_lock` held before a command acts: the lock must not have
+        changed hands since it was admitted."""
+        epoch = getattr(self._local, "epoch", None)
+        if epoch is not None and epoch != self._epoch:
+            raise NotLockHolder("the lock changed hands while the command was being prepared")
 
     def _check_state(self, rpc: str, rule: states.Rule) -> None:
         if self._state not in rule.states:
+            if rpc == "Lock" and self._holder is not None:
+                raise WrongState(f"the device is locked by {self._holder.client_name}",
+                                 state=self._state.value, holder=self._holder.client_name)
             valid = ", ".join(sorted(s.value for s in rule.states))
             raise WrongState(f"{rpc} is not valid in state {self._state.value} (seed {rule.seed}: "
                              f"valid in {valid})", state=self._state.value)
 
     def _check_lease(self, rpc: str, rule: states.Rule, lease: str | None) -> None:
-        if rule.lease is Lease.SESSION:
+        if rule.lease in (Lease.SESSION, Lease.NONE):
             return
         if rule.lease is Lease.HOLDER_IF_LOCKED and self._holder is None:
             return
@@ -203,47 +222,67 @@ class Device:
         with self._state_lock:
             if session.ended.is_set():  # ended since we looked it up: its handler ran already
                 raise ParamError(f"session {session_id!r} has ended")
+            self._transition({State.UNLOCKED}, State.INACTIVE, f"locked by {session.client_name}")
             self._holder, self._lease = session, secrets.token_urlsafe(24)
-            self._move_to(State.INACTIVE, f"locked by {session.client_name}")
+            self._epoch += 1
             return self._lease
 
     def release(self) -> None:
         with self._state_lock:
             holder = self._holder
-            self._holder = self._lease = None
             if self._state is State.INACTIVE:  # in Error it stays there, unlocked, until Reset
-                self._move_to(State.UNLOCKED, f"released by {holder.client_name}")
+                self._transition({State.INACTIVE}, State.UNLOCKED,
+                                 f"released by {holder.client_name}")
+            self._holder = self._lease = None
+            self._epoch += 1
 
     def activate(self) -> None:
         self._command_controller("enable")
-        self._wait_for(lambda f: f.enable is EnableState.ENABLED or f.estop, self.enable_timeout,
-                       "the drives to enable")
-        if self._feedback.estop or self._state is not State.INACTIVE:
-            raise ControllerFailure(f"activation interrupted ({self._error or 'e-stop'})")
-        self._move_to(State.RESTING, "activated")
+        self._wait_controller(lambda: self._power is EnableState.ENABLED or self._estop
+                              or self.link.lost is not None, self.enable_timeout)
+        if self._power is not EnableState.ENABLED:
+            why = self._error or ("e-stop pressed" if self._estop else "timed out")
+            with contextlib.suppress(Exception):
+                self.controller.disable()
+            raise ControllerFailure(f"the drives did not come on ({why})")
+        with self._state_lock:
+            self.check_epoch()
+            self._transition({State.INACTIVE}, State.RESTING, "activated")
 
     def deactivate(self) -> None:
-        self.abort_motion()  # a moving arm stops along its path before the drives go off
-        self._disable("deactivated")
+        """Stop along the path (at the arm's full deceleration) if moving, then drives off."""
+        self._power_down("deactivated")
 
-    def _disable(self, reason: str) -> None:
-        self._command_controller("disable")
-        self._wait_for(lambda f: f.enable is EnableState.DISABLED, self.enable_timeout,
-                       "the drives to disable")
-        with self._state_lock:
-            if self._state in states.ACTIVE:
-                self._move_to(State.INACTIVE, reason)
+    def _power_down(self, reason: str, timeout: float = SAFETY_STOP_TIMEOUT) -> None:
+        """Stop any motion (no new one can start meanwhile), disable, wait, then Inactive."""
+        with self.motions.no_new_motion():
+            stopped = self.motions.stop_for_safety(timeout)
+            if not stopped:
+                log.error("the motion did not stop within %.1f s; disabling the drives now",
+                          timeout)
+            self._command_controller("disable")
+            self._wait_controller(lambda: self._power is EnableState.DISABLED
+                                  or self.link.lost is not None, self.enable_timeout)
+            with self._state_lock:
+                if self._state in states.ACTIVE:
+                    self._transition(states.ACTIVE, State.INACTIVE, reason)
 
     def reset(self) -> State:
-        if self.controller.state().estop is EstopState.ESTOP:
+        """Leave Error once its cause is cleared; a lost controller is started afresh."""
+        if self.link.lost is not None:
+            self.bus.alarm(Severity.INFO, alarms.CONTROLLER_LOST, "restarting the controller")
+            self.link.restart()
+            self._start_controller(30.0)
+            self.on_health(True)
+        if self._estop:
             raise EstopActive("the e-stop is still pressed: release it, then reset")
         with self._state_lock:
             if self._state is not State.ERROR:
                 return self._state
-            self._error = ""
             target = State.INACTIVE if self._holder else State.UNLOCKED
-            self._move_to(target, "reset")
-        return target
+            self._transition({State.ERROR}, target, "reset")
+            self._error = ""
+            return target
 
     def operate_panel(self, action: str) -> tuple[bool, bool]:
         """Press or release the e-stop, open or close the door, as a person at the cell would
@@ -252,19 +291,18 @@ class Device:
         return self.link.between_cycles(_operate_panel, action)
 
     def _command_controller(self, method: str) -> None:
-        if getattr(self.controller, method)() is not Status.OK:
+        try:
+            result = getattr(self.controller, method)()
+        except (CycleProcessError, TimeoutError) as error:
+            raise ControllerFailure(f"the controller did not answer {method}: {error}") from None
+        if result is not Status.OK:
             raise ControllerFailure(f"the controller refused {method}")
 
-    def _wait_for(self, done, timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        with self._feedback_changed:
-            while self._feedback is None or not done(self._feedback):
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    raise ControllerFailure(f"timed out after {timeout:g} s waiting for {what}")
-                self._feedback_changed.wait(remaining)
+    def _wait_controller(self, done: Callable[[], bool], timeout: float) -> bool:
+        with self._controller_changed:
+            return self._controller_changed.wait_for(done, timeout)
 
-    # ---- 3.2 settings ------------------------------------------------------------------------
+    # ---- 3.2 settings, 3.3 queries ---------------------------------------------------------
 
     def update_settings(self, change) -> MotionSettings:
         """Apply `change(settings) -> settings`; a validation error leaves them as they were."""
@@ -272,236 +310,104 @@ class Device:
             self._settings = change(self._settings)
             return self._settings
 
-    # ---- 3.3 queries ---------------------------------------------------------------------------
-
-    def feedback(self) -> Feedback:
-        feedback = self._feedback
-        if feedback is None:
+    def feedback(self) -> Sample:
+        """The newest cycle's feedback (never more than a cycle old)."""
+        sample = self.link.feedback.latest()
+        if sample is None:
             raise ControllerFailure("no feedback from the controller yet")
-        return feedback
-
-    def tool_in_world(self, joints: np.ndarray) -> np.ndarray:
-        """4x4 pose (m) of the tool tip in the world frame at these joints."""
-        settings = self._settings
-        flange = self.kinematics.forward(joints)
-        return np.linalg.inv(settings.world_frame) @ flange @ settings.tool_offset
+        return sample
 
     def motion_control_state(self) -> tuple[str, str]:
         with self._state_lock:
             if self._state is State.ERROR:
                 return states.ROBOT_STOPPED_ON_ERROR, states.CONTROLLER_ERROR
-            feedback = self._feedback
-            power = (states.POWER_ON if feedback and feedback.enable is EnableState.ENABLED
-                     else states.POWER_OFF)
-            return self._motion_state, power
+            power = states.POWER_ON if self._power is EnableState.ENABLED else states.POWER_OFF
+            return self.motions.motion_state, power
 
-    # ---- 3.4 - 3.6 motion --------------------------------------------------------------------------
-
-    def planning_start(self) -> np.ndarray:
-        """Where the next motion starts: the setpoint the arm holds, rad."""
-        return self.feedback().command
-
-    def move(self, command: str, point_name: str, frame: Frame, values: np.ndarray,
-             relative: bool, straight: bool, speed_percent: float | None) -> str:
-        """Seed 3.4.1 moveAbsolute / moveRelative: plan, then start; values in SI (joints rad;
-        x, y, z m and roll, pitch, yaw rad). Nothing moves if planning fails."""
-        trajectory = self.planner.move(self.planning_start(), self._settings, frame, values,
-                                       relative, straight, speed_percent)
-        return self.start_motion(command, point_name, [trajectory])
-
-    def move_arc(self, point_name: str, frame: Frame, via: np.ndarray, goal: np.ndarray,
-                 relative: bool, speed_percent: float | None) -> str:
-        """Seed 3.4.1 moveArc: the tool tip on the circle through the arc point to the goal."""
-        trajectory = self.planner.arc(self.planning_start(), self._settings, frame, via, goal,
-                                      relative, speed_percent)
-        return self.start_motion("MoveArc", point_name, [trajectory])
-
-    def start_motion(self, command: str, point_name: str, trajectories: list,
-                     tags: dict | None = None, aux: dict | None = None) -> str:
-        """Hand planned trajectories to the executor, to play back to back; Resting -> Moving.
-        `tags` maps mark labels to (tag name, tag index) for tag events, `aux` to the aux
-        commands run there. Returns the command id that the started / tag / done / failed
-        events name (seed: CMD_STARTED_OK)."""
-        segments = [{"positions": t.positions, "velocities": t.velocities, "marks": list(t.marks)}
-                    for t in trajectories]
-        command_id = f"{command}-{next(self._command_ids)}"
-        with self._state_lock:
-            if self._state is not State.RESTING:  # an e-stop may have come while planning
-                raise WrongState(f"{command} needs the arm at rest, it is {self._state.value}")
-            self._motion = RunningMotion(command_id, command, point_name, tags or {}, aux or {})
-            self._motion_state = states.RUNNING_TRAJECTORY
-            self._move_to(State.MOVING, f"{command} {point_name}".strip())
-        self.bus.command(command_id, command, Phase.STARTED, point_name)
-        # Stop and resume ramps keep to the set acceleration, like the planned motion.
-        self.link.send({"op": "run", "id": command_id, "segments": segments,
-                        "acceleration": self._settings.joint_accelerations})
-        return command_id
-
-    def stop_motion(self, timeout: float = 10.0) -> None:
-        """Seed 3.6.1: decelerate along the path and hold; blocks until the arm is at rest."""
-        motion = self._motion
-        self.link.send({"op": "stop"})
-        self._wait_motion(motion, ("paused", "done", "failed", "aborted"), timeout, "the stop")
-
-    def resume_motion(self) -> None:
-        motion = self._motion
-        with self._state_lock:
-            motion.phase = "running"
-            self._motion_state = states.RUNNING_TRAJECTORY
-            self._move_to(State.MOVING, "resumed")
-        self.link.send({"op": "resume"})
-        self.bus.command(motion.command_id, motion.command, Phase.RESUMED, motion.point_name)
-
-    def abort_motion(self, timeout: float = 10.0) -> None:
-        """Seed 3.6.2: drop the stopped motion (and the queue); the arm stays where it is."""
-        motion = self._motion
-        if motion is None:
-            return  # nothing queued: the queue is already clear
-        self.link.send({"op": "abort"})
-        self._wait_motion(motion, ("done", "failed", "aborted"), timeout, "the abort")
-
-    def _wait_motion(self, motion: RunningMotion | None, phases, timeout: float, what: str) -> None:
-        if motion is None:
-            return
-        with self._motion_changed:
-            if not self._motion_changed.wait_for(lambda: motion.phase in phases, timeout):
-                raise ControllerFailure(f"timed out after {timeout:g} s waiting for {what}")
-
-    def _motion_event(self, msg: dict) -> None:
-        """The executor's reports on the running motion (executor.py), in order."""
-        motion = self._motion
-        if motion is None or msg.get("id") != motion.command_id:
-            log.warning("cycle report for no running motion: %r", msg)
-            return
-        op = msg["op"]
-        if op == "mark":
-            label = msg["label"]
-            for command in motion.aux.get(label, ()):
-                self._run_aux(motion, command)
-            if label in motion.tags:
-                name, index = motion.tags[label]
-                self.last_tag = (motion.point_name, name)
-                self.bus.command(motion.command_id, motion.command, Phase.TAG_REACHED,
-                                 motion.point_name, name, index)
-            return
-        with self._state_lock:
-            motion.phase = op if op != "resumed" else "running"
-            if op == "paused":
-                self._motion_state = states.ROBOT_PAUSED
-                self._move_to(State.PAUSED, "stopped on command")
-            elif op in ("done", "failed", "aborted"):
-                self._motion = None
-                self._motion_state = {"done": states.ROBOT_IDLE, "failed": states.ROBOT_STOPPED_ON_ERROR,
-                                      "aborted": states.ROBOT_STOPPED_ON_COMMAND}[op]
-                if self._state in (State.MOVING, State.PAUSED):
-                    self._move_to(State.RESTING, f"{motion.command} {op}")
-        phase = {"paused": Phase.PAUSED, "done": Phase.DONE, "failed": Phase.FAILED,
-                 "aborted": Phase.ABORTED}.get(op)
-        if phase is not None:
-            self.bus.command(motion.command_id, motion.command, phase, motion.point_name,
-                             message=msg.get("message", ""))
-        if op == "failed" or msg.get("message"):  # seed 3.4.1: an error alarm names the command
-            self.bus.alarm(Severity.ERROR if op == "failed" else Severity.WARNING,
-                           ALARM_MOTION, f"{motion.command} {motion.point_name}: "
-                           f"{msg.get('message', op)}".strip(), motion.command_id)
-        with self._motion_changed:
-            self._motion_changed.notify_all()
-
-    # ---- 3.5 paths ---------------------------------------------------------------------------------
-
-    def path_load(self, name: str, frame: Frame, straight: bool, relative: bool, specs,
-                  total: int | None = None) -> tuple[int, int]:
-        """Seed 3.5.1 pathLoad: resolve and check every point, then append them to the named
-        queue in one transaction; nothing is stored if any point fails. Returns (points
-        loaded, path length)."""
-        path = path_planning.load(self.planner, self.paths.get(name), name, frame, straight,
-                                  relative, specs, self._settings, self.outputs,
-                                  self.planning_start(), total)
-        self.paths.put(path)
-        return len(specs), len(path.points)
-
-    def path_clear(self, name: str) -> None:
-        motion = self._motion
-        if motion is not None and motion.point_name == name and motion.command == "PathMove":
-            raise WrongState(f"path {name!r} is running; stop and abort it first")
-        self.paths.delete(name)
-
-    def path_move(self, name: str, cycles: int) -> str:
-        """Seed 3.5.2 pathMove: `cycles` passes; 0 is a dry run without aux commands."""
-        path = self.paths.get(name)
-        if path is None:
-            raise NotFound(f"no path named {name!r}")
-        trajectories = path_planning.plan_run(self.planner, path, self.planning_start(),
-                                              self._settings, cycles)
-        tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
-        aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
-                                      if p.aux_commands}
-        return self.start_motion("PathMove", name, trajectories, tags, aux)
-
-    def _run_aux(self, motion: RunningMotion, command: str) -> None:
-        out = aux_commands.parse(command, self.outputs)
-        io = self.controller.get_dout_id(out.name)
-        if self.controller.write_dout(io, DoutValue.ONE if out.value else DoutValue.ZERO) \
-                is not Status.OK:
-            self.bus.alarm(Severity.WARNING, ALARM_CONTROLLER,
-                           f"aux command {command!r} failed", motion.command_id)
-
-    # ---- safety ----------------------------------------------------------------------------------
+    # ---- safety ----------------------------------------------------------------------------
 
     def _session_ended(self, session: Session, reason: str) -> None:
-        """The seed's disconnect handler (2.2): stop, deactivate and release."""
+        """A session ended (any thread): its questions take their defaults; if it held the
+        lock, the seed's disconnect handler (2.2) runs on the safety worker."""
         self.rsvp.abandon(session)
         with self._state_lock:
             if self._holder is not session:
                 return
             self._holder = self._lease = None
-            was = self._state
-        if was in states.ACTIVE:
-            try:
-                self.abort_motion()  # stop along the path, then drives off
-            except ControllerFailure:
-                log.error("the motion did not stop in time; disabling the drives now")
-            self.controller.disable()
-        if was is not State.ERROR:
-            self._move_to(State.UNLOCKED, f"lock holder {session.client_name} gone: {reason}")
-        self.bus.alarm(Severity.WARNING, ALARM_LOCK_HOLDER_LOST,
-                       f"lock holder {session.client_name} disconnected ({reason}); motion "
-                       f"stopped, drives off, lock released")
+            self._epoch += 1
+        self.bus.alarm(Severity.WARNING, alarms.LOCK_HOLDER_LOST,
+                       f"lock holder {session.client_name} disconnected ({reason}): stopping, "
+                       f"powering down and releasing")
+        self.motions.stop_now()   # reaches the cycle at once; the waiting is the worker's
+        self.safety.submit(lambda: self._disconnect_handler(session, reason),
+                           f"disconnect handler for {session.client_name}")
 
-    def _fault(self, code: int, message: str) -> None:
+    def _disconnect_handler(self, session: Session, reason: str) -> None:
+        if self._state in states.ACTIVE:
+            self._power_down(f"lock holder {session.client_name} gone")
         with self._state_lock:
-            if self._state is State.ERROR:
-                return
+            if self._state is State.INACTIVE:
+                self._transition({State.INACTIVE}, State.UNLOCKED,
+                                 f"lock holder {session.client_name} gone: {reason}")
+        self.bus.alarm(Severity.WARNING, alarms.LOCK_HOLDER_LOST,
+                       f"lock holder {session.client_name} gone: motion stopped, drives off, "
+                       f"lock released")
+
+    def _fault(self, code: int, message: str) -> bool:
+        """Into Error (from any state but Idle and Error); False if it was there already."""
+        with self._state_lock:
+            if self._state in (State.ERROR, State.IDLE):
+                return False
             self._error = message
-        self.controller.disable()
-        self._move_to(State.ERROR, message)
-        self.bus.alarm(Severity.CRITICAL if code == ALARM_ESTOP else Severity.ERROR, code, message)
+            self._transition(set(State), State.ERROR, message)
+        self.bus.alarm(Severity.CRITICAL if code in (alarms.ESTOP, alarms.CONTROLLER_LOST)
+                       else Severity.ERROR, code, message)
+        return True
+
+    def controller_lost(self, reason: str) -> None:
+        """The link lost the controller (its process died or fell silent): Error, an alarm
+        naming the cause, the running command failed, health NOT_SERVING. The lock stays with
+        its holder, who resets (which restarts the controller) or releases."""
+        self.on_health(False)
+        self._fault(alarms.CONTROLLER_LOST, f"controller lost: {reason}")
+        self.motions.fail_running(f"controller lost: {reason}")
+        with self._controller_changed:
+            self._controller_changed.notify_all()
 
     def _controller_event(self, text: str) -> None:
-        """The controller's event function (LLI 5.2.1): its errors fault the device."""
+        """The controller's event function (LLI 5.2.1): its errors fault an active device. It
+        comes before the Executor's report of the same cycle, so the e-stop is asked for."""
         log.warning("controller: %s", text)
-        if self.controller.state().estop is EstopState.ESTOP:
-            if self._state not in (State.ERROR, State.IDLE):
-                self._fault(ALARM_ESTOP, "e-stop pressed: motion stopped, drives off")
+        if "outbox" in text:
+            self.bus.alarm(Severity.ERROR, alarms.OVERFLOW, f"controller: {text}")
+            return
+        try:
+            estop = self.controller.state().estop is EstopState.ESTOP
+        except (CycleProcessError, TimeoutError):
+            return   # the controller is gone: the link reports that
+        if estop:
+            self._fault(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
         elif self._state in states.ACTIVE:
-            self._fault(ALARM_CONTROLLER, f"controller error: {text}")
+            if self._fault(alarms.CONTROLLER, f"controller error: {text}"):
+                with contextlib.suppress(ControllerFailure):
+                    self._command_controller("disable")
         else:
-            self.bus.alarm(Severity.WARNING, ALARM_CONTROLLER, f"controller: {text}")
+            self.bus.alarm(Severity.WARNING, alarms.CONTROLLER, f"controller: {text}")
 
     def on_cycle_message(self, msg: dict) -> None:
-        """The Executor's posts (executor.py), on the link's dispatch thread."""
-        if msg.get("op") != "feedback":
-            self._motion_event(msg)
+        """The Executor's reports (executor.py), in order, on the link's dispatch thread."""
+        if msg.get("op") != "controller":
+            self.motions.on_report(msg)
             return
-        feedback = Feedback(msg["time"], np.asarray(msg["position"]), np.asarray(msg["velocity"]),
-                            np.asarray(msg["command"]), EnableState(msg["enable"]), msg["estop"])
-        with self._feedback_changed:
-            previous, self._feedback = self._feedback, feedback
-            self._feedback_changed.notify_all()
-        if feedback.estop and self._state not in (State.ERROR, State.IDLE):
-            self._fault(ALARM_ESTOP, "e-stop pressed: motion stopped, drives off")
-        elif previous and previous.estop and not feedback.estop and self._holder:
-            threading.Thread(target=self._offer_reset, args=(self._holder,), daemon=True,
+        estop, was_estop = bool(msg["estop"]), self._estop
+        with self._controller_changed:
+            self._power, self._estop = EnableState(msg["enable"]), estop
+            self._controller_changed.notify_all()
+        if estop and not was_estop:
+            self._fault(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
+        elif was_estop and not estop and self._holder is not None:
+            holder = self._holder
+            threading.Thread(target=self._offer_reset, args=(holder,), daemon=True,
                              name="rsvp-estop-released").start()
 
     def _offer_reset(self, holder: Session) -> None:
@@ -512,7 +418,7 @@ class Device:
             try:
                 self.reset()
             except EstopActive as refused:  # pressed again meanwhile
-                self.bus.alarm(Severity.WARNING, ALARM_ESTOP, str(refused))
+                self.bus.alarm(Severity.WARNING, alarms.ESTOP, str(refused))
 
 
 def _operate_panel(controller, action: str) -> tuple[bool, bool]:
@@ -520,3 +426,4 @@ def _operate_panel(controller, action: str) -> tuple[bool, bool]:
     panel = controller.panel
     getattr(panel, action)()
     return panel.estop_pressed, not panel.door_closed
+

@@ -1,19 +1,16 @@
 """One error vocabulary for the device server, mapped once to gRPC statuses.
 
-Domain code raises a `CommandError` subclass; `ErrorMappingInterceptor` turns it into a status
-whose google.rpc.ErrorInfo (domain "landscape") carries a reason and, in metadata["ret_code"],
-the seed's return code (section 5), so any client can recover the seed's retVal.
+Domain code raises a `CommandError` subclass; the servicers' guard (servicers/guard.py) turns it
+into a status whose google.rpc.ErrorInfo (domain "landscape") carries a reason and, in
+metadata["ret_code"], the seed's return code (section 5), so any client can recover the seed's
+retVal. Anything else that escapes a body becomes `Internal`, never UNKNOWN.
 """
 from __future__ import annotations
-
-import logging
 
 import grpc
 from google.protobuf import any_pb2
 from google.rpc import error_details_pb2, status_pb2
 from grpc_status import rpc_status
-
-log = logging.getLogger(__name__)
 
 DOMAIN = "landscape"
 
@@ -77,43 +74,6 @@ def to_status(error: CommandError) -> grpc.Status:
         code=error.status.value[0], message=error.message, details=[detail]))
 
 
-def _mapped(behavior, streaming_response: bool):
-    """Wrap one RPC behaviour so a CommandError ends the call with its status."""
-    if streaming_response:
-        def generate(request, context):
-            try:
-                yield from behavior(request, context)
-            except CommandError as error:
-                context.abort_with_status(to_status(error))
-        return generate
-
-    def call(request, context):
-        try:
-            return behavior(request, context)
-        except CommandError as error:
-            context.abort_with_status(to_status(error))
-    return call
-
-
-class ErrorMappingInterceptor(grpc.ServerInterceptor):
-    """Maps CommandError to statuses for every RPC, whatever its streaming shape."""
-
-    def intercept_service(self, continuation, handler_call_details):
-        handler = continuation(handler_call_details)
-        if handler is None:
-            return None
-        for kind, factory in (("unary_unary", grpc.unary_unary_rpc_method_handler),
-                              ("unary_stream", grpc.unary_stream_rpc_method_handler),
-                              ("stream_unary", grpc.stream_unary_rpc_method_handler),
-                              ("stream_stream", grpc.stream_stream_rpc_method_handler)):
-            behavior = getattr(handler, kind)
-            if behavior is not None:
-                return factory(_mapped(behavior, handler.response_streaming),
-                               request_deserializer=handler.request_deserializer,
-                               response_serializer=handler.response_serializer)
-        return handler
-
-
 class Unimplemented(CommandError):
     """A command of the contract that this device server does not carry out yet."""
 
@@ -125,3 +85,16 @@ class Unreachable(OutOfRange):
     metadata names where (a point index or a fraction of the path) when known."""
 
     reason = "UNREACHABLE"
+
+
+class ResourceExhausted(CommandError):
+    """A bound on what one client may hold (streams, sizes) was reached."""
+
+    status, reason = grpc.StatusCode.RESOURCE_EXHAUSTED, "RESOURCE_EXHAUSTED"
+
+
+class Internal(CommandError):
+    """Something failed inside the server that should not have; it is logged with its
+    traceback. Nothing the call was to do should be assumed done."""
+
+    status, reason = grpc.StatusCode.INTERNAL, "INTERNAL"

@@ -20,6 +20,7 @@ that resumes "after the last sequence I saw" resumes correctly after a loss too.
 """
 from __future__ import annotations
 
+import asyncio
 import enum
 import itertools
 import threading
@@ -183,10 +184,11 @@ class SequenceOutOfRange(ValueError):
 # -- Subscriptions ---------------------------------------------------------------------------
 
 class Subscription:
-    """One reader of the bus: `get()` or iterate; `close()` (or leave the `with`) to stop.
+    """One reader of the bus: `get()` or iterate, or `await next_async()` on an event loop;
+    `close()` (or leave the `with`) to stop.
 
     Made by `EventBus.subscribe`. Thread-safe; closing it from another thread wakes a
-    waiting `get`.
+    waiting `get` or `next_async`.
     """
 
     def __init__(self, bus: EventBus, capacity: int, replay: Sequence[Event]):
@@ -196,6 +198,7 @@ class Subscription:
         self._replay = deque(replay)   # resumed events; not bounded, the history bounds it
         self._live: deque[Event] = deque()
         self._closed = False
+        self._waiter: asyncio.Future | None = None   # an async reader waiting, on its loop
 
     def get(self, timeout: float | None = None) -> Event | None:
         """The next event, waiting up to `timeout` seconds (None: forever).
@@ -212,6 +215,22 @@ class Subscription:
     def __iter__(self) -> Iterator[Event]:
         while (event := self.get()) is not None:
             yield event
+
+    async def next_async(self) -> Event | None:
+        """The next event, awaited on the running loop; None once closed. Publishers on any
+        thread wake it through the loop (no thread waits for it)."""
+        loop = asyncio.get_running_loop()
+        while True:
+            with self._cond:
+                if self._closed:
+                    return None
+                if self._replay or self._live:
+                    return (self._replay or self._live).popleft()
+                waiter = self._waiter = loop.create_future()
+            try:
+                await waiter
+            finally:
+                self._waiter = None
 
     @property
     def closed(self) -> bool:
@@ -242,6 +261,7 @@ class Subscription:
                 live.append(_lost(first, event.sequence - 1, clock()))
             live.append(event)
             self._cond.notify()
+            self._wake()
 
     def _end(self) -> None:
         with self._cond:
@@ -249,9 +269,21 @@ class Subscription:
             self._replay.clear()
             self._live.clear()
             self._cond.notify_all()
+            self._wake()
+
+    def _wake(self) -> None:
+        # With _cond held: hand the async reader's wake-up to its loop.
+        waiter, self._waiter = self._waiter, None
+        if waiter is not None:
+            waiter.get_loop().call_soon_threadsafe(_resolve, waiter)
 
     def _ready(self) -> bool:
         return self._closed or bool(self._replay) or bool(self._live)
+
+
+def _resolve(waiter: asyncio.Future) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 def _lost(first: int, last: int, now: float) -> Event:

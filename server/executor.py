@@ -13,21 +13,28 @@ keeping every joint's acceleration within its limit allows. Keeping the rate alw
 (the trajectory is within the limits at r = 1, so at any r <= 1), so a stop or a restart never
 asks more of a joint than its limit.
 
-Messages, plain dicts (picklable, so they cross the process boundary):
-  server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2, "segments": [
-                      {"positions": (N, 6), "velocities": (N, 6), "marks": [(sample, label)]},
-                      ...]}   played in order; a mark reports its label when its sample is passed
+Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
+(picklable, so they cross the process boundary):
+  server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2 (ramps that start and
+                    resume), "stop_acceleration": (6,) rad/s^2 (stops: the arm's own),
+                    "arrays": SharedArrays of `pack_run`}: segments played in order; a mark
+                    reports its label when its sample is passed
                    {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
-  cycle -> server  {"op": "feedback", "time": s, "position": [rad], "velocity": [rad/s],
-                    "command": [rad], "enable": EnableState, "estop": bool}
-                   {"op": "mark", "id", "label"}  {"op": "paused", "id"}  {"op": "resumed", "id"}
-                   {"op": "done", "id"}  {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
+  cycle -> server  {"op": "controller", "enable": EnableState value, "estop": bool} on change
+                   {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label"}
+                   {"op": "paused", "id"}  {"op": "resumed", "id"}  {"op": "done", "id"}
+                   {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
+from landscape.server.feedback import (CMD, ENABLE, ESTOP, QD, SEQ, TAU, TIME, WALL, WIDTH, Q,
+                                       FeedbackRing)
 from landscape.sim.controller import Controller, EnableState, EstopState, JointCmd
+from landscape.sim.shared_array import SharedArrays
 
 # At rest means: every joint this close to its command (rad) and this slow (rad/s); an arm that
 # is not there after SETTLE_TIMEOUT (s) is reported anyway, with its following error.
@@ -42,9 +49,11 @@ class _Motion:
     def __init__(self, msg: dict, dt: float):
         self.id = msg["id"]
         self.dt = dt
-        self.segments = list(msg["segments"])
+        self.segments = msg["segments"]   # a sequence; read one segment at a time
         self._load(0)
-        self.limit = np.asarray(msg["acceleration"], dtype=float)   # rad/s^2, per joint
+        # rad/s^2 per joint: the ramps' limit, `run_limit` to start and resume; a stop sets
+        # `stop_limit` (the arm's own, by default the same).
+        self.limit = self.run_limit = self.stop_limit = np.asarray(msg["acceleration"], dtype=float)
         self.rate = 1.0         # samples per cycle
         self.target_rate = 1.0  # 0 while stopping, 1 while running or resuming
         self.paused = False
@@ -57,9 +66,14 @@ class _Motion:
         segment = self.segments[index]
         self.positions = np.asarray(segment["positions"], dtype=float)
         self.velocities = np.asarray(segment["velocities"], dtype=float)
-        # The trajectory's acceleration at rate 1, sample i to i + 1 (rad/s^2).
-        self.accelerations = np.diff(self.velocities, axis=0, append=self.velocities[-1:]) / self.dt
-        self.marks = list(segment.get("marks", ()))
+        # The trajectory's acceleration at rate 1, sample i to i + 1 (rad/s^2): precomputed by
+        # the server for a run, so that loading a long segment costs the cycle nothing.
+        self.accelerations = segment.get("accelerations")
+        if self.accelerations is None:
+            self.accelerations = np.diff(self.velocities, axis=0,
+                                         append=self.velocities[-1:]) / self.dt
+        self.marks = segment.get("marks", ())   # (sample, label) rows, in order
+        self.next_mark = 0
         self.s = 0.0
 
     def next_segment(self) -> bool:
@@ -116,15 +130,20 @@ class _Motion:
 
 
 class Executor:
-    def __init__(self, mailbox, cycle_time: float, feedback_every: int = 5):
+    """The cyclic function. `ring` receives every cycle's feedback (feedback.py); reports go to
+    the server through `mailbox`, in order, after that cycle's row."""
+
+    def __init__(self, mailbox, cycle_time: float, ring: FeedbackRing | None = None):
         self.mailbox = mailbox
         self.cycle_time = cycle_time
-        self.feedback_every = feedback_every
+        self.ring = ring
+        self._sequence = ring.head + 1 if ring is not None else 0   # goes on after a restart
+        self._row = np.full(WIDTH, np.nan)
         self._hold: np.ndarray | None = None   # commanded position when not moving, rad
         self._motion: _Motion | None = None
-        self._cycles = 0
+        self._arrays: SharedArrays | None = None   # the running motion's trajectory block
         self._last_state = None
-        self._reports: list[dict] = []   # motion reports of this cycle, posted after feedback
+        self._reports: list[dict] = []   # reports of this cycle, posted after its row
 
     def __call__(self, ctrl: Controller) -> bool:
         fbk = ctrl.get()
@@ -142,35 +161,45 @@ class Executor:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
 
-        self._cycles += 1
         key = (state.enable, state.estop)
-        # Feedback goes first, so the server sees where the arm is when a report arrives.
-        if key != self._last_state or self._cycles % self.feedback_every == 0 or self._reports:
+        if key != self._last_state:   # first, so the server knows the power before the rest
             self._last_state = key
-            self.mailbox.post({
-                "op": "feedback", "time": getattr(ctrl, "time", 0.0),
-                "position": fbk.pos.tolist(), "velocity": fbk.vel.tolist(),
-                "command": pos.tolist(), "enable": state.enable,
-                "estop": state.estop is EstopState.ESTOP})
+            self._reports.insert(0, {"op": "controller", "enable": int(state.enable),
+                                     "estop": state.estop is EstopState.ESTOP})
+        if self.ring is not None:
+            self._write_row(ctrl, fbk, pos, state)
         for report in self._reports:
             self.mailbox.post(report)
         self._reports.clear()
         return True
 
+    def _write_row(self, ctrl, fbk, pos, state) -> None:
+        row = self._row
+        row[SEQ] = self._sequence
+        row[TIME] = getattr(ctrl, "time", 0.0)
+        row[WALL] = time.time()
+        row[Q], row[QD], row[CMD], row[TAU] = fbk.pos, fbk.vel, pos, fbk.torque
+        row[ENABLE] = int(state.enable)
+        row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
+        self.ring.write(self._sequence, row)
+        self._sequence += 1
+
     def _play(self, motion: _Motion, fbk) -> tuple[np.ndarray, np.ndarray]:
         if motion.settling is None:
             motion.advance()
-            while motion.marks and motion.marks[0][0] <= motion.s:
+            marks = motion.marks
+            while motion.next_mark < len(marks) and marks[motion.next_mark][0] <= motion.s:
                 self._reports.append({"op": "mark", "id": motion.id,
-                                      "label": motion.marks.pop(0)[1]})
+                                      "label": int(marks[motion.next_mark][1])})
+                motion.next_mark += 1
             if motion.s >= motion.last and not motion.next_segment():
                 motion.settling = "done"
             elif motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused:
                 motion.settling = "aborted" if motion.abort_when_paused else "paused"
             else:
-                self._hold = motion.sample(motion.positions)
+                self._hold = motion.sample(motion.positions).copy()   # outlives the motion's arrays
                 return self._hold, motion.sample(motion.velocities) * motion.rate
-            self._hold = motion.sample(motion.positions)
+            self._hold = motion.sample(motion.positions).copy()   # outlives the motion's arrays
         # At the end of the motion or of a stop ramp: hold until the arm has settled there, so
         # "done" and "paused" mean the arm is at rest where the command says.
         motion.settle_cycles += 1
@@ -191,10 +220,16 @@ class Executor:
         if op == "run":
             if motion is not None:
                 self._end("aborted")
-            self._motion = _Motion(msg, self.cycle_time)
+            self._arrays = msg["arrays"]
+            self._motion = _Motion({**msg, "segments": _Segments(self._arrays.open())},
+                                   self.cycle_time)
+            self._motion.stop_limit = np.asarray(msg["stop_acceleration"], dtype=float)
+            self._reports.append({"op": "started", "id": msg["id"], "wall_time": time.time()})
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
+            motion.limit = motion.stop_limit   # stops brake at the arm's full deceleration
             motion.target_rate = 0.0
         elif op == "resume" and motion is not None and motion.paused:
+            motion.limit = motion.run_limit
             motion.paused = False
             motion.target_rate = 1.0
             self._reports.append({"op": "resumed", "id": motion.id})
@@ -202,9 +237,51 @@ class Executor:
             if motion.paused:
                 self._end("aborted")
             elif motion.settling is None:  # never drop a moving arm: stop along the path first
+                motion.limit = motion.stop_limit
                 motion.abort_when_paused = True
                 motion.target_rate = 0.0
 
     def _end(self, how: str, **details) -> None:
         self._reports.append({"op": how, "id": self._motion.id, **details})
         self._motion = None
+        if self._arrays is not None:
+            self._arrays.close()
+            self._arrays = None
+
+
+class _Segments:
+    """The segments of a run, read from its shared arrays when played (not all at once: a run
+    may have many): "positions", "velocities", "accelerations" (N, 6), "marks" (M, 2) as
+    (sample in its segment, label), and "segments" (S, 4): row start, row end, first mark,
+    end of marks."""
+
+    def __init__(self, arrays: dict):
+        self._a = arrays
+
+    def __len__(self) -> int:
+        return len(self._a["segments"])
+
+    def __getitem__(self, index: int) -> dict:
+        start, end, m0, m1 = (int(v) for v in self._a["segments"][index])
+        return {"positions": self._a["positions"][start:end],
+                "velocities": self._a["velocities"][start:end],
+                "accelerations": self._a["accelerations"][start:end],
+                "marks": self._a["marks"][m0:m1]}
+
+
+def pack_run(trajectories, dt: float) -> dict[str, np.ndarray]:
+    """The arrays of a run of back-to-back trajectories, for `_Segments` (server side)."""
+    rows = [0]
+    marks, segments = [], []
+    for t in trajectories:
+        m0 = len(marks)
+        marks.extend(t.marks)
+        segments.append((rows[-1], rows[-1] + len(t), m0, len(marks)))
+        rows.append(rows[-1] + len(t))
+    positions = np.concatenate([t.positions for t in trajectories])
+    velocities = np.concatenate([t.velocities for t in trajectories])
+    accelerations = np.concatenate([
+        np.diff(t.velocities, axis=0, append=t.velocities[-1:]) / dt for t in trajectories])
+    return {"positions": positions, "velocities": velocities, "accelerations": accelerations,
+            "marks": np.array(marks, dtype=np.int64).reshape(-1, 2),
+            "segments": np.array(segments, dtype=np.int64).reshape(-1, 4)}

@@ -7,7 +7,8 @@ import itertools
 import threading
 from dataclasses import dataclass
 
-from landscape.server.events import EventBus, RsvpAnswer, RsvpRequest
+from landscape.server import alarms
+from landscape.server.events import EventBus, RsvpAnswer, RsvpRequest, Severity
 from landscape.server.sessions import Session
 
 
@@ -38,8 +39,12 @@ class RsvpBroker:
             pending = _Pending(session, event.detail, threading.Event())
             with self._lock:
                 self._pending[rsvp_id] = pending
-            session.outbox.put(event.detail)
-            pending.answered.wait(timeout_s)   # also woken by abandon(): then no answer
+            if session.outbox.put(event.detail):
+                pending.answered.wait(timeout_s)   # also woken by abandon(): then no answer
+            else:
+                self.bus.alarm(Severity.WARNING, alarms.OVERFLOW,
+                               f"session {session.id} has too many questions waiting; "
+                               f"{rsvp_id} takes its default")
             with self._lock:
                 self._pending.pop(rsvp_id, None)
             if pending.answer is not None:

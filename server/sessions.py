@@ -2,30 +2,76 @@
 
 A session ends once, for one reason (stream closed, keep-alive timeout, server stopping); the
 registry then calls `on_end(session, reason)`, which the device uses for the seed's disconnect
-handler (section 2.2). Keep-alive timeouts are checked by one watchdog thread.
+handler (section 2.2). Keep-alive timeouts are checked by one watchdog thread. What the device
+sends a session (RSVP questions) waits in its bounded `outbox` until the session's stream,
+on the event loop, takes it.
 """
 from __future__ import annotations
 
+import asyncio
 import itertools
 import logging
-import queue
 import secrets
 import threading
 import time
-from typing import Callable
+from typing import Any, Callable
 
 log = logging.getLogger(__name__)
 
+OUTBOX_SIZE = 64      # RSVP questions one session may have waiting to be sent
+
+
+class Outbox:
+    """Items for a session's stream, put from any thread, taken on the stream's event loop.
+    Bounded: `put` returns False (and keeps nothing) once `maxsize` items wait."""
+
+    END = object()     # taken last: the session ended
+
+    def __init__(self, loop: asyncio.AbstractEventLoop | None, maxsize: int = OUTBOX_SIZE):
+        self._loop = loop
+        self._queue: asyncio.Queue = asyncio.Queue(maxsize + 1)   # room for END
+        self._count = 0
+        self._maxsize = maxsize
+        self._lock = threading.Lock()
+
+    def put(self, item: Any) -> bool:
+        with self._lock:
+            if self._count >= self._maxsize:
+                return False
+            self._count += 1
+        self._deliver(item)
+        return True
+
+    def end(self) -> None:
+        self._deliver(Outbox.END)
+
+    async def get(self) -> Any:
+        item = await self._queue.get()
+        if item is not Outbox.END:
+            with self._lock:
+                self._count -= 1
+        return item
+
+    def _deliver(self, item: Any) -> None:
+        if self._loop is None:
+            return    # no stream to send to (tests opening sessions directly)
+        try:
+            self._loop.call_soon_threadsafe(self._queue.put_nowait, item)
+        except RuntimeError:
+            pass      # the loop is closed: the stream is gone
+
 
 class Session:
-    def __init__(self, session_id: str, client_name: str):
+    def __init__(self, session_id: str, client_name: str,
+                 loop: asyncio.AbstractEventLoop | None = None):
         self.id = session_id
         self.secret = secrets.token_urlsafe(24)   # given only on the session stream
         self.client_name = client_name
         self.last_seen = time.monotonic()
-        self.outbox: queue.Queue = queue.Queue()   # what the Connect stream sends to the client
+        self.outbox = Outbox(loop)    # what the Connect stream sends to the client
         self.ended = threading.Event()
         self.end_reason = ""
+        self.end_code = ""            # the gRPC status the server ends the stream with, if any
 
     def __repr__(self) -> str:
         return f"Session({self.id!r}, {self.client_name!r})"
@@ -44,8 +90,9 @@ class SessionRegistry:
         self._watchdog = threading.Thread(target=self._watch, name="session-watchdog", daemon=True)
         self._watchdog.start()
 
-    def open(self, client_name: str) -> Session:
-        session = Session(f"s{next(self._numbers)}-{secrets.token_hex(4)}", client_name or "anonymous")
+    def open(self, client_name: str, loop: asyncio.AbstractEventLoop | None = None) -> Session:
+        session = Session(f"s{next(self._numbers)}-{secrets.token_hex(4)}",
+                          client_name or "anonymous", loop)
         with self._lock:
             self._sessions[session.id] = session
         log.info("session %s opened by %r", session.id, session.client_name)
@@ -65,12 +112,15 @@ class SessionRegistry:
     def touch(self, session: Session) -> None:
         session.last_seen = time.monotonic()
 
-    def end(self, session: Session, reason: str) -> None:
+    def end(self, session: Session, reason: str, code: str = "") -> None:
+        """End `session` (once; later calls do nothing). `code` names the gRPC status its
+        stream closes with when the server ends it ("" when the stream is gone already)."""
         with self._lock:
             if self._sessions.pop(session.id, None) is None:
                 return  # already ended
-        session.end_reason = reason
+        session.end_reason, session.end_code = reason, code
         session.ended.set()
+        session.outbox.end()
         log.info("session %s (%s) ended: %s", session.id, session.client_name, reason)
         try:
             self._on_end(session, reason)
@@ -82,7 +132,7 @@ class SessionRegistry:
         with self._lock:
             sessions = list(self._sessions.values())
         for session in sessions:
-            self.end(session, "server stopping")
+            self.end(session, "the server is stopping", "UNAVAILABLE")
 
     def _watch(self) -> None:
         period = min(0.1, self.keepalive_timeout / 4)
@@ -91,4 +141,5 @@ class SessionRegistry:
             with self._lock:
                 stale = [s for s in self._sessions.values() if s.last_seen < deadline]
             for session in stale:
-                self.end(session, f"no keep-alive for {self.keepalive_timeout:g} s")
+                self.end(session, f"no keep-alive for {self.keepalive_timeout:g} s",
+                         "DEADLINE_EXCEEDED")

@@ -39,14 +39,16 @@ class Rule:
     states: frozenset
     lease: Lease
     seed: str                # the seed section that names the states
+    # Stops the arm: never waits behind another command (DESIGN.md 5).
+    immediate: bool = False
 
 
 def _read(seed: str) -> Rule:
     return Rule(ALL, Lease.NONE, seed)
 
 
-def _cmd(states, seed: str) -> Rule:
-    return Rule(frozenset(states), Lease.HOLDER, seed)
+def _cmd(states, seed: str, immediate: bool = False) -> Rule:
+    return Rule(frozenset(states), Lease.HOLDER, seed, immediate)
 
 
 RULES: dict[str, Rule] = {
@@ -55,7 +57,7 @@ RULES: dict[str, Rule] = {
     # Release only with the drives off (Inactive), or to give up control in Error.
     "Release": _cmd({State.INACTIVE, State.ERROR}, "3.1.2"),
     "Activate": _cmd({State.INACTIVE}, "3.1.2"),
-    "Deactivate": _cmd(ACTIVE, "3.1.3"),
+    "Deactivate": _cmd(ACTIVE, "3.1.3", immediate=True),
     # 3.2 set commands: any locked state; they apply to later motions
     "SetSpeed": _cmd(LOCKED, "3.2.1"),
     "SetAcceleration": _cmd(LOCKED, "3.2.1"),
@@ -81,9 +83,9 @@ RULES: dict[str, Rule] = {
     "PathClearPath": _cmd(LOCKED, "3.5.1"),
     "PathMove": _cmd(RESTING, "3.5.2"),
     # 3.6 interruptions
-    "StopMotion": _cmd({State.MOVING}, "3.6.1"),
+    "StopMotion": _cmd({State.MOVING}, "3.6.1", immediate=True),
     "ResumeMotion": _cmd({State.PAUSED}, "3.6.2"),
-    "AbortMotion": _cmd({State.INACTIVE, State.RESTING, State.PAUSED}, "3.6.2"),
+    "AbortMotion": _cmd({State.INACTIVE, State.RESTING, State.PAUSED}, "3.6.2", immediate=True),
     # 3.7 sensors
     "GetSensorReading": _read("3.7.1"),
     "MoveReact": _cmd(RESTING, "3.7.2"),

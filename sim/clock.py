@@ -376,6 +376,9 @@ class ThreadedLockStepClock:
         self._calls: queue.SimpleQueue = queue.SimpleQueue()
         self._dispatch_queue: queue.SimpleQueue = queue.SimpleQueue()
         self._running = True
+        self._released = threading.Event()
+        self._released.set()
+        self.yield_period = 0.0005   # s of wall time between two hand-overs of the interpreter
         self.call_timeout = call_timeout
         self._threads = [threading.Thread(target=self._run, name="lockstep-cycle", daemon=True),
                          threading.Thread(target=self._dispatch, name="lockstep-dispatch",
@@ -413,22 +416,39 @@ class ThreadedLockStepClock:
             for thread in self._threads:
                 thread.join(5.0)
 
+    def hold(self) -> None:
+        """Stop stepping after the current cycle (simulated time stands still); calls and
+        messages are still served. For tests that need a race to happen in a given order."""
+        self._released.clear()
+
+    def release(self) -> None:
+        """Step again after `hold`."""
+        self._released.set()
+
     def _run(self) -> None:
         step, outbox = self.controller.step, self._mailbox.outbox
-        started, cycles = time.monotonic(), 0
+        clock, sleep = time.monotonic, time.sleep
+        started, cycles, yielded = clock(), 0, clock()
         try:
             while self._running:
-                step()
-                cycles += 1
+                if self._released.is_set():
+                    step()
+                    cycles += 1
+                else:
+                    self._released.wait(0.001)
                 if self._pace:  # keep simulated time from running ahead of the wall clock
-                    ahead = cycles * self.cycle_time / self._pace - (time.monotonic() - started)
+                    ahead = cycles * self.cycle_time / self._pace - (clock() - started)
                     if ahead > 0:
-                        time.sleep(ahead)
+                        sleep(ahead)
                 while outbox:
                     self._dispatch_queue.put(outbox.popleft())
                 while not self._calls.empty():
                     self._serve(*self._calls.get())
-                time.sleep(0)  # let the server's threads have the interpreter between cycles
+                # Let the server's threads have the interpreter now and then (not every cycle:
+                # handing the GIL over costs more than a cycle of the simulation).
+                if clock() - yielded > self.yield_period:
+                    sleep(0)
+                    yielded = clock()
         finally:
             for name in ("disable", "destroy"):
                 try:

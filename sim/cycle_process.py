@@ -29,6 +29,7 @@ is checked as well, so no orphan keeps stepping a robot.
 """
 from __future__ import annotations
 
+import faulthandler
 import gc
 import os
 import queue
@@ -81,15 +82,16 @@ class Mailbox:
     """The cycle's end of the message channel to the parent; nothing here ever blocks.
 
     `poll()` returns the oldest message the parent sent, or None. `post(msg)` queues a message
-    for the parent; it leaves at the end of this cycle. If the parent stops reading, the oldest
-    queued items are dropped beyond `max_queued` and counted in `dropped`.
+    for the parent; it leaves at the end of this cycle. Nothing posted is ever dropped (reports
+    of completions, faults and tags must arrive): if the parent stops reading, the queue grows,
+    and passing `high_water` items is said once, as an event, for the parent to alarm on.
     """
 
-    def __init__(self, max_queued: int = 10_000):
+    def __init__(self, high_water: int = 10_000):
         self.inbox: deque = deque()
         self.outbox: deque = deque()
-        self.max_queued = max_queued
-        self.dropped = 0
+        self.high_water = high_water
+        self._warned = False
 
     def poll(self) -> Any | None:
         return self.inbox.popleft() if self.inbox else None
@@ -102,10 +104,11 @@ class Mailbox:
         self._queue((EVENT, str(text)))
 
     def _queue(self, item: tuple) -> None:
-        if len(self.outbox) >= self.max_queued:
-            self.outbox.popleft()
-            self.dropped += 1
         self.outbox.append(item)
+        if len(self.outbox) > self.high_water and not self._warned:
+            self._warned = True
+            self.outbox.append((EVENT, f"the cycle's outbox holds over {self.high_water} "
+                                       f"reports: the server is not reading them"))
 
 
 def serve_call(controller, mailbox: Mailbox, method: str, args: tuple) -> Any:
@@ -142,7 +145,10 @@ class CycleLoop:
         self.stats = stats
         self.spin = min(spin, self.cycle_time / 2)
 
-    def run(self, between: Callable[[float], bool]) -> None:
+    def run(self, between: Callable[[float], bool],
+            wait: Callable[[float], None] | None = None) -> None:
+        """wait(until): how to pass the time up to `until` (perf_counter s) before spinning;
+        a plain sleep by default (the cycle process reads its pipe meanwhile)."""
         step, period, spin, stats = self.step, self.cycle_time, self.spin, self.stats
         clock, sleep = time.perf_counter, time.sleep
         deadline = clock() + period
@@ -150,7 +156,10 @@ class CycleLoop:
         while True:
             remaining = deadline - clock()
             if remaining > spin:
-                sleep(remaining - spin)
+                if wait is None:
+                    sleep(remaining - spin)
+                else:
+                    wait(deadline - spin)
             while clock() < deadline:
                 pass
             start = clock()
@@ -237,6 +246,14 @@ class _Server:
         if self.cycles % 64 == 0 and os.getppid() != self.parent_pid:
             self.running = False  # reparented: the parent died without closing the pipe
         return self.running
+
+    def wait(self, until: float) -> None:
+        """Until `until` (perf_counter s), take what the parent sends as it arrives, so a
+        message sent during the wait is in the mailbox for the very next cycle."""
+        clock = time.perf_counter
+        while self.running and (remaining := until - clock()) > 0:
+            if select.select((self.fd,), (), (), remaining)[0]:
+                self._read(until + self.guard)
 
     def _read(self, deadline: float) -> None:
         # At least one item per cycle, so even an overloaded loop still hears STOP.
@@ -348,6 +365,10 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
             raise SystemExit(1)  # still building: clean up on the way out
         server.running = False  # the loop ends after this cycle
 
+    faulthandler.enable()   # a crash in native code (pybullet) leaves its stack on stderr
+    # The parent may block signals in its threads (it waits for them with sigwait); a spawned
+    # child inherits that mask, and must not: it has handlers of its own.
+    signal.pthread_sigmask(signal.SIG_SETMASK, ())
     # Ctrl-C in a terminal reaches the whole process group; the parent decides when we stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, on_sigterm)
@@ -378,7 +399,7 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
     sys.setswitchinterval(0.0001)
     code = 0
     try:
-        loop.run(server.between)
+        loop.run(server.between, server.wait)
     except BaseException:
         _fatal(conn, traceback.format_exc())
         code = 1

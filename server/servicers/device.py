@@ -1,21 +1,22 @@
 """DeviceService: the LandScape server IDL (seed section 3). Thin: convert, call the device, wrap.
 
-Every RPC is guarded by the state table (guard.py); the ones not defined here answer
-UNIMPLEMENTED after that check.
+Every RPC is guarded by the state table (guard.py), which also decides where a body runs (the
+event loop, a command thread); the ones not defined here answer UNIMPLEMENTED after the check.
 """
 from __future__ import annotations
 
 from landscape.server import convert, path_planning, services
 from landscape.server.device import Device
-from landscape.server.servicers.guard import guarded
+from landscape.server.servicers.guard import blocking, guarded, lease_of
+from landscape.server.targets import Frame
 from landscape.sim.arm import urdf
 from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
 
 @guarded(services.DEVICE)
 class DeviceServicer(services.DEVICE.servicer_base):
-    def __init__(self, device: Device):
-        self.device = device
+    def __init__(self, device: Device, hub, dispatch, limits):
+        self.device, self.hub, self.dispatch, self.limits = device, hub, dispatch, limits
 
     # ---- 3.1 ----
     def Lock(self, request, context):
@@ -112,11 +113,12 @@ class DeviceServicer(services.DEVICE.servicer_base):
             units=convert.units_to_pb(s.units))
 
     def GetRobotPosition(self, request, context):
-        joints = self.device.feedback().position
+        sample = self.device.feedback()
         units = self.device.settings.units
+        world = self.hub.tool_pose(sample.sequence, sample.position, Frame.WORLD)
         return settings_pb2.GetRobotPositionResponse(
-            ret_val=convert.ok(), joint_position=units.angle_from_si(joints).tolist(),
-            world_position=convert.matrix_to_pose(self.device.tool_in_world(joints), units),
+            ret_val=convert.ok(), joint_position=units.angle_from_si(sample.position).tolist(),
+            world_position=convert.matrix_to_pose(world, units),
             units=convert.units_to_pb(units))
 
     def GetMotionControlState(self, request, context):
@@ -134,14 +136,14 @@ class DeviceServicer(services.DEVICE.servicer_base):
     def _move(self, command: str, request, relative: bool) -> types_pb2.RetVal:
         frame = convert.enum_value(convert.FRAMES, request.frame, "frame")
         values = convert.move_values(frame, request.values, self.device.settings.units)
-        command_id = self.device.move(command, request.point_name, frame, values, relative,
+        command_id = self.device.motions.move(command, request.point_name, frame, values, relative,
                                       convert.motion_type(request), convert.optional_speed(request))
         return convert.started(command_id)
 
     def MoveArc(self, request, context):
         units = self.device.settings.units
         frame = convert.enum_value(convert.FRAMES, request.frame, "frame")
-        command_id = self.device.move_arc(
+        command_id = self.device.motions.move_arc(
             request.point_name, frame, convert.move_values(frame, request.arc_value, units),
             convert.move_values(frame, request.goal_value, units),
             convert.enum_value(convert.OFFSETS, request.offset_type, "offset_type"),
@@ -149,41 +151,51 @@ class DeviceServicer(services.DEVICE.servicer_base):
         return motion_pb2.MoveArcResponse(ret_val=convert.started(command_id))
 
     # ---- 3.5 paths ----
-    def PathLoad(self, request_iterator, context):
-        header, frame, specs = convert.path_load_stream(request_iterator, self.device.settings.units,
-                                                        path_planning.MAX_POINTS)
-        loaded, length = self.device.path_load(
-            header.path_name, frame, convert.enum_value(convert.STRAIGHT, header.motion_type,
-                                                        "motion_type (JOINT or STRAIGHT)"),
-            convert.enum_value(convert.OFFSETS, header.offset_type, "offset_type"), specs,
-            header.number_of_points or None)
+    async def PathLoad(self, request_iterator, context):
+        # The points arrive without holding anything: stops and other commands go on while a
+        # long path streams in; only storing it takes the command lock.
+        stream = convert.PathLoadStream(self.device.settings.units, path_planning.MAX_POINTS)
+        async for request in request_iterator:
+            stream.feed(request)
+        header, frame, specs = stream.finish()
+        straight = convert.enum_value(convert.STRAIGHT, header.motion_type,
+                                      "motion_type (JOINT or STRAIGHT)")
+        relative = convert.enum_value(convert.OFFSETS, header.offset_type, "offset_type")
+        lease = lease_of(context)
+
+        def store():
+            with self.device.command("PathLoad", lease):
+                return self.device.motions.path_load(header.path_name, frame, straight,
+                                                     relative, specs,
+                                                     header.number_of_points or None)
+        loaded, length = await self.dispatch.run(self.dispatch.commands, store)
         return motion_pb2.PathLoadResponse(ret_val=convert.ok(), points_loaded=loaded,
                                            path_length=length)
 
     def PathClearPath(self, request, context):
-        self.device.path_clear(request.path_name)
+        self.device.motions.path_clear(request.path_name)
         return motion_pb2.PathClearPathResponse(ret_val=convert.ok())
 
     def PathMove(self, request, context):
         cycles = request.number_of_cycles if request.HasField("number_of_cycles") else 1
         return motion_pb2.PathMoveResponse(
-            ret_val=convert.started(self.device.path_move(request.path_name, cycles)))
+            ret_val=convert.started(self.device.motions.path_move(request.path_name, cycles)))
 
     # ---- 3.6 interruptions ----
     def StopMotion(self, request, context):
-        self.device.stop_motion()
+        self.device.motions.stop_motion()
         return motion_pb2.StopMotionResponse(ret_val=convert.ok())
 
     def ResumeMotion(self, request, context):
-        self.device.resume_motion()
+        self.device.motions.resume_motion()
         return motion_pb2.ResumeMotionResponse(ret_val=convert.ok())
 
     def AbortMotion(self, request, context):
-        self.device.abort_motion()
+        self.device.motions.abort_motion()
         return motion_pb2.AbortMotionResponse(ret_val=convert.ok())
 
     def GetTagId(self, request, context):
-        path_name, tag = self.device.last_tag
+        path_name, tag = self.device.motions.last_tag
         return settings_pb2.GetTagIdResponse(ret_val=convert.ok(), path_name=path_name, tag_id=tag)
 
     # ---- extensions ----
@@ -198,6 +210,7 @@ class DeviceServicer(services.DEVICE.servicer_base):
             lock_holder=s.lock_holder, error=s.error, estop=s.estop,
             manual_control=s.manual_control, command_id=s.command_id)
 
+    @blocking
     def OperatePanel(self, request, context):
         action = convert.enum_value(convert.PANEL_ACTIONS, request.action, "action")
         estop, door_open = self.device.operate_panel(action)

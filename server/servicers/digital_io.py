@@ -8,5 +8,5 @@ from landscape.server.servicers.guard import guarded
 
 @guarded(services.DIGITAL_IO)
 class DigitalIOServicer(services.DIGITAL_IO.servicer_base):
-    def __init__(self, device: Device):
-        self.device = device
+    def __init__(self, device: Device, dispatch, limits):
+        self.device, self.dispatch, self.limits = device, dispatch, limits

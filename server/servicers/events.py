@@ -2,36 +2,36 @@
 
 Thin: subscribe to the bus, convert each domain event to its landscape.v1 message, stream it
 until the client cancels or the server closes the bus. Any client may subscribe; no lease.
+Waiting for the next event costs no thread: the bus wakes the stream on the event loop.
 """
 from __future__ import annotations
 
 import functools
 
-import grpc
-
 from landscape.server import errors, events, services
 from landscape.server.convert import event_to_proto
+from landscape.server.servicers.guard import guarded
 from landscape.v1 import event_service_pb2 as pb
 
 
+@guarded(services.EVENTS)
 class EventServicer(services.EVENTS.servicer_base):
-    def __init__(self, bus: events.EventBus, shared_conversions: int = 1024):
+    def __init__(self, device, bus: events.EventBus, dispatch, limits,
+                 shared_conversions: int = 1024):
+        self.device, self.dispatch, self.limits = device, dispatch, limits
         self._bus = bus
         # Every subscriber sends the same events: convert each once (~13 us), not once per
         # subscriber. The cached messages are only ever serialized, never changed.
         self._response = functools.lru_cache(maxsize=shared_conversions)(_response)
 
-    def Subscribe(self, request, context: grpc.ServicerContext):
+    async def Subscribe(self, request, context):
         after = request.after_sequence if request.HasField("after_sequence") else None
         try:
             subscription = self._bus.subscribe(after)
         except events.SequenceOutOfRange as err:
             raise errors.OutOfRange(str(err)) from err
-        # A cancelled or broken stream closes the subscription, which wakes the loop below.
-        if not context.add_callback(subscription.close):
-            subscription.close()
         with subscription:
-            for event in subscription:
+            while (event := await subscription.next_async()) is not None:
                 yield self._response(event)
 
 

@@ -1,15 +1,38 @@
-"""Put every RPC of a servicer behind the device's state table (states.py).
+"""Every RPC behind the device's state table, on the server's event loop (grpc.aio).
 
-`guarded(spec)` wraps each RPC the class defines in `device.command(rpc, lease)`, which refuses
-it (FAILED_PRECONDITION / PERMISSION_DENIED) before anything happens; an RPC the class does not
-define yet is guarded the same way and then answers UNIMPLEMENTED with its full name, so the
-state rules hold for the whole contract from the start and nothing pretends to work.
+`guarded(spec)` wraps each RPC a servicer class defines:
+
+1. Admission, on the event loop: the state table (states.py) and the lease refuse the call
+   (FAILED_PRECONDITION / PERMISSION_DENIED) before anything happens, and the stream caps
+   (limits.py) refuse a stream beyond its client's share (RESOURCE_EXHAUSTED).
+2. The body runs where it belongs. Plain methods are synchronous and thin: read-only ones
+   are answered on the event loop (they read memory), except those marked `@blocking` (they
+   ask the controller); mutating ones run on the command threads inside `device.command`
+   (one at a time); the immediate ones (they stop the arm: StopMotion, AbortMotion,
+   Deactivate) on threads of their own, never behind another command. `async def` methods
+   (the streams) run on the loop and use `Dispatch` for their device calls.
+3. One error mapping: a CommandError ends the call with its status and ErrorInfo
+   (errors.to_status); anything unexpected is logged with its traceback and ends as INTERNAL
+   with an ErrorInfo, never UNKNOWN. Every refusal is logged in one line.
+
+An RPC the class does not define answers UNIMPLEMENTED with its full name, after the state
+check, so the state rules hold for the whole contract and nothing pretends to work.
 """
 from __future__ import annotations
 
+import asyncio
 import functools
+import inspect
+import logging
+from concurrent.futures import ThreadPoolExecutor
 
-from landscape.server.errors import Unimplemented
+import grpc
+
+from landscape.server import states
+from landscape.server.errors import CommandError, Internal, Unimplemented, to_status
+from landscape.server.states import Lease
+
+log = logging.getLogger(__name__)
 
 LEASE_KEY = "landscape-lease"
 
@@ -21,32 +44,139 @@ def lease_of(context) -> str | None:
     return None
 
 
+def blocking(method):
+    """Marks a read-only RPC whose body waits on the controller: it runs on a thread."""
+    method.blocking = True
+    return method
+
+
+class Dispatch:
+    """The thread pools the bodies run on, shared by every servicer of one server."""
+
+    def __init__(self, commands: int = 16, immediate: int = 8, reads: int = 8):
+        self.commands = ThreadPoolExecutor(commands, thread_name_prefix="command")
+        self.immediate = ThreadPoolExecutor(immediate, thread_name_prefix="immediate")
+        self.reads = ThreadPoolExecutor(reads, thread_name_prefix="read")
+
+    async def run(self, pool: ThreadPoolExecutor, func, *args):
+        return await asyncio.get_running_loop().run_in_executor(pool, func, *args)
+
+    def shutdown(self) -> None:
+        for pool in (self.commands, self.immediate, self.reads):
+            pool.shutdown(wait=False, cancel_futures=True)
+
+
+async def abort(context, rpc: str, error: CommandError) -> None:
+    status = to_status(error)
+    log.info("refused %s from %s: %s %s: %s", rpc, context.peer(), error.status.name,
+             error.reason, error.message)
+    await context.abort(status.code, status.details, status.trailing_metadata)
+
+
+async def fail(context, rpc: str, exc: BaseException) -> None:
+    log.error("%s failed unexpectedly", rpc, exc_info=exc)
+    await abort(context, rpc, Internal(f"{rpc} failed inside the server: "
+                                       f"{type(exc).__name__}: {exc}"))
+
+
 def _missing(full_name: str):
     def body(self, request, context):
         raise Unimplemented(f"{full_name} is not implemented yet by this device server")
     return body
 
 
-def _wrap(name: str, body, streaming: bool):
-    if streaming:
-        @functools.wraps(body)
-        def stream(self, request, context):
-            with self.device.command(name, lease_of(context)):
-                yield from body(self, request, context)
-        return stream
+def _unary(name: str, body):
+    rule = states.RULES[name]
+    read_only = rule.lease is Lease.NONE
+
+    def run_command(self, request, context, lease):
+        with self.device.command(name, lease):
+            return body(self, request, context)
 
     @functools.wraps(body)
-    def unary(self, request, context):
-        with self.device.command(name, lease_of(context)):
-            return body(self, request, context)
+    async def unary(self, request, context):
+        lease = lease_of(context)
+        try:
+            self.device.admit(name, lease)
+            if read_only and not getattr(body, "blocking", False):
+                return body(self, request, context)
+            pool = (self.dispatch.reads if read_only else
+                    self.dispatch.immediate if rule.immediate else self.dispatch.commands)
+            return await self.dispatch.run(pool, run_command, self, request, context, lease)
+        except CommandError as error:
+            await abort(context, name, error)
+        except (asyncio.CancelledError, grpc.aio.AbortError):
+            raise
+        except Exception as exc:
+            await fail(context, name, exc)
     return unary
 
 
+def _stream(name: str, body, streaming_response: bool, spec_name: str):
+    """An async body (generator for server streams, coroutine for client streams)."""
+
+    async def admitted(self, request, context):
+        self.device.admit(name, lease_of(context))
+        return self.limits.acquire(name, context.peer()) if streaming_response else None
+
+    if streaming_response:
+        @functools.wraps(body)
+        async def generate(self, request, context):
+            slot = None
+            try:
+                slot = await admitted(self, request, context)
+                async for item in body(self, request, context):
+                    yield item
+            except CommandError as error:
+                await abort(context, name, error)
+            except (asyncio.CancelledError, grpc.aio.AbortError, GeneratorExit):
+                raise
+            except Exception as exc:
+                await fail(context, name, exc)
+            finally:
+                if slot is not None:
+                    slot.release()
+        return generate
+
+    @functools.wraps(body)
+    async def call(self, request, context):
+        try:
+            await admitted(self, request, context)
+            return await body(self, request, context)
+        except CommandError as error:
+            await abort(context, name, error)
+        except (asyncio.CancelledError, grpc.aio.AbortError):
+            raise
+        except Exception as exc:
+            await fail(context, name, exc)
+    return call
+
+
 def guarded(spec):
-    """Class decorator for a servicer of `spec` that has a `device` attribute."""
+    """Class decorator for a servicer of `spec` with `device`, `dispatch` and `limits`."""
     def decorate(cls):
         for method in spec.descriptor.methods:
             body = cls.__dict__.get(method.name) or _missing(f"{spec.full_name}.{method.name}")
-            setattr(cls, method.name, _wrap(method.name, body, method.server_streaming))
+            if inspect.isasyncgenfunction(body) or inspect.iscoroutinefunction(body):
+                wrapped = _stream(method.name, body, method.server_streaming, spec.full_name)
+            elif method.client_streaming or method.server_streaming:
+                wrapped = _stream(method.name, _as_async(body, method.server_streaming),
+                                  method.server_streaming, spec.full_name)
+            else:
+                wrapped = _unary(method.name, body)
+            setattr(cls, method.name, wrapped)
         return cls
     return decorate
+
+
+def _as_async(body, streaming_response: bool):
+    """A synchronous body of a streaming RPC (only `_missing` ones): raise on the loop."""
+    if streaming_response:
+        async def generate(self, request, context):
+            body(self, request, context)
+            yield None  # never reached: the body raises
+        return generate
+
+    async def call(self, request, context):
+        return body(self, request, context)
+    return call

@@ -1,54 +1,57 @@
 """SessionService.Connect: a client's session, its keep-alives and RSVP answers (seed 2.2)."""
 from __future__ import annotations
 
+import asyncio
 import logging
-import queue
-import threading
+
+import grpc
 
 from landscape.server import convert, services
 from landscape.server.device import Device
 from landscape.server.errors import ParamError
-from landscape.server.events import RsvpRequest
-from landscape.server.servicers.guard import guarded
+from landscape.server.servicers.guard import Dispatch, guarded
+from landscape.server.sessions import Outbox
 from landscape.v1 import session_service_pb2 as pb
 
 log = logging.getLogger(__name__)
 
+END_CODES = {"DEADLINE_EXCEEDED": grpc.StatusCode.DEADLINE_EXCEEDED,
+             "UNAVAILABLE": grpc.StatusCode.UNAVAILABLE}
+
 
 @guarded(services.SESSIONS)
 class SessionServicer(services.SESSIONS.servicer_base):
-    def __init__(self, device: Device):
-        self.device = device
+    def __init__(self, device: Device, dispatch: Dispatch, limits):
+        self.device, self.dispatch, self.limits = device, dispatch, limits
 
-    def Connect(self, request_iterator, context):
+    async def Connect(self, request_iterator, context):
         registry = self.device.sessions
-        first = next(request_iterator, None)
+        first = await anext(aiter(request_iterator), None)
         if first is None or first.WhichOneof("message") != "hello":
             raise ParamError("a session starts with a hello message")
-        session = registry.open(first.hello.client_name)
-        # Whatever ends the call (client gone, cancelled, server stopping) ends the session.
-        context.add_callback(lambda: registry.end(session, "stream closed"))
-        threading.Thread(target=self._read, args=(request_iterator, session),
-                         name=f"session-{session.id}", daemon=True).start()
-        yield pb.ConnectResponse(opened=pb.SessionOpened(
-            session_id=session.id,
-            keepalive_interval_ms=round(registry.keepalive_interval * 1000),
-            keepalive_timeout_ms=round(registry.keepalive_timeout * 1000),
-            session_secret=session.secret))
-        while not session.ended.is_set():
-            try:
-                item = session.outbox.get(timeout=0.1)
-            except queue.Empty:
-                continue
-            if isinstance(item, RsvpRequest):
-                item = pb.ConnectResponse(rsvp_request=convert.detail_to_proto(item))
-            yield item
+        session = registry.open(first.hello.client_name, asyncio.get_running_loop())
+        reader = asyncio.create_task(self._read(request_iterator, session))
+        try:
+            yield pb.ConnectResponse(opened=pb.SessionOpened(
+                session_id=session.id,
+                keepalive_interval_ms=round(registry.keepalive_interval * 1000),
+                keepalive_timeout_ms=round(registry.keepalive_timeout * 1000),
+                session_secret=session.secret))
+            while (item := await session.outbox.get()) is not Outbox.END:
+                yield pb.ConnectResponse(rsvp_request=convert.detail_to_proto(item))
+            if session.end_code in END_CODES:   # the server ended it: say why
+                await context.abort(END_CODES[session.end_code], session.end_reason)
+        finally:
+            reader.cancel()
+            # Whatever ended the call (client gone, cancelled, server stopping) ends the
+            # session; the disconnect handler runs on the device's safety worker, not here.
+            registry.end(session, "stream closed")
 
-    def _read(self, request_iterator, session) -> None:
+    async def _read(self, request_iterator, session) -> None:
         registry = self.device.sessions
         reason = "stream closed by the client"
         try:
-            for message in request_iterator:
+            async for message in request_iterator:
                 registry.touch(session)   # any message counts as a keep-alive
                 if message.WhichOneof("message") == "rsvp_answer":
                     answer = message.rsvp_answer
@@ -56,7 +59,8 @@ class SessionServicer(services.SESSIONS.servicer_base):
                                                    list(answer.data)):
                         log.warning("session %s answered %r with %r: no such question waits",
                                     session.id, answer.rsvp_id, answer.choice)
+        except asyncio.CancelledError:
+            return
         except Exception as exc:  # the transport failed: the session is over all the same
             reason = f"stream failed: {type(exc).__name__}"
         registry.end(session, reason)
-

@@ -88,7 +88,7 @@ def test_bad_path_points_name_their_index_and_store_nothing(arm):
     error = refused(lambda: arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(
         header=header("fast", 5), tags=tags[:5])])))
     assert error.code() is grpc.StatusCode.OUT_OF_RANGE
-    assert arm.server.device.paths == {}
+    assert arm.server.device.motions.paths == {}
 
 
 def test_a_stream_without_header_or_with_too_many_points_is_refused(arm):
@@ -103,7 +103,7 @@ def test_a_stream_without_header_or_with_too_many_points_is_refused(arm):
     error = refused(lambda: arm.device.PathLoad(flood(), timeout=60))
     assert error.code() is grpc.StatusCode.OUT_OF_RANGE
     assert str(MAX_POINTS) in error.details()
-    assert arm.server.device.paths == {}
+    assert arm.server.device.motions.paths == {}
 
 
 def test_a_path_move_with_negative_cycles_is_refused(arm):

@@ -56,24 +56,38 @@ def test_an_oversized_message_is_refused_and_the_server_keeps_serving(channel, s
     assert reply.robot_type == "TX90"
 
 
-def test_streams_beyond_the_limit_are_refused_and_commands_still_run():
+def test_stream_caps_are_per_client_and_never_cost_a_session():
+    """Issue 9.7: one client holding its share of subscriptions takes nothing from others,
+    and sessions (they carry safety) are never refused because of subscriptions."""
     from support import start_server
+    from landscape.client import Session
+    from landscape.server.limits import Cap
     from landscape.v1 import event_service_pb2, event_service_pb2_grpc
-    server = start_server(max_streams=2)
+    server = start_server(stream_caps={"session": Cap(2, 4), "watch": Cap(2, 3)})
     try:
-        with grpc.insecure_channel(server.target) as channel:
-            events = event_service_pb2_grpc.EventServiceStub(channel)
-            open_streams = [events.Subscribe(event_service_pb2.SubscribeRequest(after_sequence=0))
-                            for _ in range(2)]
-            for stream in open_streams:
+        # A connection of its own (channels in one process share connections otherwise).
+        own = [("grpc.use_local_subchannel_pool", 1)]
+        with grpc.insecure_channel(server.target) as greedy, \
+                grpc.insecure_channel(server.target, options=own) as other:
+            events = event_service_pb2_grpc.EventServiceStub(greedy)
+            held = [events.Subscribe(event_service_pb2.SubscribeRequest(after_sequence=0))
+                    for _ in range(2)]
+            for stream in held:
                 next(stream)   # both are live
             with pytest.raises(grpc.RpcError) as refused:
                 next(events.Subscribe(event_service_pb2.SubscribeRequest(), timeout=5))
             assert refused.value.code() == grpc.StatusCode.RESOURCE_EXHAUSTED
-            device = device_service_pb2_grpc.DeviceServiceStub(channel)
+            assert "this client" in refused.value.details()
+            # Another client still subscribes, and sessions open on both.
+            mine = event_service_pb2_grpc.EventServiceStub(other).Subscribe(
+                event_service_pb2.SubscribeRequest(after_sequence=0))
+            next(mine)
+            for channel in (greedy, other):
+                Session(channel, "still-possible").open().close()
+            device = device_service_pb2_grpc.DeviceServiceStub(greedy)
             state = device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=5).state
             assert state == types_pb2.DEVICE_STATE_UNLOCKED
-            open_streams[0].cancel()
+            held[0].cancel()
             # Its slot comes back once the server has seen the cancellation.
             deadline = time.monotonic() + 5
             while True:
@@ -84,7 +98,7 @@ def test_streams_beyond_the_limit_are_refused_and_commands_still_run():
                 except grpc.RpcError:
                     assert time.monotonic() < deadline
                     time.sleep(0.05)
-            third.cancel()
-            open_streams[1].cancel()
+            for stream in (third, held[1], mine):
+                stream.cancel()
     finally:
         server.stop(grace=None)

@@ -1,0 +1,8 @@
+"""The device's alarm codes (Alarm.code); the seed's return codes are the negative ones."""
+
+LOCK_HOLDER_LOST = 101    # the lock holder's session ended: stopped, powered down, released
+ESTOP = 102               # the e-stop was pressed
+CONTROLLER = 103          # the controller reported an error
+MOTION = 104              # a motion failed, or ended with a warning
+CONTROLLER_LOST = 105     # the controller's process died or fell silent; Reset restarts it
+OVERFLOW = 106            # a bounded queue overflowed (what was dropped is said)
