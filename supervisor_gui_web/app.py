@@ -41,7 +41,10 @@ def create_app(config: DashboardConfig) -> web.Application:
     app.router.add_get("/ws", _websocket)
     app.router.add_get("/api/devices", _devices)
     app.router.add_get("/api/devices/{name}/world", _world)
-    app.router.add_get("/", lambda request: web.FileResponse(static / "index.html"))
+    async def index(request: web.Request) -> web.FileResponse:
+        return web.FileResponse(static / "index.html")
+
+    app.router.add_get("/", index)
     app.router.add_static("/", static)
     app.cleanup_ctx.append(_device_links)
     return app

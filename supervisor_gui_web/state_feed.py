@@ -2,7 +2,8 @@
 
 The stream is asked for in meters and radians and the tool pose in the robot base frame, the
 frames and units of the URDF the page draws (the page converts to the device's units for
-display). The force sensor rides along for the force plot.
+display). The force sensor rides along for the force plot; a device that cannot put sensors in
+the stream (UNIMPLEMENTED) is asked again without them, and the page says it has no readings.
 
 TEMPORARY (config.poll_state_if_unimplemented): a device server that answers StreamState with
 UNIMPLEMENTED is polled instead; the samples then carry only what the gets say, in the device's
@@ -11,6 +12,7 @@ units and the world frame, and the StreamStarted message says so in its note.
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 
 import grpc
@@ -19,6 +21,8 @@ from landscape.supervisor.feeds import Feed
 from landscape.supervisor.rpc_table import RPCS, STREAM_STATE
 from landscape.v1 import (control_pb2, settings_pb2, state_service_pb2 as pb, types_pb2,
                           device_service_pb2_grpc)
+
+log = logging.getLogger(__name__)
 
 SENSORS = ("force_sensor",)
 SI_UNITS = types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS, angular=types_pb2.ANGULAR_UNIT_RADIANS)
@@ -31,21 +35,33 @@ class StateFeed(Feed):
         super().__init__(link)
         self.rate_hz = rate_hz
         self.poll_if_unimplemented = poll_if_unimplemented
+        self.sensors = SENSORS
 
     def request(self) -> pb.StreamStateRequest:
-        return pb.StreamStateRequest(rate_hz=self.rate_hz, units=SI_UNITS, sensors=SENSORS,
+        return pb.StreamStateRequest(rate_hz=self.rate_hz, units=SI_UNITS, sensors=self.sensors,
                                      frame=types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME)
 
     async def once(self) -> None:
-        call = RPCS[STREAM_STATE].callable(self.link.channel)(self.request())
-        try:
-            async for reply in call:
-                self.working()
-                self._publish(reply)
-        except grpc.aio.AioRpcError as error:
-            if error.code() is not grpc.StatusCode.UNIMPLEMENTED or not self.poll_if_unimplemented:
-                raise
-            await self._poll(error.details())
+        self.sensors = SENSORS   # a new attempt may be a new server: ask for everything again
+        while True:
+            try:
+                await self._stream()
+                return
+            except grpc.aio.AioRpcError as error:
+                if error.code() is not grpc.StatusCode.UNIMPLEMENTED:
+                    raise
+                if self.sensors:
+                    log.info("%s: state stream without sensors: %s", self.link.name, error.details())
+                    self.sensors = ()
+                elif self.poll_if_unimplemented:
+                    await self._poll(error.details())
+                else:
+                    raise
+
+    async def _stream(self) -> None:
+        async for reply in RPCS[STREAM_STATE].callable(self.link.channel)(self.request()):
+            self.working()
+            self._publish(reply)
 
     def _publish(self, reply: pb.StreamStateResponse) -> None:
         kind = reply.WhichOneof("message")

@@ -58,3 +58,55 @@ def browser():
             yield chromium
         finally:
             chromium.close()
+
+
+class Page:
+    """One browser tab on the dashboard, as an operator uses it: buttons by their ids, what the
+    page shows by its ids. Every wait has a timeout; errors in the page fail the test."""
+
+    TIMEOUT_MS = 15_000
+
+    def __init__(self, chromium, url: str, name: str | None = None):
+        self.context = chromium.new_context(viewport={"width": 1400, "height": 1000})
+        self.page = self.context.new_page()
+        self.errors: list[str] = []
+        self.page.on("pageerror", lambda error: self.errors.append(str(error)))
+        self.page.goto(url)
+        if name:
+            self.page.fill("#client-name", name)
+        from playwright.sync_api import expect
+        self.expect = expect
+        expect(self.page.locator("#connection")).to_have_text("connected", timeout=self.TIMEOUT_MS)
+        expect(self.page.locator("#joints .joint")).to_have_count(6, timeout=self.TIMEOUT_MS)
+
+    def click(self, element_id: str) -> None:
+        self.page.click(f"#{element_id}", timeout=self.TIMEOUT_MS)
+
+    def text(self, element_id: str) -> str:
+        return self.page.inner_text(f"#{element_id}", timeout=self.TIMEOUT_MS)
+
+    def shows(self, element_id: str, text: str, timeout_ms: int | None = None) -> None:
+        """Waits until the element's text contains `text`."""
+        self.expect(self.page.locator(f"#{element_id}")).to_contain_text(
+            text, timeout=timeout_ms or self.TIMEOUT_MS)
+
+    def log_has(self, text: str, timeout_ms: int | None = None) -> None:
+        self.expect(self.page.locator("#log li", has_text=text).first).to_be_attached(
+            timeout=timeout_ms or self.TIMEOUT_MS)
+
+    def take_control(self) -> None:
+        """Open a session, lock, activate: through the buttons, as an operator does."""
+        self.click("btn-session")
+        self.expect(self.page.locator("#btn-lock")).to_be_enabled(timeout=self.TIMEOUT_MS)
+        self.click("btn-lock")
+        self.expect(self.page.locator("#btn-activate")).to_be_enabled(timeout=self.TIMEOUT_MS)
+        self.click("btn-activate")
+        self.shows("st-state", "resting")
+
+    def joint(self, index: int) -> str:
+        return self.page.inner_text(f"#joints .joint:nth-child({index + 1}) .jvalue",
+                                    timeout=self.TIMEOUT_MS)
+
+    def close(self) -> None:
+        self.context.close()
+        assert not self.errors, f"errors in the page: {self.errors}"

@@ -87,7 +87,7 @@ async function main() {
       view.setJoints((sample.jointPositions || []).map((q) => toSI(q, 'angular', units)));
       if (sample.toolPose) view.setToolPose(poseToSI(sample.toolPose, units));
       state.sample(sample, received - cycle);
-      plots.add(sample, received / 1000, (a) => fromSI(toSI(a, 'angular', units), 'angular', ctx.model.units));
+      plots.add(sample, performance.now() / 1000, (a) => fromSI(toSI(a, 'angular', units), 'angular', ctx.model.units));
       if (ctx.deviceState !== state.lastState) { state.lastState = ctx.deviceState; ctx.changed('state'); }
     } else if (frame.rpc === FEED_EVENTS) {
       if (frame.status) { log.add('alarm', 3, `event stream: ${describeStatus(frame.status)}`); return; }

@@ -3,6 +3,7 @@ import uPlot from 'uplot';
 import 'uplot/dist/uPlot.min.css';
 
 const WINDOW_S = 10;
+const REDRAW_HZ = 5;
 const COLORS = ['#c62828', '#2e7d32', '#1565c0', '#ef6c00', '#6a1b9a', '#00838f'];
 
 class LivePlot {
@@ -17,9 +18,16 @@ class LivePlot {
       series: [{}, ...labels.map((label, i) => ({ label, stroke: COLORS[i % COLORS.length], width: 1.5 }))],
     }, this.data, element);
     new ResizeObserver(() => this.plot.setSize({ width: element.clientWidth, height: 150 })).observe(element);
-    this.dirty = false;
-    const redraw = () => { if (this.dirty) { this.plot.setData(this.data); this.dirty = false; } requestAnimationFrame(redraw); };
-    requestAnimationFrame(redraw);
+    this.pending = false;
+  }
+
+  // Redrawn after new points, at most REDRAW_HZ times a second: a plot needs no more, and each
+  // redraw takes the page's main thread from the live state.
+  redraw() {
+    if (this.pending) return;
+    this.pending = true;
+    setTimeout(() => requestAnimationFrame(() => { this.pending = false; this.plot.setData(this.data); }),
+      1000 / REDRAW_HZ);
   }
 
   // One point per series at time t (seconds).
@@ -28,7 +36,7 @@ class LivePlot {
     x.push(t);
     ys.forEach((y, i) => y.push(values[i] ?? null));
     while (x.length && x[0] < t - WINDOW_S) { x.shift(); ys.forEach((y) => y.shift()); }
-    this.dirty = true;
+    this.redraw();
   }
 }
 

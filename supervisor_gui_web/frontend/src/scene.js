@@ -21,7 +21,7 @@ export class CellView {
   constructor(canvas) {
     THREE.Object3D.DEFAULT_UP.set(0, 0, 1);
     this.canvas = canvas;
-    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: false });
     this.renderer.setPixelRatio(window.devicePixelRatio);
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xe8ecef);
@@ -31,6 +31,7 @@ export class CellView {
     this.controls = new OrbitControls(this.camera, canvas);
     this.controls.target.set(0.25, -0.1, 0.45);
     this.controls.update();
+    this.controls.addEventListener('change', () => this.requestRender());
 
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8d8d8d, 2.0));
     const sun = new THREE.DirectionalLight(0xffffff, 2.0);
@@ -53,8 +54,17 @@ export class CellView {
 
     new ResizeObserver(() => this.resize()).observe(canvas.parentElement);
     this.resize();
-    const loop = () => { this.renderer.render(this.scene, this.camera); requestAnimationFrame(loop); };
-    requestAnimationFrame(loop);
+  }
+
+  // Draw once in the next animation frame, and only when something changed: a software-rendered
+  // frame costs the page's main thread milliseconds that the live state would wait behind.
+  requestRender() {
+    if (this.renderPending) return;
+    this.renderPending = true;
+    requestAnimationFrame(() => {
+      this.renderPending = false;
+      this.renderer.render(this.scene, this.camera);
+    });
   }
 
   resize() {
@@ -63,6 +73,7 @@ export class CellView {
     this.renderer.setSize(w, h, false);
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();
+    this.requestRender();
   }
 
   makeLine(color, capacity) {
@@ -78,6 +89,7 @@ export class CellView {
     if (this.robot) this.base.remove(this.robot);
     this.robot = loader.parse(urdf);
     this.base.add(this.robot);
+    this.requestRender();
     this.ghost = loader.parse(urdf);        // never drawn: forward kinematics of path points
     this.jointNames = Object.keys(this.robot.joints).filter((n) => this.robot.joints[n].jointType !== 'fixed');
     return this.jointNames.map((name) => {
@@ -92,7 +104,7 @@ export class CellView {
     const world = cell.world;
     for (const box of [...world.fixtures, ...world.parts]) {
       const mesh = new THREE.Mesh(new THREE.BoxGeometry(...box.size),
-        new THREE.MeshStandardMaterial({ color: colorOf(box.color), roughness: 0.8 }));
+        new THREE.MeshLambertMaterial({ color: colorOf(box.color) }));
       placePose(mesh, box.pose.xyz, box.pose.rpy);
       mesh.name = box.name;
       this.scene.add(mesh);
@@ -104,6 +116,7 @@ export class CellView {
       this.scene.add(edges);
     }
     for (const tool of world.tools) this.addTool(tool);
+    this.requestRender();
   }
 
   addTool(tool) {
@@ -113,7 +126,7 @@ export class CellView {
     this.scene.add(slot);
     const radius = tool.kind === 'vacuum_cup' ? tool.cup_radius : 0.035;
     const body = new THREE.Mesh(new THREE.CylinderGeometry(radius, 0.04, tool.length, 20),
-      new THREE.MeshStandardMaterial({ color: tool.kind === 'vacuum_cup' ? 0x37474f : 0x78909c }));
+      new THREE.MeshLambertMaterial({ color: tool.kind === 'vacuum_cup' ? 0x37474f : 0x78909c }));
     body.rotation.x = Math.PI / 2;          // three's cylinder runs along y
     body.position.z = tool.length / 2;
     const mount = new THREE.Group();
@@ -128,13 +141,14 @@ export class CellView {
     const flange = this.robot.links.tool0;
     for (const [toolName, tool] of this.tools) {
       const parent = toolName === name && flange ? flange : tool.slot;
-      if (tool.mount.parent !== parent) parent.add(tool.mount);
+      if (tool.mount.parent !== parent) { parent.add(tool.mount); this.requestRender(); }
     }
   }
 
   setJoints(values) {
     if (!this.robot) return;
     this.jointNames.forEach((name, i) => { if (i < values.length) this.robot.setJointValue(name, values[i]); });
+    this.requestRender();
   }
 
   // The tool tip in the robot base frame, meters and radians: the tool frame and the trail.
@@ -148,6 +162,7 @@ export class CellView {
     t.count += 1;
     t.line.geometry.setDrawRange(0, t.count);
     t.line.geometry.attributes.position.needsUpdate = true;
+    this.requestRender();
   }
 
   // Where the tool tip is at these joint values (radians), in the base frame; toolOffset is the
@@ -166,6 +181,7 @@ export class CellView {
   // in order.
   setPath(xyz) {
     this.pathGroup.clear();
+    this.requestRender();
     if (!xyz.length) return;
     const points = xyz.map((p) => new THREE.Vector3(p.x, p.y, p.z));
     const geometry = new THREE.BufferGeometry().setFromPoints(points);

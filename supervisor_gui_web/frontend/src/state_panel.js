@@ -4,6 +4,10 @@
 import { fmt, fromSI, symbol, toSI } from './units.js';
 
 const $ = (id) => document.getElementById(id);
+// Only a text that changed is written: every write costs the page a repaint.
+function put(element, text) {
+  if (element.textContent !== text) element.textContent = text;
+}
 const short = (name, prefix) => (name || '').replace(prefix, '').toLowerCase() || '–';
 
 export class StatePanel {
@@ -36,22 +40,27 @@ export class StatePanel {
     const angle = (v) => fromSI(toSI(v, 'angular', sampleUnits), 'angular', units);
     const length = (v) => fromSI(toSI(v, 'linear', sampleUnits), 'linear', units);
 
-    $('st-state').textContent = short(sample.deviceState, 'DEVICE_STATE_');
-    $('st-power').textContent = sample.controlMode || '–';
-    $('st-motion').textContent = sample.motionControlState || '–';
-    $('st-estop').textContent = sample.estop ? 'PRESSED' : 'released';
+    put($('st-state'), short(sample.deviceState, 'DEVICE_STATE_'));
+    put($('st-power'), sample.controlMode || '–');
+    put($('st-motion'), sample.motionControlState || '–');
+    put($('st-estop'), sample.estop ? 'PRESSED' : 'released');
     $('st-estop').className = sample.estop ? 'alert' : '';
-    $('st-command').textContent = sample.commandId || '–';
-    $('st-tag').textContent = `${sample.pointName || '–'} / ${sample.tagName || '–'}`;
+    put($('st-command'), sample.commandId || '–');
+    put($('st-tag'), `${sample.pointName || '–'} / ${sample.tagName || '–'}`);
     const p = sample.toolPose || {};
     const frame = short(this.ctx.model.started?.frame, 'REFERENCE_FRAME_').replace('_cartesian_frame', '');
-    $('st-pose').textContent = `${frame}: ${['x', 'y', 'z'].map((k) => fmt(length(p[k] || 0))).join(' ')} ${symbol(units.linear)}, `
-      + `${['roll', 'pitch', 'yaw'].map((k) => fmt(angle(p[k] || 0))).join(' ')} ${symbol(units.angular)}`;
+    put($('st-pose'), `${frame}: ${['x', 'y', 'z'].map((k) => fmt(length(p[k] || 0))).join(' ')} ${symbol(units.linear)}, `
+      + `${['roll', 'pitch', 'yaw'].map((k) => fmt(angle(p[k] || 0))).join(' ')} ${symbol(units.angular)}`);
     const rate = this.received.length / 2;
-    $('st-cycle').textContent = sample.sequence && sample.sequence !== '0'
+    if (now - (this.cycleShown || 0) < 250) return this.joints(sample, sampleUnits, units);   // a readable pace
+    this.cycleShown = now;
+    put($('st-cycle'), sample.sequence && sample.sequence !== '0'
       ? `#${sample.sequence}, t ${fmt(sample.controllerTime, 2)} s, skipped ${sample.skipped}, age ${fmt(age, 1)} ms, ${fmt(rate, 0)}/s`
-      : `no cycle number (polled), ${fmt(rate, 0)}/s`;
+      : `no cycle number (polled), ${fmt(rate, 0)}/s`);
+    return this.joints(sample, sampleUnits, units);
+  }
 
+  joints(sample, sampleUnits, units) {
     const joints = sample.jointPositions || [];
     document.querySelectorAll('#joints .joint').forEach((row, i) => {
       const limit = this.limits[i];
@@ -59,8 +68,8 @@ export class StatePanel {
       const share = (q - limit.lower) / (limit.upper - limit.lower);
       row.querySelector('.mark').style.left = `${Math.min(100, Math.max(0, share * 100))}%`;
       row.classList.toggle('near-limit', share < 0.03 || share > 0.97);
-      row.querySelector('.jvalue').textContent = `${fmt(fromSI(q, 'angular', units))} ${symbol(units.angular)}`
-        + ` [${fmt(fromSI(limit.lower, 'angular', units), 2)}, ${fmt(fromSI(limit.upper, 'angular', units), 2)}]`;
+      put(row.querySelector('.jvalue'), `${fmt(fromSI(q, 'angular', units))} ${symbol(units.angular)}`
+        + ` [${fmt(fromSI(limit.lower, 'angular', units), 2)}, ${fmt(fromSI(limit.upper, 'angular', units), 2)}]`);
     });
   }
 
@@ -69,20 +78,20 @@ export class StatePanel {
     const s = this.ctx.model.status;
     const d = s.GetDeviceState;
     if (d?.refused) {
-      $('st-lock').textContent = `unknown (${d.refused.message})`;
+      put($('st-lock'), `unknown (${d.refused.message})`);
     } else if (d) {
-      $('st-lock').textContent = d.locked ? d.lockHolder : 'nobody';
-      $('st-manual').textContent = d.manualControl || '–';
-      $('st-error').textContent = d.error || '–';
-      if (!this.ctx.model.sample) $('st-state').textContent = short(d.state, 'DEVICE_STATE_');
+      put($('st-lock'), d.locked ? d.lockHolder : 'nobody');
+      put($('st-manual'), d.manualControl || '–');
+      put($('st-error'), d.error || '–');
+      if (!this.ctx.model.sample) put($('st-state'), short(d.state, 'DEVICE_STATE_'));
     }
     const ee = s.GetEndEffectorState;
-    $('st-tool').textContent = ee ? (ee.refused ? `not available (${ee.refused.message})` : `${ee.currentEe || 'none'} ${ee.eeState}`) : '–';
+    put($('st-tool'), ee ? (ee.refused ? `not available (${ee.refused.message})` : `${ee.currentEe || 'none'} ${ee.eeState}`) : '–');
     const v = s.GetVelocities;
     const a = s.GetAccelerations;
-    if (v && a && !v.refused && !a.refused) $('st-speed').textContent = `${fmt(v.percentVelocity, 0)} % / ${fmt(a.percentAccel, 0)} %`;
+    if (v && a && !v.refused && !a.refused) put($('st-speed'), `${fmt(v.percentVelocity, 0)} % / ${fmt(a.percentAccel, 0)} %`);
     const u = this.ctx.model.units;
-    $('st-units').textContent = `${symbol(u.linear)}, ${symbol(u.angular)}`;
+    put($('st-units'), `${symbol(u.linear)}, ${symbol(u.angular)}`);
     document.querySelectorAll('.unit-angle').forEach((e) => { e.textContent = symbol(u.angular); });
   }
 }
