@@ -30,13 +30,10 @@ def parse_args(argv=None) -> DashboardConfig:
                         help="state samples per second sent to the page")
     parser.add_argument("--cell", help="the cell file the devices run (world geometry for the "
                                        "3D view; default: the default cell)")
-    parser.add_argument("--no-temporary-state-polling", dest="poll", action="store_false",
-                        help="do not poll GetRobotPosition when StreamState is unimplemented")
     args = parser.parse_args(argv)
     try:
         return DashboardConfig(devices=tuple(args.device), host=args.host, port=args.port,
-                               display_rate_hz=args.display_rate, cell=args.cell,
-                               poll_state_if_unimplemented=args.poll)
+                               display_rate_hz=args.display_rate, cell=args.cell)
     except ValueError as error:
         parser.error(str(error))
 

@@ -52,7 +52,7 @@ def create_app(config: DashboardConfig) -> web.Application:
 
 async def _device_links(app: web.Application):
     config = app[CONFIG]
-    links = {d.name: DeviceLink(d, config.display_rate_hz, config.poll_state_if_unimplemented)
+    links = {d.name: DeviceLink(d, config.display_rate_hz)
              for d in config.devices}
     for link in links.values():
         link.start()

@@ -30,11 +30,6 @@ class DashboardConfig:
     port: int = DEFAULT_PORT            # 0 picks a free port
     # State samples per second sent to the page (StreamState's rate_hz).
     display_rate_hz: float = DEFAULT_DISPLAY_RATE_HZ
-    # TEMPORARY, until StateService.StreamState is served by every device server: when it
-    # answers UNIMPLEMENTED, poll GetRobotPosition (and the state gets) at the display rate
-    # instead, and say so in the StreamStarted note. Remove with the polling code in
-    # state_feed.py.
-    poll_state_if_unimplemented: bool = True
     # The cell file the world geometry is read from (None: the default cell). TEMPORARY: the
     # contract has no call that describes the cell's world yet (see cell_world.py).
     cell: str | None = None

@@ -22,8 +22,7 @@ log = logging.getLogger(__name__)
 
 
 class DeviceLink:
-    def __init__(self, target: DeviceTarget, display_rate_hz: float, poll_state_if_unimplemented: bool,
-                 history: int = 500):
+    def __init__(self, target: DeviceTarget, display_rate_hz: float, history: int = 500):
         self.name = target.name
         self.target = target.address
         self.channel = grpc.aio.insecure_channel(target.address)
@@ -31,7 +30,7 @@ class DeviceLink:
         self._history: deque[str] = deque(maxlen=history)   # the newest event frames, for joiners
         self._latest: dict[str, str] = {}                   # feed -> its newest frame, for joiners
         self.status_poll = StatusPoll(self)
-        self.feeds = [StateFeed(self, display_rate_hz, poll_state_if_unimplemented),
+        self.feeds = [StateFeed(self, display_rate_hz),
                       EventFeed(self, on_state_change=self.status_poll.kick), self.status_poll]
         self._tasks: list[asyncio.Task] = []
 

@@ -56,7 +56,7 @@ export class StatePanel {
     this.cycleShown = now;
     put($('st-cycle'), sample.sequence && sample.sequence !== '0'
       ? `#${sample.sequence}, t ${fmt(sample.controllerTime, 2)} s, skipped ${sample.skipped}, age ${fmt(age, 1)} ms, ${fmt(rate, 0)}/s`
-      : `no cycle number (polled), ${fmt(rate, 0)}/s`);
+      : `no cycle number, ${fmt(rate, 0)}/s`);
     return this.joints(sample, sampleUnits, units);
   }
 
