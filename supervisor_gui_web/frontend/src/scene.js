@@ -7,6 +7,13 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import URDFLoader from 'urdf-loader';
 
 const TRAIL_POINTS = 600;
+const SOFTWARE_FPS = 15;
+
+function rendererName(renderer) {
+  const gl = renderer.getContext();
+  const info = gl.getExtension('WEBGL_debug_renderer_info');
+  return info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
+}
 
 function placePose(object, xyz, rpy) {
   object.position.set(xyz[0], xyz[1], xyz[2]);
@@ -22,7 +29,13 @@ export class CellView {
     THREE.Object3D.DEFAULT_UP.set(0, 0, 1);
     this.canvas = canvas;
     this.renderer = new THREE.WebGLRenderer({ canvas, antialias: false });
-    this.renderer.setPixelRatio(window.devicePixelRatio);
+    // Without a GPU (a software rasterizer such as SwiftShader) every pixel costs the page's
+    // CPU: draw at half resolution and at most SOFTWARE_FPS frames a second, so the live
+    // state never waits long behind a frame.
+    this.software = /swiftshader|llvmpipe|software/i.test(rendererName(this.renderer));
+    this.renderer.setPixelRatio(this.software ? 0.5 : window.devicePixelRatio);
+    this.minFrameMs = this.software ? 1000 / SOFTWARE_FPS : 0;
+    this.lastFrame = 0;
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xe8ecef);
     this.camera = new THREE.PerspectiveCamera(45, 1, 0.05, 50);
@@ -61,10 +74,12 @@ export class CellView {
   requestRender() {
     if (this.renderPending) return;
     this.renderPending = true;
-    requestAnimationFrame(() => {
+    const wait = Math.max(0, this.lastFrame + this.minFrameMs - performance.now());
+    setTimeout(() => requestAnimationFrame(() => {
       this.renderPending = false;
+      this.lastFrame = performance.now();
       this.renderer.render(this.scene, this.camera);
-    });
+    }), wait);
   }
 
   resize() {
