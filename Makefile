@@ -20,10 +20,12 @@ help:
 
 # Editable install; setup.py generates the landscape.v1 stubs from proto/ on every build.
 $(STAMP): pyproject.toml setup.py $(wildcard proto/landscape/v1/*.proto)
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev]'
-	touch $@
+	@echo "installing into $(VENV) (a minute or two the first time)"
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	@$(PY) -m pip install -q --upgrade pip
+	@# setuptools explains editable installs at length, as warnings: not for our users.
+	@PYTHONWARNINGS=ignore $(PY) -m pip install -q -e '.[dev]'
+	@touch $@
 
 # The web supervisor's page: npm packages as locked, then the Vite build the backend serves.
 FRONTEND := supervisor_gui_web/frontend
@@ -39,10 +41,10 @@ proto: install
 	$(PY) -c 'import setup; setup.generate_stubs()'
 
 run: install
-	$(PY) -m landscape.server --port $(PORT)
+	@$(PY) -m landscape.server --port $(PORT)
 
 test: install tools
-	$(PY) -m pytest
+	@$(PY) -m pytest
 
 lint: install
 	$(VENV)/bin/buf lint
@@ -50,8 +52,11 @@ lint: install
 bench: install
 	@for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
+# Needs Go; without it grpcurl is not built and its tests skip, saying so.
 $(GRPCURL):
-	GOBIN=$(CURDIR)/.tools/bin go install github.com/fullstorydev/grpcurl/cmd/grpcurl@$(GRPCURL_VERSION)
+	@if command -v go >/dev/null; then \
+	  GOBIN=$(CURDIR)/.tools/bin go install github.com/fullstorydev/grpcurl/cmd/grpcurl@$(GRPCURL_VERSION); \
+	else echo "make tools: no Go on this machine, so no grpcurl (its tests will skip)"; fi
 
 tools: $(GRPCURL)
 

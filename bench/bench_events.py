@@ -9,10 +9,10 @@ Prints, no pass/fail:
   against a bare server stream that stamps and sends on the same period;
 - whether a stalled gRPC subscriber slows the publisher or a healthy subscriber.
 
-Both streams are served by one bare gRPC server in this process (the EventServicer on an
-EventBus, and the baseline beside it), so the only difference is the bus; the device and its
-cycle process are left out so they do not add noise. The clients run in a child process, as
-supervisors would, so they do not share the server's GIL.
+The events are served by a real device server in this process (grpc.aio, its controller left
+uninitialised so the cycle adds no noise; the bench publishes on its bus), the baseline by a
+bare grpc.aio server beside it, so the difference is the bus and the servicer. The clients
+run in a child process, as supervisors would, so they do not share the server's GIL.
 Run: .venv/bin/python bench/bench_events.py
 """
 from __future__ import annotations
@@ -23,13 +23,14 @@ import multiprocessing as mp
 import statistics
 import threading
 import time
-from concurrent import futures
 
 import grpc
 from google.protobuf import wrappers_pb2
 
-from landscape.server import events, services
-from landscape.server.servicers.events import EventServicer, event_to_proto
+from landscape.server import events
+from landscape.server.app import serve
+from landscape.server.config import ServerConfig
+from landscape.server.convert import event_to_proto
 from landscape.v1 import event_service_pb2 as pb
 from landscape.v1 import event_service_pb2_grpc
 
@@ -51,7 +52,7 @@ def _sample_response() -> pb.SubscribeResponse:
     return pb.SubscribeResponse(event=event_to_proto(sample_event(events.EventBus())))
 
 
-def _burst(request: wrappers_pb2.UInt64Value, context):
+async def _burst(request: wrappers_pb2.UInt64Value, context):
     """Stream request.value copies of the sample as fast as the transport takes them."""
     response = _sample_response()
     for i in range(1, request.value + 1):
@@ -59,7 +60,7 @@ def _burst(request: wrappers_pb2.UInt64Value, context):
         yield response
 
 
-def _tick(request: wrappers_pb2.UInt64Value, context):
+async def _tick(request: wrappers_pb2.UInt64Value, context):
     """Stream request.value samples, one per PERIOD_S, stamped with the instant it was due.
 
     Every stream wakes at the same instants (a grid of PERIOD_S), so 20 streams fan out each
@@ -69,26 +70,36 @@ def _tick(request: wrappers_pb2.UInt64Value, context):
     due = math.ceil(time.time() / PERIOD_S) * PERIOD_S
     for i in range(1, request.value + 1):
         due += PERIOD_S
-        time.sleep(max(0.0, due - time.time()))
+        await asyncio.sleep(max(0.0, due - time.time()))
         response.event.sequence = i
         response.event.time.FromNanoseconds(round(due * 1e9))
         yield response
 
 
 class Served:
-    """The EventService on a fresh bus, and the baseline streams, on one loopback server."""
+    """The EventService of a device server (its bus), and the baseline streams on a bare
+    grpc.aio server; both on loopback."""
 
     def __init__(self):
-        self.bus = events.EventBus()
-        self.server = grpc.server(futures.ThreadPoolExecutor(max_workers=64))
-        services.EVENTS.add_to_server(EventServicer(self.bus), self.server)
-        self.server.add_generic_rpc_handlers((_baseline_handler(),))
-        self.target = f"127.0.0.1:{self.server.add_insecure_port('127.0.0.1:0')}"
-        self.server.start()
+        self.device_server = serve(ServerConfig(port=0, clock="lockstep", start_device=False))
+        self.bus = self.device_server.bus
+        self.target = self.device_server.target
+        self._loop = asyncio.new_event_loop()
+        threading.Thread(target=self._loop.run_forever, daemon=True).start()
+        self.baseline, port = asyncio.run_coroutine_threadsafe(self._bare(), self._loop).result()
+        self.baseline_target = f"127.0.0.1:{port}"
+
+    async def _bare(self):
+        server = grpc.aio.server()
+        server.add_generic_rpc_handlers((_baseline_handler(),))
+        port = server.add_insecure_port("127.0.0.1:0")
+        await server.start()
+        return server, port
 
     def stop(self) -> None:
-        self.bus.close()
-        self.server.stop(None)
+        asyncio.run_coroutine_threadsafe(self.baseline.stop(None), self._loop).result()
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self.device_server.stop(grace=None)
 
 
 def _baseline_handler():
@@ -214,7 +225,8 @@ def bus_throughput(served: Served, n_clients: int, stalled: bool = False):
 
 
 def baseline_throughput(served: Served, n_clients: int) -> float:
-    return rate(Clients(served.target, "Burst", n_clients, N_EVENTS).collect(), N_EVENTS)
+    return rate(Clients(served.baseline_target, "Burst", n_clients, N_EVENTS).collect(),
+                N_EVENTS)
 
 
 def bus_latency(served: Served, n_clients: int) -> list[float]:
@@ -230,7 +242,7 @@ def bus_latency(served: Served, n_clients: int) -> list[float]:
 
 
 def baseline_latency(served: Served, n_clients: int) -> list[float]:
-    return [x for r in Clients(served.target, "Tick", n_clients, N_LATENCY).collect()
+    return [x for r in Clients(served.baseline_target, "Tick", n_clients, N_LATENCY).collect()
             for x in r[4]]
 
 

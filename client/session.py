@@ -41,6 +41,8 @@ class Session:
         self._open_timeout = open_timeout
         self.session_id = ""
         self.session_secret = ""
+        self.end_status: grpc.StatusCode | None = None   # why the server ended it, if it did
+        self.end_details = ""
 
     def __enter__(self) -> "Session":
         return self.open()
@@ -89,8 +91,8 @@ class Session:
             for message in self._call:
                 if message.WhichOneof("message") == "rsvp_request":
                     self._answer(message.rsvp_request)
-        except grpc.RpcError:
-            pass  # cancelled by close(), or the server went away
+        except grpc.RpcError as error:   # cancelled by close(), or the server ended it
+            self.end_status, self.end_details = error.code(), error.details() or ""
         finally:
             self._closed.set()
 

@@ -10,9 +10,14 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 from multiprocessing import resource_tracker
+
+# gRPC's core logs its own copy of errors the server reports itself (a port in use, say);
+# GRPC_VERBOSITY=ERROR (or DEBUG) brings them back.
+os.environ.setdefault("GRPC_VERBOSITY", "NONE")
 
 # Before anything starts a thread (numpy's import starts its BLAS threads): threads inherit
 # the mask, so the stop signals can only be taken by the sigwait in main(). The resource
@@ -42,14 +47,18 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
     parser.add_argument("--clock", choices=CLOCKS, default="realtime",
                         help="realtime: 4 ms cycle process; lockstep: as fast as possible")
     parser.add_argument("--paths", default="var/paths.sqlite3",
-                        help="SQLite file keeping the named paths across restarts "
+                        help="SQLite file keeping the named paths and the settings (speed, "
+                             "acceleration, tool offset, world frame, units) across restarts "
                              "(default %(default)s)")
+    parser.add_argument("--reset-settings", action="store_true",
+                        help="start from the default settings instead of the stored ones")
     parser.add_argument("--log-level", default="INFO",
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"],
                         help="what to log (default %(default)s); refused commands are INFO")
     args = parser.parse_args(argv)
     config = ServerConfig(address=args.address, port=args.port, cell=args.cell,
-                          clock=args.clock, paths_file=args.paths)
+                          clock=args.clock, paths_file=args.paths,
+                          reset_settings=args.reset_settings)
     return config, args.log_level
 
 

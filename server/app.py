@@ -16,6 +16,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from landscape.server import services
+from landscape.server.collision import CollisionScene
 from landscape.server.config import ServerConfig
 from landscape.server.controller_link import ControllerLink
 from landscape.server.device import Device
@@ -96,7 +97,7 @@ class RunningServer:
         self.runner.run(self.health.enter_graceful_shutdown())
         self.device.close()
         self.bus.close()
-        self.hub.close()
+        self.runner.run(self.hub.aclose())
         self.runner.run(self.server.stop(grace), timeout=None)
         self.dispatch.shutdown()
         self.link.stop()
@@ -131,8 +132,11 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                           on_lost=lambda why: device and device.controller_lost(why),
                           pace=config.lockstep_pace)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
-    device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs)
-    hub, dispatch, limits = StateHub(device), Dispatch(), StreamLimits(config.stream_caps)
+    device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs,
+                    reset_settings=config.reset_settings,
+                    collisions=CollisionScene(cell, config.collision_margin))
+    hub = StateHub(device, max_lag=250 if config.clock == "realtime" else 8)
+    dispatch, limits = Dispatch(), StreamLimits(config.stream_caps)
     try:
         if config.start_device:
             device.start()
@@ -146,7 +150,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     running = RunningServer(server, health_servicer, port, config.address, bus, device, link,
                             hub, dispatch, limits, runner)
     device.on_health = running.set_serving
-    log.info("device server listening on %s", listen_address(config.address, port))
+    log.debug("device server listening on %s", listen_address(config.address, port))
     return running
 
 

@@ -25,7 +25,11 @@ class ServerConfig:
     clock: str = "realtime"
     # Lock-step only: at most this many simulated seconds per wall second (None: flat out).
     lockstep_pace: float | None = None
-    # SQLite file of the named paths (None: kept in memory only, lost at exit).
+    # SQLite file of the named paths and the settings (None: in memory only, lost at exit).
     paths_file: str | None = None
+    # Start from the default settings instead of the stored ones (and store the defaults).
+    reset_settings: bool = False
+    # m: no planned motion may bring two bodies of the cell closer than this (collision/).
+    collision_margin: float = 0.005
     # Initialise the controller at start-up (False leaves the device Idle, for tests).
     start_device: bool = True

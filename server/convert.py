@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from google.protobuf import timestamp_pb2
 
-from landscape.server import events
+from landscape.server import bounds, events
 from landscape.server.errors import CommandError, OutOfRange, ParamError
 from landscape.server.path_planning import PointSpec, at_point
 from landscape.server.settings import Kind
@@ -160,6 +160,7 @@ class PathLoadStream:
         self._messages = 0
 
     def feed(self, request) -> None:
+        bounds.check(request)
         if len(self.specs) + len(request.tags) > self.max_points:
             raise OutOfRange(f"a path holds at most {self.max_points} points")
         if self._messages == 0:
@@ -243,6 +244,10 @@ def _rsvp_answer(d: events.RsvpAnswer):
                                         timed_out=d.timed_out)
 
 
+def _operator_message(d: events.OperatorMessage):
+    return "operator_message", event_service_pb2.OperatorMessage(text=d.text, source=d.source)
+
+
 def _events_lost(d: events.EventsLost):
     return "events_lost", event_service_pb2.EventsLost(first_sequence=d.first_sequence,
                                         last_sequence=d.last_sequence)
@@ -252,5 +257,6 @@ def _events_lost(d: events.EventsLost):
 _DETAILS = {
     events.CommandEvent: _command, events.Alarm: _alarm, events.StateChange: _state_change,
     events.DigitalIOSignal: _digital_io, events.RsvpRequest: _rsvp_request,
-    events.RsvpAnswer: _rsvp_answer, events.EventsLost: _events_lost,
+    events.RsvpAnswer: _rsvp_answer, events.OperatorMessage: _operator_message,
+    events.EventsLost: _events_lost,
 }

@@ -27,7 +27,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 
-from landscape.server import alarms, states
+from landscape.server import alarms, states, stored_settings
+from landscape.server.collision import CollisionScene
 from landscape.server.errors import (ControllerFailure, EstopActive, NotLockHolder, ParamError,
                                      WrongState)
 from landscape.server.events import EventBus, Severity
@@ -66,13 +67,17 @@ class DeviceStatus:
 
 
 class Device:
-    def __init__(self, link, bus: EventBus, arm: ArmModel, *, paths: PathStore | None = None,
+    def __init__(self, link, bus: EventBus, arm: ArmModel, *, collisions: CollisionScene,
+                 paths: PathStore | None = None,
                  outputs: set[str] = frozenset(), enable_timeout: float = 5.0,
-                 keepalive_interval: float = 0.5, keepalive_timeout: float = 2.0):
+                 keepalive_interval: float = 0.5, keepalive_timeout: float = 2.0,
+                 reset_settings: bool = False):
         self.link = link
         self.bus = bus
         self.arm = arm
         self.kinematics = Kinematics(arm)
+        # What is where in the cell, for checking motions before they start (collision/).
+        self.collisions = collisions
         self.enable_timeout = enable_timeout
         self.rsvp_timeout = 30.0
         self.rsvp = RsvpBroker(bus)
@@ -84,14 +89,19 @@ class Device:
         self._lease: str | None = None
         self._epoch = 0                    # +1 whenever the lock changes hands
         self._local = threading.local()    # the epoch a command was admitted under
-        self._settings = MotionSettings(arm)
+        self._store = paths or PathStore()
+        defaults = MotionSettings(arm)
+        self._settings = (defaults if reset_settings
+                          else stored_settings.from_record(defaults, self._store.load_settings()))
+        if reset_settings:
+            self._store.save_settings(stored_settings.to_record(defaults))
         self._error = ""
         self._power = EnableState.DISABLED   # the controller's last reported power state
         self._estop = False
         self._controller_changed = threading.Condition()
         self._state_lock = threading.RLock()
         self._command_lock = threading.Lock()
-        self.motions = MotionControl(self, paths or PathStore(), set(outputs))
+        self.motions = MotionControl(self, self._store, set(outputs))
 
     @property
     def controller(self):
@@ -284,6 +294,11 @@ class Device:
             self._error = ""
             return target
 
+    def post_message(self, text: str):
+        """A message for the operator on the event stream, from the lock holder."""
+        holder = self._holder
+        return self.bus.operator_message(text, holder.client_name if holder else "")
+
     def operate_panel(self, action: str) -> tuple[bool, bool]:
         """Press or release the e-stop, open or close the door, as a person at the cell would
         (`action` names a Panel method); returns (e-stop pressed, door open)."""
@@ -305,10 +320,13 @@ class Device:
     # ---- 3.2 settings, 3.3 queries ---------------------------------------------------------
 
     def update_settings(self, change) -> MotionSettings:
-        """Apply `change(settings) -> settings`; a validation error leaves them as they were."""
+        """Apply `change(settings) -> settings`: validated, stored, then in force; a validation
+        or storage error leaves them as they were."""
         with self._state_lock:
-            self._settings = change(self._settings)
-            return self._settings
+            settings = change(self._settings)
+            self._store.save_settings(stored_settings.to_record(settings))
+            self._settings = settings
+            return settings
 
     def feedback(self) -> Sample:
         """The newest cycle's feedback (never more than a cycle old)."""

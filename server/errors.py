@@ -55,7 +55,10 @@ class OutOfRange(CommandError):
 
 
 class NotFound(CommandError):
-    status, reason, ret_code = grpc.StatusCode.NOT_FOUND, "NOT_FOUND", CMD_PARAM_ERR
+    """A name (path, tool, sensor) the device does not know: a parameter error (the seed's
+    CMD_PARAM_ERR), so INVALID_ARGUMENT; the reason says NOT_FOUND."""
+
+    status, reason, ret_code = grpc.StatusCode.INVALID_ARGUMENT, "NOT_FOUND", CMD_PARAM_ERR
 
 
 class ControllerFailure(CommandError):
@@ -98,3 +101,10 @@ class Internal(CommandError):
     traceback. Nothing the call was to do should be assumed done."""
 
     status, reason = grpc.StatusCode.INTERNAL, "INTERNAL"
+
+
+class Collision(CommandError):
+    """A planned motion would bring two bodies of the cell closer than the safety margin;
+    metadata names them and where (time, fraction, segment). Nothing moved."""
+
+    status, reason = grpc.StatusCode.FAILED_PRECONDITION, "COLLISION"

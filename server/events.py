@@ -21,7 +21,9 @@ that resumes "after the last sequence I saw" resumes correctly after a loss too.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import enum
+import functools
 import itertools
 import threading
 import time
@@ -31,6 +33,8 @@ from dataclasses import dataclass
 
 DEFAULT_HISTORY = 10_000   # events kept for resuming subscribers
 DEFAULT_BUFFER = 1_024     # events a subscriber may fall behind before it loses some
+MAX_TEXT = 1_024           # characters of any one string of an event; longer ones are cut
+                           # (with "…"), so no event exceeds a few kilobytes
 
 _INT32 = range(-2**31, 2**31)
 _UINT32 = range(2**32)
@@ -134,6 +138,13 @@ class RsvpAnswer:
 
 
 @dataclass(frozen=True, slots=True)
+class OperatorMessage:
+    """A message for the operator, posted by the lock holder `source`."""
+    text: str
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
 class EventsLost:
     """Events first_sequence..last_sequence (inclusive) that this subscriber will not get."""
     first_sequence: int
@@ -141,9 +152,10 @@ class EventsLost:
 
 
 Detail = (CommandEvent | Alarm | StateChange | DigitalIOSignal | RsvpRequest | RsvpAnswer
-          | EventsLost)
+          | OperatorMessage | EventsLost)
 # What the device publishes; EventsLost is made by the bus for one subscriber only.
-_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer)
+_PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer,
+              OperatorMessage)
 
 
 @dataclass(frozen=True, slots=True)
@@ -198,6 +210,7 @@ class Subscription:
         self._replay = deque(replay)   # resumed events; not bounded, the history bounds it
         self._live: deque[Event] = deque()
         self._closed = False
+        self._draining = False     # the bus closed: what is pending still goes out, then end
         self._waiter: asyncio.Future | None = None   # an async reader waiting, on its loop
 
     def get(self, timeout: float | None = None) -> Event | None:
@@ -206,11 +219,9 @@ class Subscription:
         Returns None on timeout or once the subscription is closed.
         """
         with self._cond:
-            if not self._cond.wait_for(self._ready, timeout):
+            if not self._cond.wait_for(self._ready, timeout) or self._closed:
                 return None
-            if self._closed:
-                return None
-            return (self._replay or self._live).popleft()
+            return self._next()
 
     def __iter__(self) -> Iterator[Event]:
         while (event := self.get()) is not None:
@@ -224,8 +235,8 @@ class Subscription:
             with self._cond:
                 if self._closed:
                     return None
-                if self._replay or self._live:
-                    return (self._replay or self._live).popleft()
+                if self._replay or self._live or self._draining:
+                    return self._next()
                 waiter = self._waiter = loop.create_future()
             try:
                 await waiter
@@ -234,7 +245,8 @@ class Subscription:
 
     @property
     def closed(self) -> bool:
-        return self._closed
+        """Closed, or the bus closed and everything pending has been taken."""
+        return self._closed or (self._draining and not (self._replay or self._live))
 
     def close(self) -> None:
         """Stop receiving; pending events are discarded. Idempotent."""
@@ -263,13 +275,23 @@ class Subscription:
             self._cond.notify()
             self._wake()
 
-    def _end(self) -> None:
+    def _end(self, drain: bool = False) -> None:
+        """No more events; with `drain`, the pending ones are still delivered first."""
         with self._cond:
-            self._closed = True
-            self._replay.clear()
-            self._live.clear()
+            if drain:
+                self._draining = True
+            else:
+                self._closed = True
+                self._replay.clear()
+                self._live.clear()
             self._cond.notify_all()
             self._wake()
+
+    def _next(self) -> Event | None:
+        # With _cond held: the next pending event, or None once a drained bus has none left.
+        if self._replay or self._live:
+            return (self._replay or self._live).popleft()
+        return None
 
     def _wake(self) -> None:
         # With _cond held: hand the async reader's wake-up to its loop.
@@ -278,7 +300,31 @@ class Subscription:
             waiter.get_loop().call_soon_threadsafe(_resolve, waiter)
 
     def _ready(self) -> bool:
-        return self._closed or bool(self._replay) or bool(self._live)
+        return self._closed or self._draining or bool(self._replay) or bool(self._live)
+
+
+def _clip(text: str) -> str:
+    return text if len(text) <= MAX_TEXT else text[:MAX_TEXT - 1] + "…"
+
+
+def _clipped(detail):
+    """`detail` with every string field (and every string of a tuple field) clipped."""
+    changes = None
+    for name in _text_fields(type(detail)):
+        value = getattr(detail, name)
+        if isinstance(value, str):
+            if len(value) > MAX_TEXT:
+                changes = {**(changes or {}), name: _clip(value)}
+        elif any(len(v) > MAX_TEXT for v in value):
+            changes = {**(changes or {}), name: tuple(_clip(v) for v in value)}
+    return dataclasses.replace(detail, **changes) if changes else detail
+
+
+@functools.cache
+def _text_fields(kind: type) -> tuple[str, ...]:
+    """The fields of a detail record that hold text (str, or tuples of str)."""
+    return tuple(f.name for f in dataclasses.fields(kind)
+                 if f.type in ("str", "tuple[str, ...]"))
 
 
 def _resolve(waiter: asyncio.Future) -> None:
@@ -367,10 +413,15 @@ class EventBus:
         detail = RsvpAnswer(rsvp_id, choice, tuple(data), timed_out)
         return self.publish("rsvp_answer", (rsvp_id, choice, *data), detail)
 
+    def operator_message(self, text: str, source: str) -> Event:
+        """A message for the operator; data: [text, source]."""
+        return self.publish("operator_message", (text, source), OperatorMessage(text, source))
+
     def publish(self, event_id: str, data: Sequence[str], detail: Detail) -> Event:
         """Number, stamp, keep and fan out one event. Prefer the typed helpers above."""
         _check(isinstance(detail, _PUBLISHED), f"cannot publish a {type(detail).__name__}")
-        data = tuple(data)
+        data = tuple(_clip(d) for d in data[:16])
+        detail = _clipped(detail)
         with self._lock:
             # Numbered and stamped under the lock, so sequence order is time order.
             self._last_sequence += 1
@@ -398,7 +449,8 @@ class EventBus:
             return subscription
 
     def close(self) -> None:
-        """End every subscription (their get returns None); later ones start closed.
+        """End every subscription once it has delivered what is pending (then their get
+        returns None); later ones start closed.
 
         Publishing still works, so a device core shutting down need not check.
         """
@@ -406,7 +458,7 @@ class EventBus:
             self._closed = True
             subscribers, self._subscribers = self._subscribers, set()
             for subscription in subscribers:
-                subscription._end()
+                subscription._end(drain=True)
 
     def _replay_after(self, after: int) -> list[Event]:
         # Called with the lock held; kept sequences are contiguous, oldest first.

@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from landscape.server import alarms, aux_commands, path_planning, states
-from landscape.server.errors import ControllerFailure, NotFound, WrongState
+from landscape.server.collision import check_motion
+from landscape.server.errors import Collision, ControllerFailure, NotFound, WrongState
 from landscape.server.events import Phase, Severity
 from landscape.server.executor import pack_run
 from landscape.server.moves import Planner
@@ -113,6 +114,11 @@ class MotionControl:
         path = path_planning.load(self.planner, self.paths.get(name), name, frame, straight,
                                   relative, specs, self.device.settings, self.outputs,
                                   self.planning_start(), total)
+        # The whole path, as it would run from its first point, is checked against the cell
+        # now: a bad path is refused at load, naming the segment (the point it heads to).
+        self.check_collisions(path_planning.plan_run(
+            self.planner, path, np.array(path.points[0].joints), self.device.settings, 1),
+            what=f"path {name!r}")
         self.paths.put(path)
         return len(specs), len(path.points)
 
@@ -136,12 +142,33 @@ class MotionControl:
 
     # ---- starting ----------------------------------------------------------------------------
 
+    def check_collisions(self, trajectories: list, what: str = "the motion", *,
+                         allow=(), exclude=()) -> None:
+        """Refuse trajectories (played back to back) that would bring two bodies of the cell
+        within the safety margin (collision/); `allow` names contacts meant to happen (a tool
+        coupling), `exclude` bodies the motion is meant to touch (a guarded move's surface)."""
+        model = self.device.collisions.model()
+        offset = 0.0
+        for trajectory in trajectories:
+            result = check_motion(model, trajectory.positions, trajectory.dt, trajectory.marks,
+                                  allow=allow, exclude=exclude)
+            contact = result.contact
+            if contact is not None:
+                where = contact.metadata()
+                where["time"] = f"{offset + contact.time:.3f}"
+                raise Collision(f"{what} would collide: {contact}", **where)
+            offset += trajectory.duration
+
     def start(self, command: str, point_name: str, trajectories: list,
-              tags: dict | None = None, aux: dict | None = None) -> str:
+              tags: dict | None = None, aux: dict | None = None, *, allow=(),
+              exclude=()) -> str:
         """Hand planned trajectories to the executor, to play back to back; Resting -> Moving.
         `tags` maps mark labels to (tag name, tag index) for tag events, `aux` to the aux
-        commands run there. Returns the command id that the started / tag / done / failed
-        events name (seed: CMD_STARTED_OK)."""
+        commands run there; `allow` and `exclude` as in check_collisions, which runs first.
+        Returns the command id that the started / tag / done / failed events name (seed:
+        CMD_STARTED_OK)."""
+        self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow,
+                              exclude=exclude)
         device = self.device
         arrays = device.link.share(pack_run(trajectories, self.planner.dt))
         command_id = f"{command}-{next(self._ids)}"

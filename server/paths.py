@@ -1,4 +1,5 @@
-"""Named paths (seed 3.5): points resolved to joints when loaded, kept in SQLite.
+"""Named paths (seed 3.5): points resolved to joints when loaded, kept in SQLite (with the
+settings of seed 3.2, stored_settings.py).
 
 A path is checked whole when it is loaded (every point reachable in the arm's configuration,
 every straight segment followable) and stored resolved, so pathMove runs what was checked.
@@ -63,6 +64,20 @@ class PathStore:
         self._lock = threading.Lock()
         with self._lock, self._db:
             self._db.execute("CREATE TABLE IF NOT EXISTS paths (name TEXT PRIMARY KEY, body TEXT NOT NULL)")
+            self._db.execute("CREATE TABLE IF NOT EXISTS settings (id INTEGER PRIMARY KEY CHECK (id = 1), "
+                             "body TEXT NOT NULL)")
+
+    def load_settings(self) -> dict | None:
+        """The stored settings record (stored_settings.py), or None if none was stored."""
+        with self._lock:
+            row = self._db.execute("SELECT body FROM settings WHERE id = 1").fetchone()
+        return json.loads(row[0]) if row else None
+
+    def save_settings(self, record: dict) -> None:
+        """Replace the stored settings, in one transaction."""
+        body = json.dumps(record)
+        with self._lock, self._db:
+            self._db.execute("INSERT OR REPLACE INTO settings (id, body) VALUES (1, ?)", (body,))
 
     def load_all(self) -> dict[str, StoredPath]:
         with self._lock:

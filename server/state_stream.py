@@ -7,7 +7,11 @@ written; every waiting stream then takes what it is due:
   cycles it is due, with no gaps, even when several arrive at once.
 - A stream that falls more than `max_lag` cycles behind (a slow reader: its writes wait on
   flow control) jumps to the newest cycle and says how many it skipped: latest sample wins,
-  nothing is queued for it, and nobody else waits for it.
+  nothing is queued for it, and nobody else waits for it. On the real-time clock `max_lag`
+  (250 cycles, 1 s) lets a reader that stalls for a moment (a busy machine) catch up without a
+  gap; on the lock-step clock, whose cycles outrun any reader, it is a few cycles, so a reader
+  always sees the arm as it is now. (What a stalled reader finds queued in the transport
+  besides is bounded by its own HTTP/2 flow-control window.)
 
 Watchers cost no thread: they wait on one shared future that each wake-up replaces.
 """
@@ -37,7 +41,8 @@ class View:
 
 
 class StateHub:
-    def __init__(self, device, max_lag: int = 50, conversions: int = 64):
+    def __init__(self, device, max_lag: int = 250, conversions: int = 64):
+        """max_lag: cycles a stream may fall behind before it jumps to the newest."""
         self.device = device
         self.ring = device.link.feedback
         self.max_lag = max_lag
@@ -54,14 +59,19 @@ class StateHub:
         self._tick = loop.create_future()
         loop.add_reader(self.ring.tick_fd, self._on_tick)
 
-    def close(self) -> None:
-        """End every stream (from the loop's thread or any other)."""
+    async def aclose(self) -> None:
+        """End every stream and stop listening to the ring (on the loop, before the ring's
+        pipe closes)."""
         self._closed = True
-        if self._loop is not None and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._on_tick)
+        if self._loop is not None:
+            self._loop.remove_reader(self.ring.tick_fd)
+            self._wake()
 
     def _on_tick(self) -> None:
         self.ring.drain_ticks()
+        self._wake()
+
+    def _wake(self) -> None:
         tick, self._tick = self._tick, self._loop.create_future()
         if not tick.done():
             tick.set_result(None)

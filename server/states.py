@@ -112,6 +112,7 @@ RULES: dict[str, Rule] = {
     "ListDigitalIO": _read("4.1"),
     # 2 client IDL
     "Subscribe": _read("2.1"),
+    "PostMessage": _cmd(ALL, "2.1"),
     "Connect": _read("2.2"),
     # live state
     "StreamState": _read("-"),

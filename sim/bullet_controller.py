@@ -36,8 +36,12 @@ import math
 from typing import Any
 
 import numpy as np
-import pybullet as pb
-from pybullet_utils.bullet_client import BulletClient
+
+from landscape.sim.native_output import silenced
+
+with silenced():   # pybullet's banner
+    import pybullet as pb
+    from pybullet_utils.bullet_client import BulletClient
 
 from landscape.sim.cell import PANEL_WIRES, Cell
 from landscape.sim.controller import (
@@ -85,7 +89,8 @@ class BulletController(Controller):
         self.cyclic = cyclic
         self._event_func: EventFunc | None = None
 
-        self._bc = BulletClient(pb.DIRECT)
+        with silenced():   # "argv[0]="
+            self._bc = BulletClient(pb.DIRECT)
         self._bc.setPhysicsEngineParameter(fixedTimeStep=spec.cycle_time / spec.substeps,
                                            deterministicOverlappingPairs=1)
         self.world = World(self._bc, cell)

@@ -225,6 +225,24 @@ class Kinematics:
         The chain base_link -> link1 -> ... -> link6 (= tool0): for each joint, a translation
         to its origin, then a rotation by q_i about its axis.
         """
+        T = self._joint_transforms(q)
+        out = T[..., 0, :, :]
+        for i in range(1, 6):
+            out = out @ T[..., i, :, :]
+        return out
+
+    def link_frames(self, q) -> np.ndarray:
+        """Frames of link1 .. link6 in base_link (each at its joint, as in the URDF): q (..., 6)
+        -> (..., 6, 4, 4); [..., 5, :, :] is `forward(q)`."""
+        T = self._joint_transforms(q)
+        out = np.empty_like(T)
+        out[..., 0, :, :] = T[..., 0, :, :]
+        for i in range(1, 6):
+            out[..., i, :, :] = out[..., i - 1, :, :] @ T[..., i, :, :]
+        return out
+
+    def _joint_transforms(self, q) -> np.ndarray:
+        """(..., 6, 4, 4): per joint, the translation to its origin, then the rotation by q_i."""
         q = np.asarray(q, dtype=float)
         if q.shape[-1:] != (6,):
             raise ValueError(f"joint vectors need a last axis of 6, got shape {q.shape}")
@@ -235,10 +253,7 @@ class Kinematics:
         T[..., n, k, k] = c
         T[..., n, j, k] = -s
         T[..., n, k, j] = s
-        out = T[..., 0, :, :]
-        for i in range(1, 6):
-            out = out @ T[..., i, :, :]
-        return out
+        return T
 
     def configuration(self, q) -> Config:
         """Concrete labels (LEFTY/RIGHTY, POSITIVE/NEGATIVE) of a joint vector (6,)."""

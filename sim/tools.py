@@ -16,12 +16,8 @@ import numpy as np
 import pybullet as pb
 
 from landscape.sim.cell import ToolSpec
+from landscape.sim.tool_shapes import FINGER, FINGER_FORCE, GRIPPER_BODY, PLATE_T
 
-_PLATE_T = 0.015          # m, plate thickness
-_GRIPPER_BODY = 0.06      # m, gripper housing height below the plate
-_FINGER = (0.01, 0.02)    # m, finger thickness (along the stroke) and width
-_FINGER_MASS = 0.1        # kg, each
-_FINGER_FORCE = 200.0     # N, finger drive
 _ARRIVED = 5e-4           # m, a finger this close to its target has arrived
 _SUCTION_REACH = 0.002    # m, a part this close to the cup face is sucked on
 _HOLD_FORCE = 500.0       # N, limit of the holding constraints
@@ -34,76 +30,6 @@ class Part:
     name: str
     body: int
     size: tuple[float, float, float]
-
-
-# ---- URDF -------------------------------------------------------------------------------------
-
-def _box(size, xyz, rgba) -> str:
-    geo = f'<geometry><box size="{size[0]} {size[1]} {size[2]}"/></geometry>'
-    org = f'<origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/>'
-    return (f'<visual>{org}{geo}<material name="m"><color rgba="{rgba}"/></material></visual>'
-            f'<collision>{org}{geo}</collision>')
-
-
-def _cyl(radius, length, z, rgba) -> str:
-    geo = f'<geometry><cylinder radius="{radius}" length="{length}"/></geometry>'
-    org = f'<origin xyz="0 0 {z}"/>'
-    return (f'<visual>{org}{geo}<material name="m"><color rgba="{rgba}"/></material></visual>'
-            f'<collision>{org}{geo}</collision>')
-
-
-def _inertial(mass, xyz, r) -> str:
-    i = mass * r * r / 2.0   # a rough, well-conditioned inertia: the tool is not a study object
-    return (f'<inertial><origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/><mass value="{mass}"/>'
-            f'<inertia ixx="{i}" iyy="{i}" izz="{i}" ixy="0" ixz="0" iyz="0"/></inertial>')
-
-
-_GREY, _DARK, _BLACK = "0.7 0.7 0.72 1", "0.25 0.25 0.28 1", "0.1 0.1 0.1 1"
-
-
-def tool_urdf(spec: ToolSpec) -> str:
-    """The tool as URDF; its root link `plate` is the tool frame."""
-    if spec.kind == "parallel_gripper":
-        return _gripper_urdf(spec)
-    return _cup_urdf(spec)
-
-
-def _gripper_urdf(s: ToolSpec) -> str:
-    body_end = _PLATE_T + _GRIPPER_BODY
-    if s.length <= body_end + 0.01:
-        raise ValueError(f"tool {s.name!r}: a gripper needs length > {body_end + 0.01} m")
-    finger_len = s.length - body_end
-    width = s.stroke + 2 * _FINGER[0] + 0.02
-    plate = (_cyl(0.045, _PLATE_T, _PLATE_T / 2, _GREY)
-             + _box((width, 0.05, _GRIPPER_BODY), (0, 0, _PLATE_T + _GRIPPER_BODY / 2), _DARK)
-             + _inertial(max(s.mass - 2 * _FINGER_MASS, 0.05), (0, 0, body_end / 2), 0.05))
-    parts = [f'<?xml version="1.0"?>\n<robot name="{s.name}">\n<link name="plate">{plate}</link>\n']
-    for side, sign in (("left", -1), ("right", 1)):
-        # Joint value d = half the finger gap: 0 closed, stroke / 2 open.
-        x = sign * _FINGER[0] / 2
-        finger = (_box((_FINGER[0], _FINGER[1], finger_len), (x, 0, 0), _BLACK)
-                  + _inertial(_FINGER_MASS, (x, 0, 0), 0.01))
-        parts.append(
-            f'<link name="finger_{side}">{finger}</link>\n'
-            f'<joint name="finger_{side}" type="prismatic"><parent link="plate"/>'
-            f'<child link="finger_{side}"/><origin xyz="0 0 {body_end + finger_len / 2}"/>'
-            f'<axis xyz="{sign} 0 0"/><limit lower="0" upper="{s.stroke / 2}" '
-            f'effort="{_FINGER_FORCE}" velocity="{s.finger_speed}"/></joint>\n')
-    parts.append("</robot>\n")
-    return "".join(parts)
-
-
-def _cup_urdf(s: ToolSpec) -> str:
-    cup_h = 0.02
-    stem = s.length - _PLATE_T - cup_h
-    if stem <= 0:
-        raise ValueError(f"tool {s.name!r}: a vacuum cup needs length > {_PLATE_T + cup_h} m")
-    plate = (_cyl(0.04, _PLATE_T, _PLATE_T / 2, _GREY)
-             + _cyl(0.012, stem, _PLATE_T + stem / 2, _DARK)
-             + _cyl(s.cup_radius, cup_h, s.length - cup_h / 2, _BLACK)
-             + _inertial(s.mass, (0, 0, s.length / 3), 0.04))
-    return (f'<?xml version="1.0"?>\n<robot name="{s.name}">\n<link name="plate">{plate}</link>\n'
-            '</robot>\n')
 
 
 # ---- frames -----------------------------------------------------------------------------------
@@ -233,17 +159,17 @@ class ParallelGripper(Tool):
     def _drive(self, d: float) -> None:
         for j in self._fingers:
             self.bc.setJointMotorControl2(self.body, j, pb.POSITION_CONTROL, targetPosition=d,
-                                          force=_FINGER_FORCE, maxVelocity=self.spec.finger_speed)
+                                          force=FINGER_FORCE, maxVelocity=self.spec.finger_speed)
 
     def _between_fingers(self) -> tuple[int | None, float]:
         """The part between the fingers, and its width across them (m)."""
         gap = 2 * self.bc.getJointState(self.body, 0)[0]
-        top = _PLATE_T + _GRIPPER_BODY
+        top = PLATE_T + GRIPPER_BODY
         _, torn = self.plate_pose()
         for part in self.parts.values():
             ppos, porn = self.bc.getBasePositionAndOrientation(part.body)
             c = self.to_tool(ppos)
-            if abs(c[0]) < gap / 2 and abs(c[1]) < _FINGER[1] and top < c[2] < self.spec.length:
+            if abs(c[0]) < gap / 2 and abs(c[1]) < FINGER[1] and top < c[2] < self.spec.length:
                 across = rotation(torn)[:, 0] @ rotation(porn)
                 width = float(np.abs(across) @ np.asarray(part.size))
                 if width < gap:

@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import contextlib
+import queue
 import subprocess
 import sys
+import threading
 import time
 
 import grpc
@@ -110,6 +112,8 @@ class Arm:
         activate(self.session)
         self.device, _, events = stubs(self.session.channel)
         self.events = events.Subscribe(event_service_pb2.SubscribeRequest(after_sequence=0))
+        self._received: queue.Queue = queue.Queue()
+        threading.Thread(target=self._read_events, daemon=True, name="arm-events").start()
         self.kin = Kinematics(self.server.device.arm)
         self.link = self.server.link
         self.link.between_cycles(lambda c: c.rec_init())
@@ -119,15 +123,30 @@ class Arm:
         self.session.close()
         self.server.stop(grace=None)
 
-    def wait_command(self, command_id, phases=("command_done", "command_failed")) -> list:
-        seen = []
-        for reply in self.events:
-            event = reply.event
+    def _read_events(self):
+        try:
+            for reply in self.events:
+                self._received.put(reply.event)
+        except grpc.RpcError:
+            pass
+        self._received.put(None)
+
+    def wait_command(self, command_id, phases=("command_done", "command_failed"),
+                     timeout: float = 120.0) -> list:
+        """The events of `command_id` up to one of `phases`; AssertionError after `timeout`."""
+        seen, deadline = [], time.monotonic() + timeout
+        while True:
+            try:
+                event = self._received.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise AssertionError(f"no {'/'.join(phases)} for {command_id} within "
+                                     f"{timeout} s; saw {[e.event_id for e in seen]}") from None
+            if event is None:
+                raise AssertionError("event stream ended")
             if event.HasField("command") and event.command.command_id == command_id:
                 seen.append(event)
                 if event.event_id in phases:
                     return seen
-        raise AssertionError("event stream ended")
 
     def record_start(self):
         self.link.between_cycles(lambda c: c.rec_start())

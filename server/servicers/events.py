@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import functools
 
-from landscape.server import errors, events, services
+from landscape.server import convert, errors, events, services
 from landscape.server.convert import event_to_proto
 from landscape.server.servicers.guard import guarded
 from landscape.v1 import event_service_pb2 as pb
@@ -33,6 +33,10 @@ class EventServicer(services.EVENTS.servicer_base):
         with subscription:
             while (event := await subscription.next_async()) is not None:
                 yield self._response(event)
+
+    def PostMessage(self, request, context):
+        event = self.device.post_message(request.text)
+        return pb.PostMessageResponse(ret_val=convert.ok("posted"), sequence=event.sequence)
 
 
 # -- Domain -> wire -------------------------------------------------------------------------

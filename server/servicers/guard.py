@@ -2,8 +2,9 @@
 
 `guarded(spec)` wraps each RPC a servicer class defines:
 
-1. Admission, on the event loop: the state table (states.py) and the lease refuse the call
-   (FAILED_PRECONDITION / PERMISSION_DENIED) before anything happens, and the stream caps
+1. Admission, on the event loop: the request's bounds (bounds.py), the state table
+   (states.py) and the lease refuse the call (INVALID_ARGUMENT / OUT_OF_RANGE,
+   FAILED_PRECONDITION / PERMISSION_DENIED) before anything happens, and the stream caps
    (limits.py) refuse a stream beyond its client's share (RESOURCE_EXHAUSTED).
 2. The body runs where it belongs. Plain methods are synchronous and thin: read-only ones
    are answered on the event loop (they read memory), except those marked `@blocking` (they
@@ -28,7 +29,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import grpc
 
-from landscape.server import states
+from landscape.server import bounds, states
 from landscape.server.errors import CommandError, Internal, Unimplemented, to_status
 from landscape.server.states import Lease
 
@@ -97,6 +98,7 @@ def _unary(name: str, body):
     async def unary(self, request, context):
         lease = lease_of(context)
         try:
+            bounds.check(request)
             self.device.admit(name, lease)
             if read_only and not getattr(body, "blocking", False):
                 return body(self, request, context)
@@ -116,6 +118,8 @@ def _stream(name: str, body, streaming_response: bool, spec_name: str):
     """An async body (generator for server streams, coroutine for client streams)."""
 
     async def admitted(self, request, context):
+        if hasattr(request, "ListFields"):
+            bounds.check(request)   # streamed requests are checked message by message
         self.device.admit(name, lease_of(context))
         return self.limits.acquire(name, context.peer()) if streaming_response else None
 

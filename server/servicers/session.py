@@ -6,9 +6,9 @@ import logging
 
 import grpc
 
-from landscape.server import convert, services
+from landscape.server import bounds, convert, services
 from landscape.server.device import Device
-from landscape.server.errors import ParamError
+from landscape.server.errors import CommandError, ParamError
 from landscape.server.servicers.guard import Dispatch, guarded
 from landscape.server.sessions import Outbox
 from landscape.v1 import session_service_pb2 as pb
@@ -29,6 +29,7 @@ class SessionServicer(services.SESSIONS.servicer_base):
         first = await anext(aiter(request_iterator), None)
         if first is None or first.WhichOneof("message") != "hello":
             raise ParamError("a session starts with a hello message")
+        bounds.check(first)
         session = registry.open(first.hello.client_name, asyncio.get_running_loop())
         reader = asyncio.create_task(self._read(request_iterator, session))
         try:
@@ -54,6 +55,11 @@ class SessionServicer(services.SESSIONS.servicer_base):
             async for message in request_iterator:
                 registry.touch(session)   # any message counts as a keep-alive
                 if message.WhichOneof("message") == "rsvp_answer":
+                    try:
+                        bounds.check(message)
+                    except CommandError as error:
+                        log.warning("session %s: answer refused: %s", session.id, error)
+                        continue
                     answer = message.rsvp_answer
                     if not self.device.rsvp.answer(session, answer.rsvp_id, answer.choice,
                                                    list(answer.data)):

@@ -150,3 +150,34 @@ def test_lock_needs_the_sessions_secret_not_just_its_id(server):
             assert reply.lease and reply.ret_val.ret_msg == "locked"
         finally:
             owner.close()
+
+
+def test_strings_and_lists_beyond_their_bounds_are_refused_before_anything_happens(arm):
+    """Issue 9.5: a 2.5 MB point name used to be accepted and published to every subscriber."""
+    error = refused(lambda: arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        point_name="p" * 2_500_000, frame=types_pb2.REFERENCE_FRAME_JOINT_FRAME,
+        values=[0.1, 0, 1.5, 0, 1.5, 0])))
+    assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
+    assert error_info(error).metadata["field"] == "point_name"
+    error = refused(lambda: arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        point_name="p" * 257, frame=types_pb2.REFERENCE_FRAME_JOINT_FRAME,
+        values=[0.1, 0, 1.5, 0, 1.5, 0])))
+    assert error_info(error).metadata["bound"] == "256"
+    tags = [types_pb2.TagStruct(joint_values=[0, 0, 1.5, 0, 1.5, 0],
+                                aux_commands=["dout gripper_close 1"] * 17)]
+    error = refused(lambda: arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(
+        header=header("long-aux", 1), tags=tags)])))
+    assert error.code() is grpc.StatusCode.OUT_OF_RANGE
+    assert error_info(error).metadata["field"] == "tags[0].aux_commands"
+    assert arm.server.device.state is State.RESTING and "long-aux" not in arm.server.device.motions.paths
+    with grpc.insecure_channel(arm.server.target) as channel:
+        error = refused(lambda: Session(channel, "n" * 300).open())
+        assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
+
+
+def test_no_event_string_exceeds_its_bound():
+    from landscape.server.events import MAX_TEXT, EventBus, Severity
+    bus = EventBus()
+    event = bus.alarm(Severity.INFO, 1, "x" * 100_000, "id" * 1000)
+    assert len(event.detail.message) == MAX_TEXT and event.detail.message.endswith("…")
+    assert all(len(d) <= MAX_TEXT for d in event.data)

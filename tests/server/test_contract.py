@@ -23,7 +23,7 @@ EXPECTED = {
         "Jog", "Reset", "GetDeviceState", "GetRobotDescription", "OperatePanel",
     ],
     services.DIGITAL_IO: ["SetDigitalIO", "GetDigitalIO", "SignalDigitalIO", "ListDigitalIO"],
-    services.EVENTS: ["Subscribe"],
+    services.EVENTS: ["Subscribe", "PostMessage"],
     services.SESSIONS: ["Connect"],
     services.STATE: ["StreamState"],
 }

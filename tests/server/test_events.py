@@ -212,12 +212,13 @@ def test_closing_the_bus_ends_every_subscription():
     bus = EventBus()
     sub = bus.subscribe()
     bus.state_change("A", "B")
-    ended = threading.Event()
-    waiter = threading.Thread(target=lambda: (list(sub), ended.set()))
+    ended, got = threading.Event(), []
+    waiter = threading.Thread(target=lambda: (got.extend(sub), ended.set()))
     waiter.start()
     bus.close()
     waiter.join(DEADLINE_S)
     assert ended.is_set() and sub.closed and sub.get(timeout=0) is None
+    assert [e.event_id for e in got] == ["state_changed"]   # what was pending still went out
     assert bus.subscriber_count == 0
     assert bus.subscribe().get(timeout=0) is None       # later ones start closed
     assert bus.state_change("A", "B").sequence == 2     # publishing still works
@@ -448,3 +449,23 @@ def test_closing_the_bus_ends_the_streams_cleanly(server, stub):
     server.bus.close()
     assert list(stream) == []          # ends with OK, no error
     assert stream.code() == grpc.StatusCode.OK
+
+
+def test_the_lock_holder_posts_a_message_every_subscriber_sees(server):
+    from support import locked_session, stubs
+    holder = locked_session(server, "operator-console")
+    try:
+        _, _, events = stubs(holder.channel)
+        stream = events.Subscribe(pb.SubscribeRequest(), timeout=10)
+        reply = events.PostMessage(pb.PostMessageRequest(text="part 7 is cracked"), timeout=5)
+        event = next(r.event for r in stream if r.event.HasField("operator_message"))
+        stream.cancel()
+        assert event.sequence == reply.sequence
+        assert (event.operator_message.text, event.operator_message.source) == (
+            "part 7 is cracked", "operator-console")
+        with grpc.insecure_channel(server.target) as channel:   # without the lease: refused
+            with pytest.raises(grpc.RpcError) as refused:
+                stubs(channel)[2].PostMessage(pb.PostMessageRequest(text="spam"), timeout=5)
+            assert refused.value.code() is grpc.StatusCode.PERMISSION_DENIED
+    finally:
+        holder.close()

@@ -93,7 +93,8 @@ def test_an_unreachable_point_fails_the_load_by_index_and_nothing_is_stored(arm)
     assert "point 7" in refused.value.details()
     with pytest.raises(grpc.RpcError) as missing:
         arm.device.PathMove(motion_pb2.PathMoveRequest(path_name="bad"))
-    assert missing.value.code() is grpc.StatusCode.NOT_FOUND
+    assert missing.value.code() is grpc.StatusCode.INVALID_ARGUMENT
+    assert error_info(missing.value).reason == "NOT_FOUND"
 
 
 def test_loads_append_and_clear_deletes(arm):
@@ -102,7 +103,8 @@ def test_loads_append_and_clear_deletes(arm):
     arm.device.PathClearPath(motion_pb2.PathClearPathRequest(path_name="p"))
     with pytest.raises(grpc.RpcError) as missing:
         arm.device.PathClearPath(motion_pb2.PathClearPathRequest(path_name="p"))
-    assert missing.value.code() is grpc.StatusCode.NOT_FOUND
+    assert missing.value.code() is grpc.StatusCode.INVALID_ARGUMENT
+    assert error_info(missing.value).reason == "NOT_FOUND"
 
 
 def test_a_wrong_point_count_or_bad_aux_command_is_refused(arm):

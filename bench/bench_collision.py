@@ -1,0 +1,190 @@
+"""Collision checking figures: whole trajectories against the default cell, beside their planning.
+
+    .venv/bin/python bench/bench_collision.py [--repeat 7] [--seed 0] [--margin 0.005]
+
+Motions (the default cell, TX90, the gripper mounted, dt = 4 ms), each planned by time_path
+(server/motion/timing.py) as the server plans them:
+
+- "cycle 10 s": a pick-and-place cycle of 14 waypoints above the table and the rack, stopping
+  where the tool goes down to a part (fingers 2 cm above the table), at the speed that makes
+  it last 10 s; clear, so every pair is checked to the end.
+- "path 100": 100 random waypoints in the free space over the table and beside it (flange
+  pointing down, 0.45 to 0.7 m high), blended, at 100 % speed (with the default seed the
+  spline dips onto block_2 near its end: nearly the whole path is checked).
+- "through table": one joint move whose straight joint line sweeps the tool through the table:
+  found, and how soon.
+
+For each: samples, duration, the check time (best and median of --repeat) with its counts
+(configurations placed and exact coal distances in the narrow phase; sphere/box bounds in the
+broad phase), and in the same run the planning time of the same motion (time_path, best of
+--repeat) and a baseline check: pinocchio's computeCollisions with every pair at every 4 ms
+sample (security margin = the margin; it gives no guarantee between samples). Then clearance(q)
+at the motion's samples, per call, and how long the scene takes to compile after a change.
+
+Prints the table; no pass/fail.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from bench_planning import timed   # bench/ is on the path when a benchmark runs
+from landscape.server.collision import CollisionScene, check_motion, clearance
+from landscape.server.motion.timing import time_path
+from landscape.server.motion.trajectory import Limits
+from landscape.server.units import pose_matrix
+from landscape.sim.cell import load_cell
+from landscape.sim.kinematics import Kinematics
+
+DT = 0.004
+DOWN = (np.pi, 0.0, 0.0)
+
+
+class Cell:
+    def __init__(self, margin: float):
+        self.cell = load_cell()
+        self.kin = Kinematics(self.cell.arm)
+        self.scene = CollisionScene(self.cell, margin)
+        self.scene.mount_tool("gripper")
+        self.q0 = np.array(self.cell.controller.initial_position)
+
+    def ik(self, xyz, near) -> np.ndarray:
+        """Joints putting the flange at xyz (m), pointing down, nearest `near`."""
+        q, result = self.kin.reverse(pose_matrix(xyz, DOWN), near)
+        if q is None:
+            raise RuntimeError(f"{xyz} unreachable: {result.name}")
+        return q
+
+    def chain(self, points) -> np.ndarray:
+        out = [self.q0]
+        for p in points:
+            out.append(self.ik(p, out[-1]))
+        return np.array(out)
+
+
+def cycle(c: Cell) -> tuple[np.ndarray, np.ndarray]:
+    """A pick-and-place cycle: waypoints (M, 6) and stops (M,)."""
+    above, low = 0.55, 0.2 + 0.02 + 0.16     # flange heights: clear / fingers 2 cm up
+    pts = [(0.5, -0.15, above), (0.5, -0.15, low), (0.5, -0.15, above),
+           (0.73, 0.1, above), (0.73, 0.1, low + 0.02), (0.73, 0.1, above),
+           (0.3, -0.45, 0.7), (0.0, -0.45, 0.75), (0.3, -0.45, 0.7),
+           (0.5, 0.15, above), (0.5, 0.15, low), (0.5, 0.15, above), (0.45, 0.0, 0.7)]
+    W = c.chain(pts)
+    stops = np.zeros(len(W), dtype=bool)
+    stops[[0, 2, 5, 11, len(W) - 1]] = True
+    return W, stops
+
+
+def free_path(c: Cell, n: int, rng) -> np.ndarray:
+    """n waypoints over and beside the table, flange down, each reachable from the last."""
+    out = [c.q0]
+    while len(out) < n:
+        xyz = (rng.uniform(0.3, 0.7), rng.uniform(-0.4, 0.4), rng.uniform(0.45, 0.7))
+        q, _ = c.kin.reverse(pose_matrix(xyz, DOWN), out[-1])
+        if q is not None:
+            out.append(q)
+    return np.array(out)
+
+
+def ten_seconds(c: Cell, W: np.ndarray, stops: np.ndarray) -> Limits:
+    """The limits (percent speed, 100 % acceleration) under which the cycle lasts 10 s."""
+    lo, hi = 1.0, 100.0
+    for _ in range(30):
+        mid = (lo + hi) / 2
+        if time_path(W, Limits.scaled(c.cell.arm, mid, 100), DT, stops=stops).duration > 10.0:
+            lo = mid
+        else:
+            hi = mid
+    return Limits.scaled(c.cell.arm, hi, 100)
+
+
+def compile_times(c: Cell) -> list[tuple[str, float]]:
+    """(change, ms to compile the scene's model after it): the scene follows the world."""
+    scene = c.scene
+    changes = [("unmount", scene.unmount_tool), ("mount", lambda: scene.mount_tool("gripper")),
+               ("attach", lambda: scene.attach_part("block_1", q=c.q0)),
+               ("release", lambda: scene.release_part(c.q0))]
+    out = []
+    for name, change in changes:
+        change()
+        start = time.perf_counter()
+        scene.model()
+        out.append((name, (time.perf_counter() - start) * 1e3))
+    return out
+
+
+def baseline(model, Q: np.ndarray, margin: float) -> int:
+    """Every sample, every pair, in pinocchio (C++); the number of samples within the margin."""
+    data, gdata = model.pin_model.createData(), pin.GeometryData(model.geom_model)
+    for request in gdata.collisionRequests:
+        request.security_margin = margin
+    return sum(pin.computeCollisions(model.pin_model, data, model.geom_model, gdata, q, True)
+               for q in Q)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=7)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--margin", type=float, default=0.005)
+    args = parser.parse_args()
+
+    c = Cell(args.margin)
+    model = c.scene.model()
+    W, stops = cycle(c)
+    full = Limits.scaled(c.cell.arm, 100, 100)
+    cases = [("cycle 10 s", W, stops, ten_seconds(c, W, stops)),
+             ("path 100", free_path(c, 100, np.random.default_rng(args.seed)), None, full),
+             ("through table", np.array([c.ik((0.6, -0.55, 0.3), c.q0),
+                                         c.ik((0.6, 0.55, 0.3), c.q0)]), None, full)]
+
+    rows, clearance_times = [], []
+    for name, W, stops, limits in cases:
+        plan, traj = timed(lambda: time_path(W, limits, DT, stops=stops), args.repeat)
+        Q = traj.positions
+        check, result = timed(lambda: check_motion(model, Q, DT, traj.marks), args.repeat)
+        base, within = timed(lambda: baseline(model, Q, args.margin), 1)
+        rows.append({"motion": name, "M": len(W), "samples": len(Q), "dur s": traj.duration,
+                     "check": min(check) * 1e3, "median": statistics.median(check) * 1e3,
+                     "configs": result.configurations, "exact": result.pair_checks,
+                     "bounds": result.bound_checks, "plan": min(plan) * 1e3,
+                     "baseline": min(base) * 1e3,
+                     "found": f"{result.contact or 'clear'}; baseline: {within} samples "
+                              "within the margin"})
+        sample = Q[:: max(1, len(Q) // 200)]
+        per_call = []
+        for limit in (math.inf, 0.05):
+            start = time.perf_counter()
+            for q in sample:
+                clearance(model, q, limit=limit)
+            per_call.append((time.perf_counter() - start) / len(sample) * 1e6)
+        clearance_times.append(f"{name} {per_call[0]:.0f} ({per_call[1]:.0f} within 5 cm)")
+
+    print(f"Collision checks, default cell, gripper mounted, margin {args.margin * 1e3:.1f} mm, "
+          f"{len(model.geometries)} shapes, {len(model.pairs)} pairs, dt = {DT * 1e3:.0f} ms\n")
+    columns = [("motion", "<14", ""), ("M", ">4", ""), ("samples", ">7", ""),
+               ("dur s", ">6", ".2f"), ("check", ">7", ".2f"), ("median", ">7", ".2f"),
+               ("configs", ">7", ""), ("exact", ">6", ""), ("bounds", ">7", ""),
+               ("plan", ">7", ".2f"), ("baseline", ">9", ".1f")]
+    head = " ".join(format(key, align) for key, align, _ in columns)
+    print(head + "\n" + "-" * len(head) + "   (ms)")
+    for row in rows:
+        print(" ".join(format(format(row[key], fmt), align) for key, align, fmt in columns))
+    print()
+    for row in rows:
+        print(f"{row['motion']:<14} {row['found']}")
+    print("\nclearance(q), us per call: " + ", ".join(clearance_times))
+    print("model compile after a change, ms: " + ", ".join(
+        f"{name} {ms:.1f}" for name, ms in compile_times(c)))
+    print("\ncheck: check_motion; exact: coal distances; bounds: broad-phase bounds; plan: "
+          "time_path of the same\nwaypoints; baseline: computeCollisions at every sample "
+          "with all pairs (no guarantee between samples).")
+
+
+if __name__ == "__main__":
+    main()

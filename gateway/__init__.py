@@ -1,0 +1,8 @@
+"""The CRCL gateway: NIST Canonical Robot Command Language clients drive a LandScape device.
+
+CRCL documents arrive on TCP (wire.py), are parsed safely (xmlsafe.py), validated against the
+official schemas when configured (schemas.py) and always by the typed parser (parse.py into
+model.py), then carried out per connection (session.py) as landscape.v1 calls on a device
+server (device.py, motions.py); CRCLStatus answers come from the live state (state_feed.py,
+status.py).
+"""

@@ -1,0 +1,167 @@
+"""CRCL commands that change the session's settings or reporting, or wait (no device motion)."""
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+
+from landscape.gateway import model as m
+from landscape.gateway.errors import CrclError
+from landscape.gateway.motions import push_rates
+from landscape.gateway.settings import JOINTS, rate_si, tolerance_si
+from landscape.v1 import event_service_pb2, settings_pb2, types_pb2
+
+_RATE_FIELDS = {"TransSpeed": ("trans_speed", "length", "max_world_linear_velocity", "limits"),
+                "RotSpeed": ("rot_speed", "angle", "max_world_angular_velocity", "limits"),
+                "TransAccel": ("trans_accel", "length", "max_world_linear_accel", "accel_limits"),
+                "RotAccel": ("rot_accel", "angle", "max_world_angular_accel", "accel_limits")}
+
+
+async def set_units(session, cmd: m.SetUnits) -> str:
+    session.settings.units = session.settings.units.with_unit(cmd.QUANTITY, cmd.unit)
+    return f"{cmd.QUANTITY} units: {cmd.unit}"
+
+
+async def set_rate(session, cmd: m.SetRate) -> str:
+    field, quantity, limit, limits = _RATE_FIELDS[cmd.QUANTITY]
+    units = session.settings.units
+    scale = units.length_si(1.0) if quantity == "length" else units.angle_si(1.0)
+    rate = rate_si(cmd.rate, scale)
+    setattr(session.settings, field, rate)
+    await push_rates(session)
+    maximum = getattr(getattr(session.control, limits), limit)
+    if rate.absolute is not None and rate.absolute > maximum:
+        out = units.length_out if quantity == "length" else units.angle_out
+        return f"{cmd.QUANTITY} limited to the arm's maximum, {out(maximum):.6g}"
+    return f"{cmd.QUANTITY} set"
+
+
+async def set_end_pose_tolerance(session, cmd: m.SetEndPoseTolerance) -> str:
+    session.settings.end_tolerance = tolerance_si(cmd.tolerance, session.settings.units)
+    return "end pose tolerance set"
+
+
+async def set_intermediate_pose_tolerance(session, cmd: m.SetIntermediatePoseTolerance) -> str:
+    session.settings.intermediate_tolerance = tolerance_si(cmd.tolerance, session.settings.units)
+    return "intermediate pose tolerance set (the device's paths pass through every waypoint)"
+
+
+def _check_joint(joint: int) -> None:
+    if joint > JOINTS:
+        raise CrclError(f"joint {joint}: the arm has joints 1 to {JOINTS}")
+
+
+async def set_default_joint_tolerances(session, cmd: m.SetDefaultJointPositionsTolerances) -> str:
+    for t in cmd.tolerances:
+        _check_joint(t.joint)
+    units = session.settings.units
+    session.settings.joint_tolerances.update(
+        {t.joint: units.angle_si(t.tolerance) for t in cmd.tolerances})
+    return "default joint tolerances set"
+
+
+async def set_motion_coordination(session, cmd: m.SetMotionCoordination) -> str:
+    # The device always finishes rotation and translation together, which both settings allow.
+    session.settings.coordinated = cmd.coordinated
+    return "motion coordination set (the device's motions are always coordinated)"
+
+
+async def configure_joint_reports(session, cmd: m.ConfigureJointReports) -> str:
+    for report in cmd.reports:
+        _check_joint(report.joint)
+    reports = session.settings.reporting.joint_reports
+    if cmd.reset_all:
+        reports.clear()
+    for r in cmd.reports:
+        reports[r.joint] = (r.position, r.torque_or_force, r.velocity)
+    return "joint reports configured"
+
+
+async def configure_status_report(session, cmd: m.ConfigureStatusReport) -> str:
+    r = session.settings.reporting
+    r.joints, r.pose, r.gripper = cmd.report_joints, cmd.report_pose, cmd.report_gripper
+    r.settings, r.sensors, r.guards = cmd.report_settings, cmd.report_sensors, cmd.report_guards
+    return "status report configured" + (" (guards are not supported: none to report)"
+                                         if cmd.report_guards else "")
+
+
+MAX_DWELL = 86_400.0   # s
+
+
+async def dwell(session, cmd: m.Dwell) -> str:
+    if cmd.seconds > MAX_DWELL:
+        raise CrclError(f"a dwell of {cmd.seconds:g} s is longer than a day")
+    await asyncio.sleep(cmd.seconds)
+    return f"dwelled {cmd.seconds:g} s"
+
+
+async def message(session, cmd: m.Message) -> str:
+    # On the device's event stream, where every supervisor (the dashboard) shows it.
+    control = session.control
+    await control.call("PostMessage", event_service_pb2.PostMessageRequest(text=cmd.text),
+                       stub=control.link.event_service)
+    return "posted on the device's event stream"
+
+
+async def loop_block(session, cmd: m.Command) -> str:
+    raise CrclError(f"{cmd.KIND} belongs in a CRCLProgram: the program's runner repeats the "
+                    f"block; alone it means nothing")
+
+
+# ---- robot parameters: the device settings no CRCL command sets ----------------------------------
+
+def _pose_values(session, text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not np.all(np.isfinite(values)):
+        raise CrclError(f"{text!r}: expected six numbers, x y z roll pitch yaw "
+                        f"(current length and angle units)")
+    units = session.settings.units
+    return [units.length_si(v) for v in values[:3]] + [units.angle_si(v) for v in values[3:]]
+
+
+async def _tool_offset(session, value: str) -> None:
+    x, y, z, roll, pitch, yaw = _pose_values(session, value)
+    await session.control.call("SetToolOffset", settings_pb2.SetToolOffsetRequest(
+        offset=types_pb2.Pose(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw)))
+
+
+async def _workstation_frame(session, value: str) -> None:
+    x, y, z, roll, pitch, yaw = _pose_values(session, value)
+    await session.control.call("SetWorldCartesianFrame", settings_pb2.SetWorldCartesianFrameRequest(
+        frame=types_pb2.Pose(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw)))
+
+
+# name -> what it sets; values are "x y z roll pitch yaw" in the session's units.
+ROBOT_PARAMETERS = {
+    "ToolOffset": _tool_offset,            # the controlled point in the flange frame
+    "WorkstationFrame": _workstation_frame,   # the workstation (world) frame in the robot base
+}
+
+
+def _known(name: str) -> None:
+    if name not in ROBOT_PARAMETERS:
+        raise CrclError(f"unknown robot parameter {name!r}; known: {', '.join(ROBOT_PARAMETERS)}")
+
+
+async def set_robot_parameters(session, cmd: m.SetRobotParameters) -> str:
+    for setting in cmd.settings:
+        _known(setting.name)
+    for setting in cmd.settings:
+        await ROBOT_PARAMETERS[setting.name](session, setting.value)
+        session.settings.robot_parameters[setting.name] = setting.value
+    return f"set {', '.join(s.name for s in cmd.settings)}"
+
+
+async def enable_parameter_status(session, cmd: m.EnableRobotParameterStatus) -> str:
+    _known(cmd.parameter)
+    session.settings.reported_parameters.add(cmd.parameter)
+    return f"{cmd.parameter} reported in SettingsStatus"
+
+
+async def disable_parameter_status(session, cmd: m.DisableRobotParameterStatus) -> str:
+    _known(cmd.parameter)
+    session.settings.reported_parameters.discard(cmd.parameter)
+    return f"{cmd.parameter} no longer reported"

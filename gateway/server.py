@@ -1,0 +1,72 @@
+"""The CRCL TCP server (asyncio): one CrclSession per connection, documents in, status out.
+
+Each connection reads into its own DocumentSplitter; a document is handled before the next is
+read, and GetStatus answers are written in order. A connection whose stream cannot be
+resynchronised (a DOCTYPE, a single token past the size bound) is closed; everything else a
+client gets wrong is a CRCL_Error status on the connection, which stays open. One client's
+trouble never touches another's connection.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass
+
+from landscape.gateway.device import DeviceLink
+from landscape.gateway.session import CrclSession, GatewayOptions
+from landscape.gateway.wire import Document, DocumentSplitter, WireError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PORT = 64444
+READ_SIZE = 64 * 1024
+
+
+@dataclass
+class Gateway:
+    link: DeviceLink
+    options: GatewayOptions
+    server: asyncio.base_events.Server | None = None
+
+    @property
+    def port(self) -> int:
+        return self.server.sockets[0].getsockname()[1]
+
+    async def serve(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT) -> "Gateway":
+        self.server = await asyncio.start_server(self._connection, host, port,
+                                                 limit=READ_SIZE)
+        log.info("CRCL gateway listening on %s:%d (device %s)", host, self.port, self.link.target)
+        return self
+
+    async def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
+            await self.server.wait_closed()
+
+    async def _connection(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+        peer = writer.get_extra_info("peername")
+        session = CrclSession(self.link, self.options, f"{peer[0]}:{peer[1]}" if peer else "")
+        splitter = DocumentSplitter(self.options.max_document)
+        log.info("%s connected", session.name)
+        try:
+            while data := await reader.read(READ_SIZE):
+                for item in splitter.feed(data):
+                    if isinstance(item, Document):
+                        reply = await session.receive(item.data)
+                        if reply is not None:
+                            writer.write(reply)
+                    else:
+                        await session.refuse(f"byte {item.offset}: {item.reason}")
+                await writer.drain()
+        except WireError as error:
+            log.warning("%s: closing: %s", session.name, error)
+        except (ConnectionError, asyncio.IncompleteReadError):
+            pass
+        finally:
+            await session.close()
+            writer.close()
+            try:
+                await writer.wait_closed()
+            except ConnectionError:
+                pass
+            log.info("%s disconnected", session.name)

@@ -1,0 +1,269 @@
+"""One CRCL session: a TCP connection's (or a gRPC stream's) commands, in order, and its status.
+
+- Documents are parsed safely, validated against the schemas when configured, and always by
+  the typed parser; a refused document becomes a CRCL_Error status saying why, and the
+  session goes on.
+- GetStatus is answered at once from the live state; it never waits behind a command.
+- Other commands run in the order they arrive, each the current one (CRCL_Working) while it
+  runs. A new command preempts a running one that lasts (a motion, a dwell, a program: spec
+  section VI): it is cancelled and the arm stops along its path before the new one starts;
+  quick commands (settings) just finish first. CommandIDs are the client's.
+- Before InitCanon, and after EndCanon, commands other than InitCanon are errors (EndCanon
+  and StopMotion before InitCanon have nothing to do, and are done).
+- InitCanon takes the device's lock for this session (one session at a time holds it), turns
+  the drives on and resets units and settings; EndCanon stops, turns the drives off and
+  releases. A connection that ends lets the device's disconnect handler do the same.
+"""
+from __future__ import annotations
+
+import asyncio
+import collections
+import itertools
+import logging
+from dataclasses import dataclass
+
+from landscape.gateway import model as m
+from landscape.gateway import parse, status, xmlsafe
+from landscape.gateway.device import Control, DeviceLink, DeviceRefused
+from landscape.gateway.errors import CrclError
+from landscape.gateway.handlers import HANDLERS
+from landscape.gateway.motions import push_rates
+from landscape.gateway.program import expand
+from landscape.gateway.schemas import SchemaInvalid, SchemaSet
+from landscape.gateway.settings import CrclSettings
+from landscape.gateway.status import DONE, ERROR, WORKING, CommandRecord
+from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT
+from landscape.v1 import motion_pb2, types_pb2
+
+log = logging.getLogger(__name__)
+_session_numbers = itertools.count(1)
+MAX_QUEUED = 10_000     # commands waiting behind the running one, per session
+
+
+@dataclass(frozen=True)
+class GatewayOptions:
+    schemas: SchemaSet | None = None
+    max_document: int = DEFAULT_MAX_DOCUMENT
+    gripper_stroke: float = status.DEFAULT_GRIPPER_STROKE
+
+
+class CrclSession:
+    def __init__(self, link: DeviceLink, options: GatewayOptions, peer: str = ""):
+        self.link = link
+        self.options = options
+        self.name = f"crcl-{next(_session_numbers)}{' ' + peer if peer else ''}"
+        self.settings = CrclSettings()
+        self.record = CommandRecord()
+        self.control: Control | None = None
+        self.ended = False                  # after EndCanon, until the next InitCanon
+        self._status_ids = itertools.count(1)
+        self._queue: collections.deque = collections.deque()
+        self._worker: asyncio.Task | None = None
+        self._running: asyncio.Task | None = None
+        self._running_lasts = False         # the running command is preempted by the next
+        self._must_halt = False             # a preempted motion may still move the arm
+        self.motion_start: asyncio.Future | None = None   # a motion call in flight
+        self.listeners: list = []           # called with no argument when the record changes
+
+    # ---- documents -------------------------------------------------------------------------
+
+    def read(self, data: bytes) -> m.CommandInstance | m.Program:
+        """The typed document; raises CrclError saying what is wrong (line, element)."""
+        try:
+            tree = xmlsafe.parse(data, self.options.max_document)
+            if self.options.schemas is not None:
+                self.options.schemas.validate(tree)
+            return parse.document(tree)
+        except (xmlsafe.XmlRefused, SchemaInvalid, parse.CrclParseError) as error:
+            raise CrclError(f"document refused: {error}") from None
+        except Exception as error:   # a gateway bug: refuse the document, keep the connection
+            log.exception("%s: reading a document", self.name)
+            raise CrclError(f"document refused: gateway error {error!r}") from None
+
+    async def receive(self, data: bytes) -> bytes | None:
+        """Take one document; returns the status to send back (GetStatus only), else None."""
+        try:
+            document = self.read(data)
+        except CrclError as error:
+            await self.refuse(str(error), _command_id_of(data))
+            return self.status() if b"GetStatusType" in data else None
+        if isinstance(document, m.Program):
+            self.submit(lambda: self._run_program(document), True, CommandRecord(
+                document.commands[0].command_id, WORKING, program_index=0,
+                program_length=len(document.commands)))
+            return None
+        command = document.command
+        if isinstance(command, m.GetStatus):
+            return self.status()
+        self.submit(lambda: self.execute(command), command.MOTION or command.LASTS,
+                    CommandRecord(command.command_id, WORKING, program_file=document.program_file,
+                                  program_index=document.program_index,
+                                  program_length=document.program_length))
+        await asyncio.sleep(0)   # a command done at once is Done for the next GetStatus
+        return None
+
+    async def refuse(self, why: str, command_id: int | None = None) -> None:
+        """A document or stream fault that is no command: reported as an error."""
+        log.info("%s: %s", self.name, why)
+        self.record = CommandRecord(self.record.command_id if command_id is None else command_id,
+                                    ERROR, why)
+        self.changed()
+
+    def changed(self) -> None:
+        for listener in self.listeners:
+            listener()
+
+    def status(self) -> bytes:
+        feed = self.link.feed
+        return status.build(self.record, next(self._status_ids), self.settings, feed.latest,
+                            feed.unavailable, self.options.gripper_stroke)
+
+    # ---- running commands ---------------------------------------------------------------------
+
+    def submit(self, body, lasts: bool, record: CommandRecord) -> None:
+        """Queue a command (`body()` makes its coroutine). Commands run in order; a new one
+        preempts a running command that lasts (a motion, a dwell, a program)."""
+        if len(self._queue) >= MAX_QUEUED:
+            self.record = CommandRecord(record.command_id, ERROR,
+                                        f"more than {MAX_QUEUED} commands queued: refused")
+            return
+        self._queue.append((body, lasts, record))
+        if self._running is None and len(self._queue) == 1:
+            self.record = record     # it runs next: status names it from now on
+        if self._running is not None and self._running_lasts and not self._running.done():
+            self._running.cancel()
+        if self._worker is None or self._worker.done():
+            self._worker = asyncio.create_task(self._work(), name=f"{self.name} commands")
+
+    async def _work(self) -> None:
+        while self._queue:
+            body, lasts, record = self._queue.popleft()
+            if self._must_halt:
+                self._must_halt = False
+                await self._halt_quietly()
+            self.record = record
+            self.changed()
+            self._running, self._running_lasts = asyncio.create_task(body()), lasts
+            try:
+                description = await asyncio.shield(self._running)
+                if self.record is record:
+                    record.state, record.description = DONE, description or ""
+            except asyncio.CancelledError:
+                if not self._running.cancelled():
+                    raise              # the worker itself is cancelled: the session closes
+                record.state, record.description = ERROR, "preempted by the next command"
+                self._must_halt = lasts
+            except (CrclError, DeviceRefused) as error:
+                record.state, record.description = ERROR, str(error)
+            except Exception as error:   # a bug must not take the connection down silently
+                log.exception("%s: command %d failed", self.name, record.command_id)
+                record.state, record.description = ERROR, f"gateway error: {error!r}"
+            finally:
+                self._running = None
+                self.changed()
+
+    async def wait(self) -> None:
+        """Until every queued command has finished (for programs and tests)."""
+        while self._worker is not None and not self._worker.done():
+            await asyncio.gather(self._worker, return_exceptions=True)
+
+    async def _halt_quietly(self) -> None:
+        """After a preempted motion: let a move request in flight land, then stop on the
+        path. A failure here is the next command's to report."""
+        if self.motion_start is not None:
+            await asyncio.gather(self.motion_start, return_exceptions=True)
+            self.motion_start = None
+        if self.control is not None:
+            try:
+                await self.halt()
+            except DeviceRefused as error:
+                log.warning("%s: stopping the preempted motion: %s", self.name, error)
+
+    async def halt(self) -> None:
+        """Stop a motion along its path and drop it (the arm rests, drives stay on)."""
+        state = await self.control.state()
+        if state == types_pb2.DEVICE_STATE_MOVING:
+            await self.control.call("StopMotion", motion_pb2.StopMotionRequest())
+            state = types_pb2.DEVICE_STATE_PAUSED
+        if state == types_pb2.DEVICE_STATE_PAUSED:
+            await self.control.call("AbortMotion", motion_pb2.AbortMotionRequest())
+
+    async def execute(self, command: m.Command) -> str | None:
+        """Carry out one command; returns a description for its Done status."""
+        if command.guards:
+            raise CrclError("guards (sensor limits on a command) are not supported by this "
+                            "gateway; send the command without Guard elements")
+        if isinstance(command, m.InitCanon):
+            return await self.init_canon()
+        if self.control is None:
+            if isinstance(command, (m.EndCanon, m.StopMotion)):
+                return "no CRCL session is active: nothing to do"
+            when = "after EndCanon" if self.ended else "before InitCanon"
+            raise CrclError(f"{command.KIND} {when}: only InitCanon is accepted")
+        if isinstance(command, m.EndCanon):
+            return await self.end_canon()
+        return await HANDLERS[type(command)](self, command)
+
+    async def init_canon(self) -> str:
+        if self.control is None:
+            self.control = await self.link.take_control(self.name)
+        try:
+            await self.control.prepare()
+            self.settings = CrclSettings()
+            await push_rates(self)
+        except BaseException:
+            await self.drop_control()
+            raise
+        self.ended = False
+        return "session started: lock held, drives on, default units"
+
+    async def end_canon(self) -> str:
+        control, self.control = self.control, None
+        await control.release()
+        self.ended = True
+        return "session ended: motion stopped, drives off, lock released"
+
+    async def drop_control(self) -> None:
+        control, self.control = self.control, None
+        if control is not None:
+            await control.close()
+
+    async def close(self) -> None:
+        """The connection ended."""
+        self._queue.clear()
+        for task in (self._running, self._worker):
+            if task is not None:
+                task.cancel()
+        await asyncio.gather(*(t for t in (self._running, self._worker) if t),
+                             return_exceptions=True)
+        await self.drop_control()
+
+    # ---- programs ----------------------------------------------------------------------------
+
+    async def _run_program(self, program: m.Program) -> str:
+        """A CRCLProgram sent whole: its commands in order, each to its end; the first error
+        ends the program and names the command."""
+        commands = expand(program)
+        record = self.record
+        for index, command in enumerate(commands):
+            record.command_id, record.program_index = command.command_id, index
+            record.program_length = len(commands)
+            self.changed()
+            try:
+                await self.execute(command)
+            except (CrclError, DeviceRefused) as error:
+                raise CrclError(f"program stopped at command {index} ({command.KIND}, CommandID "
+                                f"{command.command_id}): {error}") from None
+        return f"program done: {len(commands)} commands"
+
+
+def _command_id_of(data: bytes) -> int | None:
+    """The CommandID of a document that was refused, if it can be read at all."""
+    start = data.find(b"<CommandID>")
+    end = data.find(b"</CommandID>", start)
+    if start < 0 or end < 0:
+        return None
+    try:
+        return int(data[start + len(b"<CommandID>"):end].strip())
+    except ValueError:
+        return None

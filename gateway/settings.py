@@ -1,0 +1,87 @@
+"""What one CRCL session has set, in SI, and what it asked status to report.
+
+InitCanon starts from these defaults (spec section VI for the units; the rates are the
+device's cautious defaults: a quarter of the maximum speed, half the maximum acceleration).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from landscape.gateway import model as m
+from landscape.gateway.units import CrclUnits
+
+JOINTS = 6    # the TX90
+
+
+@dataclass(frozen=True)
+class SiRate:
+    """A speed or acceleration: absolute in m or rad per second (squared), or a fraction of
+    the arm's maximum."""
+
+    absolute: float | None = None
+    fraction: float | None = None
+
+    def value(self, maximum: float) -> float:
+        """In SI, at most `maximum` (the robot may go slower than asked, never faster)."""
+        wanted = self.absolute if self.absolute is not None else self.fraction * maximum
+        return min(wanted, maximum)
+
+
+def rate_si(rate: m.Rate, scale: float) -> SiRate:
+    """A CRCL rate in SI; `scale` is the size of the session's length or angle unit."""
+    if rate.absolute is not None:
+        return SiRate(absolute=rate.absolute * scale)
+    return SiRate(fraction=rate.fraction)
+
+
+@dataclass(frozen=True)
+class ToleranceSi:
+    """A pose tolerance in SI (m per axis, rad between axes); None: not constrained."""
+
+    x: float | None = None
+    y: float | None = None
+    z: float | None = None
+    x_axis: float | None = None
+    z_axis: float | None = None
+
+
+def tolerance_si(t: m.PoseTolerance, units: CrclUnits) -> ToleranceSi:
+    length = lambda v: None if v is None else units.length_si(v)
+    angle = lambda v: None if v is None else units.angle_si(v)
+    return ToleranceSi(length(t.x_point), length(t.y_point), length(t.z_point),
+                       angle(t.x_axis), angle(t.z_axis))
+
+
+@dataclass
+class Reporting:
+    """ConfigureStatusReport and ConfigureJointReports: what GetStatus includes."""
+
+    joints: bool = True
+    pose: bool = True
+    gripper: bool = True
+    settings: bool = False
+    sensors: bool = True
+    guards: bool = False
+    # joint number -> (position, torque or force, velocity); by default every joint's position
+    joint_reports: dict[int, tuple[bool, bool, bool]] = field(
+        default_factory=lambda: {j: (True, False, False) for j in range(1, JOINTS + 1)})
+
+
+@dataclass
+class CrclSettings:
+    units: CrclUnits = CrclUnits()
+    trans_speed: SiRate = SiRate(fraction=0.25)
+    rot_speed: SiRate = SiRate(fraction=0.25)
+    trans_accel: SiRate = SiRate(fraction=0.5)
+    rot_accel: SiRate = SiRate(fraction=0.5)
+    end_tolerance: ToleranceSi = ToleranceSi()
+    intermediate_tolerance: ToleranceSi = ToleranceSi()
+    joint_tolerances: dict[int, float] = field(default_factory=dict)      # joint -> rad
+    coordinated: bool = True
+    end_effector_setting: float | None = None
+    end_effector_parameters: dict[str, str] = field(default_factory=dict)
+    robot_parameters: dict[str, str] = field(default_factory=dict)
+    reported_parameters: set[str] = field(default_factory=set)
+    sensors: set[str] = field(default_factory=set)
+    grippers_disabled: set[str] = field(default_factory=set)
+    reporting: Reporting = field(default_factory=Reporting)

@@ -1,0 +1,172 @@
+"""The real gateway in a thread of the test process (its own event loop), before a real device
+server, and a CRCL client written from the specification (raw sockets, not gateway code)."""
+from __future__ import annotations
+
+import asyncio
+import re
+import socket
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from lxml import etree
+
+from landscape.gateway.device import DeviceLink
+from landscape.gateway.schemas import SchemaSet, default_directory
+from landscape.gateway.server import Gateway
+from landscape.gateway.session import GatewayOptions
+
+EXAMPLES = Path(__file__).resolve().parents[3] / "shared" / "crcl" / "examples"
+# NIST's examples are read from beside the checkout, never copied in: without them, the tests
+# that use them skip.
+needs_examples = pytest.mark.skipif(not EXAMPLES.is_dir(),
+                                    reason="NIST's CRCL examples (../shared/crcl/examples) are absent")
+XSD = default_directory()
+
+
+class RunningGateway:
+    """The gateway serving on a free loopback port, stopped by close()."""
+
+    def __init__(self, device_target: str, **options):
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True,
+                                       name="crcl-gateway")
+        self.thread.start()
+        schemas = SchemaSet(XSD) if XSD else None
+        self.options = GatewayOptions(schemas=schemas, **options)
+        self.link, self.gateway = self.run(self._start(device_target))
+        self.port = self.gateway.port
+
+    async def _start(self, target: str):
+        link = DeviceLink(target)
+        await link.start()
+        gateway = await Gateway(link, self.options).serve("127.0.0.1", 0)
+        return link, gateway
+
+    def run(self, coroutine, timeout: float = 30.0):
+        return asyncio.run_coroutine_threadsafe(coroutine, self.loop).result(timeout)
+
+    def close(self) -> None:
+        async def stop():
+            await self.gateway.close()
+            await self.link.close()
+        self.run(stop())
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(timeout=10)
+
+
+# ---- a CRCL client from the specification ------------------------------------------------------
+
+XSI = 'xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance"'
+
+
+def command(kind: str, command_id: int, body: str = "") -> bytes:
+    return (f'<?xml version="1.0" encoding="UTF-8"?>\n<CRCLCommandInstance {XSI}>'
+            f'<CRCLCommand xsi:type="{kind}Type"><CommandID>{command_id}</CommandID>{body}'
+            f'</CRCLCommand></CRCLCommandInstance>').encode()
+
+
+def pose(x, y, z, xaxis=(1, 0, 0), zaxis=(0, 0, -1), tag="EndPosition") -> str:
+    return (f"<{tag}><Point><X>{x}</X><Y>{y}</Y><Z>{z}</Z></Point>"
+            f"<XAxis><I>{xaxis[0]}</I><J>{xaxis[1]}</J><K>{xaxis[2]}</K></XAxis>"
+            f"<ZAxis><I>{zaxis[0]}</I><J>{zaxis[1]}</J><K>{zaxis[2]}</K></ZAxis></{tag}>")
+
+
+class RawClient:
+    """Sends bytes; reads CRCLStatus documents back, found by their closing tag."""
+
+    def __init__(self, port: int, timeout: float = 30.0):
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+        self.buffer = b""
+        self.next_id = 1000
+
+    def send(self, data: bytes) -> None:
+        self.sock.sendall(data)
+
+    def read_status(self) -> str:
+        end = b"</CRCLStatus>"
+        while end not in self.buffer:
+            chunk = self.sock.recv(65536)
+            if not chunk:
+                raise ConnectionError("the gateway closed the connection")
+            self.buffer += chunk
+        i = self.buffer.index(end) + len(end)
+        raw, self.buffer = self.buffer[:i], self.buffer[i:]
+        check_status(raw)
+        return raw.decode().strip()
+
+    def status(self) -> str:
+        self.next_id += 1
+        self.send(command("GetStatus", self.next_id))
+        return self.read_status()
+
+    def wait_done(self, command_id: int, timeout: float = 60.0) -> str:
+        """Poll until the command is Done or Error; returns that status."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            text = self.status()
+            if field(text, "CommandID") == str(command_id) and \
+                    field(text, "CommandState") in ("CRCL_Done", "CRCL_Error"):
+                return text
+            time.sleep(0.01)
+        raise AssertionError(f"command {command_id} not finished in {timeout} s: {text}")
+
+    def run(self, kind: str, command_id: int, body: str = "", timeout: float = 60.0) -> str:
+        self.send(command(kind, command_id, body))
+        return self.wait_done(command_id, timeout)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+_STATUS_SCHEMA = None
+
+
+def check_status(raw: bytes) -> None:
+    """Every status the gateway writes must validate against CRCLStatus.xsd."""
+    global _STATUS_SCHEMA
+    if XSD is None:
+        return
+    if _STATUS_SCHEMA is None:
+        parser = etree.XMLParser(no_network=True)
+        _STATUS_SCHEMA = etree.XMLSchema(etree.parse(str(XSD / "CRCLStatus.xsd"), parser))
+    document = etree.fromstring(raw.strip())
+    assert _STATUS_SCHEMA.validate(document), (_STATUS_SCHEMA.error_log, raw)
+
+
+def field(status: str, tag: str) -> str | None:
+    match = re.search(rf"<{tag}>(.*?)</{tag}>", status, re.S)
+    return match.group(1) if match else None
+
+
+def program(commands: list[tuple[str, str]]) -> bytes:
+    """A CRCLProgram: InitCanon, (kind, body) middle commands, EndCanon; CommandIDs 1, 2, ..."""
+    middle = "".join(f'<MiddleCommand xsi:type="{kind}Type"><CommandID>{i}</CommandID>{body}'
+                     f"</MiddleCommand>" for i, (kind, body) in enumerate(commands, start=2))
+    return (f'<?xml version="1.0" encoding="UTF-8"?>\n<CRCLProgram {XSI}><InitCanon><CommandID>1'
+            f"</CommandID></InitCanon>{middle}<EndCanon><CommandID>{len(commands) + 2}</CommandID>"
+            f"</EndCanon></CRCLProgram>").encode()
+
+
+def reachable_program() -> bytes:
+    """Moves, waypoints and settings the TX90 can do, in millimetres and degrees."""
+    return program([
+        ("SetLengthUnits", "<UnitName>millimeter</UnitName>"),
+        ("SetAngleUnits", "<UnitName>degree</UnitName>"),
+        ("SetTransSpeed", '<TransSpeed xsi:type="TransSpeedAbsoluteType"><Setting>500</Setting>'
+                          "</TransSpeed>"),
+        ("SetEndPoseTolerance", "<Tolerance><XPointTolerance>1</XPointTolerance><YPointTolerance>1"
+                                "</YPointTolerance><ZPointTolerance>1</ZPointTolerance><XAxisTolerance>1"
+                                "</XAxisTolerance><ZAxisTolerance>1</ZAxisTolerance></Tolerance>"),
+        ("MoveTo", "<MoveStraight>false</MoveStraight>" + pose(500, 100, 600)),
+        ("MoveTo", "<MoveStraight>true</MoveStraight>" + pose(500, -100, 600)),
+        ("MoveThroughTo", "<MoveStraight>false</MoveStraight>" + pose(550, 0, 500, tag="Waypoint")
+         + pose(500, 150, 550, tag="Waypoint") + "<NumPositions>2</NumPositions>"),
+        ("Dwell", "<DwellTime>0.05</DwellTime>"),
+        ("Message", "<Message>program half done</Message>"),
+        ("ActuateJoints", '<ActuateJoint><JointNumber>1</JointNumber><JointPosition>10'
+                          '</JointPosition><JointDetails xsi:type="JointSpeedAccelType">'
+                          "<JointSpeed>30</JointSpeed></JointDetails></ActuateJoint>"),
+        ("MoveTo", "<MoveStraight>true</MoveStraight>" + pose(450, 0, 550)),
+    ])

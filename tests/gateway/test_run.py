@@ -1,0 +1,74 @@
+"""The program runner (landscape-crcl-run) against the real gateway: NIST's example programs
+and one the arm can do."""
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+
+import pytest
+from lxml import etree
+
+from landscape.gateway.run import ProgramFailed, run
+
+from crcl_support import EXAMPLES, reachable_program, needs_examples
+
+
+def test_a_reachable_program_runs_to_completion_with_progress_per_command(gateway, tmp_path):
+    path = tmp_path / "program.xml"
+    path.write_bytes(reachable_program())
+    out = io.StringIO()
+    assert run(path, f"127.0.0.1:{gateway.port}", out=out) == 13
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 13 and all("CRCL_Done" in line for line in lines), lines
+    assert lines[7].startswith("[8/13] MoveThroughTo (CommandID 8): CRCL_Done")
+
+
+@needs_examples
+def test_the_example_program_stops_at_the_first_command_the_device_cannot_do(gateway):
+    out = io.StringIO()
+    with pytest.raises(ProgramFailed) as failure:
+        run(EXAMPLES / "programExample.xml", f"127.0.0.1:{gateway.port}", out=out)
+    message = str(failure.value)
+    # CommandID 7 is SetEndEffector with no tool on the arm (or, while the device lacks
+    # tools, UNIMPLEMENTED); CommandID 8 moves to X = 1.5 m, beyond the TX90's reach.
+    assert "(SetEndEffector, CommandID 7) failed" in message or \
+        "(MoveThroughTo, CommandID 8) failed" in message, message
+    assert out.getvalue().splitlines()[-1].startswith("[7/41] SetEndEffector (CommandID 7): "
+                                                      "CRCL_Error")
+
+
+@needs_examples
+def test_the_example_program_without_tool_commands_fails_where_the_arm_cannot_reach(gateway, tmp_path):
+    tree = etree.parse(str(EXAMPLES / "programExample.xml"))
+    for element in tree.getroot().findall("MiddleCommand"):
+        if element.get("{http://www.w3.org/2001/XMLSchema-instance}type") in (
+                "SetEndEffectorType", "OpenToolChangerType", "CloseToolChangerType"):
+            tree.getroot().remove(element)
+    path = tmp_path / "moves-only.xml"
+    tree.write(str(path))
+    with pytest.raises(ProgramFailed, match=r"command 6 \(MoveThroughTo, CommandID 8\) failed: "
+                                            r"PathLoad refused .*not reachable"):
+        run(path, f"127.0.0.1:{gateway.port}", out=io.StringIO())
+
+
+@needs_examples
+def test_program_all_stops_at_its_first_command(gateway):
+    with pytest.raises(ProgramFailed, match=r"command 1 \(ActuateJoints, CommandID 2\) failed: "
+                                            r"joint 3: force/torque control"):
+        run(EXAMPLES / "programAll.xml", f"127.0.0.1:{gateway.port}", out=io.StringIO())
+
+
+@needs_examples
+def test_the_command_line_runner(gateway, tmp_path):
+    path = tmp_path / "program.xml"
+    path.write_bytes(reachable_program())
+    done = subprocess.run([sys.executable, "-m", "landscape.gateway.run", str(path), "--gateway",
+                           f"127.0.0.1:{gateway.port}"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-1] == "program done: 13 commands"
+    failed = subprocess.run([sys.executable, "-m", "landscape.gateway.run",
+                             str(EXAMPLES / "programAll.xml"), "--gateway",
+                             f"127.0.0.1:{gateway.port}"], capture_output=True, text=True, timeout=120)
+    assert failed.returncode == 1
+    assert "program failed: command 1 (ActuateJoints, CommandID 2) failed" in failed.stderr

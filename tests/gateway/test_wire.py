@@ -1,0 +1,80 @@
+"""The wire splitter: documents found in a byte stream however TCP cuts it."""
+from __future__ import annotations
+
+import pytest
+
+from landscape.gateway.wire import Document, DocumentSplitter, Refused, WireError
+
+from crcl_support import EXAMPLES
+
+COMMANDS = [p.read_bytes().strip() for p in sorted(EXAMPLES.glob("command*.xml"))]
+
+
+def documents(items):
+    return [i.data for i in items if isinstance(i, Document)]
+
+
+def test_documents_split_byte_by_byte_come_out_whole():
+    stream = b"\n \t".join(COMMANDS)
+    splitter, out = DocumentSplitter(), []
+    for i in range(len(stream)):
+        out += splitter.feed(stream[i:i + 1])
+    assert [d.strip() for d in documents(out)] == [c.strip() for c in COMMANDS]
+    assert splitter.pending == 0
+
+
+def test_coalesced_documents_and_odd_markup():
+    tricky = (b'<?xml version="1.0"?><!-- </A> --><A x="a>b" y=\'</A>\'><B/><![CDATA[</A>]]>'
+              b'<C>t</C></A>')
+    out = DocumentSplitter().feed(tricky + b"  " + tricky + COMMANDS[0])
+    assert documents(out) == [tricky, tricky, COMMANDS[0]]
+
+
+def test_a_declaration_starts_the_document_after_whitespace():
+    out = DocumentSplitter().feed(b"\r\n  " + COMMANDS[0])
+    assert documents(out)[0].startswith(b"<?xml")
+
+
+def test_an_oversized_document_is_dropped_and_the_next_one_is_read():
+    splitter = DocumentSplitter(max_document=2000)
+    big = b"<A>" + b"<B>" + b"x" * 10_000 + b"</B>" * 1 + b"</A>"
+    out = []
+    for i in range(0, len(big), 333):
+        out += splitter.feed(big[i:i + 333])
+        assert splitter.pending <= 2000 + 333
+    out += splitter.feed(COMMANDS[1])
+    assert isinstance(out[0], Refused) and "longer than 2000 bytes" in out[0].reason
+    assert documents(out) == [COMMANDS[1]]
+
+
+def test_text_between_documents_is_refused_and_skipped():
+    out = DocumentSplitter().feed(b"garbage" + COMMANDS[0])
+    assert isinstance(out[0], Refused) and "text outside" in out[0].reason
+    assert documents(out) == [COMMANDS[0]]
+
+
+@pytest.mark.parametrize("declaration", [b"<!DOCTYPE A [<!ENTITY e 'x'>]>", b"<!ENTITY e 'x'>"])
+def test_a_dtd_ends_the_stream(declaration):
+    with pytest.raises(WireError, match="DTD"):
+        DocumentSplitter().feed(b'<?xml version="1.0"?>' + declaration + b"<A>&e;</A>")
+
+
+def test_a_single_endless_token_ends_the_stream():
+    splitter = DocumentSplitter(max_document=1000)
+    with pytest.raises(WireError, match="token"):
+        splitter.feed(b'<A x="' + b"y" * 5000)
+
+
+def test_a_truncated_document_is_refused_where_the_next_declaration_starts():
+    cut = COMMANDS[0][:len(COMMANDS[0]) // 2]
+    out = DocumentSplitter().feed(cut + b"\n" + COMMANDS[1])
+    assert isinstance(out[0], Refused) and "truncated" in out[0].reason
+    assert documents(out) == [COMMANDS[1]]
+
+
+def test_a_document_without_end_closes_the_stream_after_its_budget():
+    splitter = DocumentSplitter(max_document=100)
+    splitter.feed(b"<A>")
+    with pytest.raises(WireError, match="without end"):
+        for _ in range(1000):
+            splitter.feed(b"x" * 100)

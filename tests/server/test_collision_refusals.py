@@ -1,0 +1,79 @@
+"""Issue 11 through gRPC: planned motions that would hit the cell are refused before anything
+moves, naming the two bodies and where; the same targets reached around the obstacle run."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import grpc
+from landscape.server.states import State
+from landscape.server.units import pose_matrix
+from landscape.v1 import motion_pb2, types_pb2
+
+from support import Arm, error_info
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+DOWN = (np.pi, 0.0, 0.0)
+
+
+@pytest.fixture
+def arm(tmp_path):
+    a = Arm(tmp_path)
+    yield a
+    a.close()
+
+
+def _joints(arm, xyz, near):
+    q, result = arm.kin.reverse(pose_matrix(xyz, DOWN), near)
+    assert q is not None, result
+    return q
+
+
+def _path(arm, name, points, blend=0.0):
+    header = motion_pb2.PathHeader(path_name=name, frame=JOINT,
+                                   motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+    tags = [types_pb2.TagStruct(joint_values=list(q), tag_name=f"p{i}", transition_speed=blend)
+            for i, q in enumerate(points)]
+    return arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=tags)]))
+
+
+def _run(arm, name):
+    reply = arm.device.PathMove(motion_pb2.PathMoveRequest(path_name=name))
+    return arm.wait_command(reply.ret_val.command_id)[-1].event_id
+
+
+def test_a_move_through_the_table_is_refused_and_the_way_around_runs(arm):
+    q0 = arm.joints()
+    over_a = _joints(arm, (0.6, -0.55, 0.45), q0)
+    a = _joints(arm, (0.6, -0.55, 0.12), over_a)     # flange beside the table, below its top
+    over_b = _joints(arm, (0.6, 0.55, 0.45), over_a)
+    b = _joints(arm, (0.6, 0.55, 0.12), over_b)
+    _path(arm, "down", [q0, over_a, a])
+    assert _run(arm, "down") == "command_done"
+    with pytest.raises(grpc.RpcError) as refused:
+        arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=list(b)))
+    assert refused.value.code() is grpc.StatusCode.FAILED_PRECONDITION
+    info = error_info(refused.value)
+    assert info.reason == "COLLISION" and info.metadata["body_b"] == "table"
+    assert info.metadata["body_a"].startswith("link") and float(info.metadata["time"]) > 0
+    assert "table" in refused.value.details()
+    assert arm.server.device.state is State.RESTING
+    assert np.allclose(arm.joints(), a, atol=1e-4)           # nothing moved
+    _path(arm, "around", [a, over_a, over_b, b])
+    assert _run(arm, "around") == "command_done"
+    assert np.allclose(arm.joints(), b, atol=1e-3)
+
+
+def test_a_path_sweeping_through_the_rack_is_refused_at_load_naming_its_segment(arm):
+    points = [arm.joints()]
+    for i, angle in enumerate(np.radians([30, 20, 0, -20, -40, -55, -70, -90, -110])):
+        points.append(_joints(arm, (0.65 * np.cos(angle), 0.65 * np.sin(angle),
+                                    0.5 if i < 6 else 0.25), points[-1]))
+    with pytest.raises(grpc.RpcError) as refused:
+        _path(arm, "sweep", points, blend=50)
+    info = error_info(refused.value)
+    assert info.reason == "COLLISION" and info.metadata["body_b"] == "rack"
+    assert info.metadata["segment"] == "7"
+    assert "sweep" not in arm.server.device.motions.paths      # nothing stored
+    _path(arm, "sweep", points[:7], blend=50)                  # up to point 6 it is clear

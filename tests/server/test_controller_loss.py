@@ -1,0 +1,145 @@
+"""Issue 8.1: the cycle process dies or hangs, on the real-time clock as `make run` has it.
+
+The loss is noticed within a few cycles (its pipe closes at once when it dies; its feedback
+stops when it hangs), the device goes to Error with an alarm naming the cause, health says
+NOT_SERVING, a motion in flight fails with its command id, the lock stays with its holder
+(the documented rule), and Reset starts a fresh cycle process that works like the first.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import grpc
+import pytest
+from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+from landscape.server.app import serve
+from landscape.server.config import ServerConfig
+from landscape.server.states import State
+from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, types_pb2
+
+from support import activate, locked_session, stubs, wait_until
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+
+
+@pytest.fixture
+def realtime():
+    server = serve(ServerConfig(port=0, clock="realtime"))
+    yield server
+    server.stop(grace=None)
+
+
+def _lost_alarm(events, after: float):
+    """The controller-lost alarm and the Error state change, from the event stream."""
+    alarm = state = None
+    for reply in events:
+        event = reply.event
+        if event.HasField("alarm") and event.alarm.code == 105 and alarm is None:
+            alarm = event
+        if event.HasField("state_change") and event.state_change.to_state == "error":
+            state = event
+        if alarm and state:
+            return alarm, state
+    raise AssertionError("no controller-lost alarm")
+
+
+def _health(channel) -> int:
+    return health_pb2_grpc.HealthStub(channel).Check(
+        health_pb2.HealthCheckRequest(service="landscape.v1.DeviceService"), timeout=5).status
+
+
+@pytest.mark.parametrize("when", ["moving", "resting", "enabling"])
+def test_a_killed_cycle_process_is_an_error_and_reset_brings_a_working_one(realtime, when):
+    server = realtime
+    holder = locked_session(server, "holder")
+    device, _, events = stubs(holder.channel)
+    stream = events.Subscribe(event_service_pb2.SubscribeRequest())
+    try:
+        command_id = ""
+        if when in ("moving", "resting"):
+            activate(holder)
+        if when == "moving":
+            reply = device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+                frame=JOINT, values=[1.5, 0, 1.5708, 0, 1.5708, 0], speed=20), timeout=5)
+            command_id = reply.ret_val.command_id
+        if when == "enabling":
+            server.device.enable_timeout = 30.0
+            activating = device.Activate.future(control_pb2.ActivateRequest(), timeout=30)
+            time.sleep(0.02)   # enabling takes 0.1 s of the cell's controller
+        killed = time.time()
+        os.kill(server.link.clock.pid, signal.SIGKILL)
+        alarm, error = _lost_alarm(stream, killed)
+        latency = alarm.time.ToNanoseconds() / 1e9 - killed
+        print(f"{when}: Error and alarm {latency * 1000:.1f} ms after SIGKILL: "
+              f"{alarm.alarm.message}")
+        assert latency < 0.05
+        assert "cycle process" in alarm.alarm.message
+        assert server.device.state is State.ERROR
+        assert server.device.status().lock_holder == "holder"   # the rule: the lock stays
+        assert _health(holder.channel) == health_pb2.HealthCheckResponse.NOT_SERVING
+        if when == "moving":
+            failed = next(r.event for r in stream if r.event.event_id == "command_failed")
+            assert failed.command.command_id == command_id
+            assert "controller lost" in failed.command.message
+        if when == "enabling":
+            with pytest.raises(grpc.RpcError) as refused:
+                activating.result()
+            assert refused.value.code() is grpc.StatusCode.ABORTED
+        # Nothing is left hanging: calls answer, and Reset starts a fresh cycle process.
+        status = device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=2)
+        assert status.state == types_pb2.DEVICE_STATE_ERROR and "cycle process" in status.error
+        reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
+        assert reply.state == types_pb2.DEVICE_STATE_INACTIVE
+        assert _health(holder.channel) == health_pb2.HealthCheckResponse.SERVING
+        activate(holder)
+        reply = device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=JOINT, values=[0.2, 0, 1.5708, 0, 1.5708, 0], speed=50), timeout=5)
+        done = next(r.event for r in stream if r.event.HasField("command")
+                    and r.event.command.command_id == reply.ret_val.command_id
+                    and r.event.event_id in ("command_done", "command_failed"))
+        assert done.event_id == "command_done"
+    finally:
+        stream.cancel()
+        holder.close()
+
+
+def test_a_hung_cycle_process_is_noticed_by_its_silence(realtime):
+    server = realtime
+    holder = locked_session(server, "holder")
+    _, _, events = stubs(holder.channel)
+    stream = events.Subscribe(event_service_pb2.SubscribeRequest())
+    pid = server.link.clock.pid
+    try:
+        activate(holder)
+        stopped = time.time()
+        os.kill(pid, signal.SIGSTOP)
+        alarm, _ = _lost_alarm(stream, stopped)
+        latency = alarm.time.ToNanoseconds() / 1e9 - stopped
+        print(f"silence noticed after {latency * 1000:.1f} ms: {alarm.alarm.message}")
+        assert "no feedback" in alarm.alarm.message
+        assert latency < 0.2
+        assert server.device.state is State.ERROR
+    finally:
+        os.kill(pid, signal.SIGCONT)
+        stream.cancel()
+        holder.close()
+    # The holder left; anyone may reset: the hung process is stopped and a fresh one started.
+    wait_until(lambda: server.device.status().lock_holder == "", timeout=5)
+    with grpc.insecure_channel(server.target) as channel:
+        device, _, _ = stubs(channel)
+        reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
+    assert reply.state == types_pb2.DEVICE_STATE_UNLOCKED
+    assert server.link.clock.pid != pid
+    wait_until(lambda: not _alive(pid), timeout=5)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as stat:
+        return stat.read().split()[2] != "Z"

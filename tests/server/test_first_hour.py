@@ -1,0 +1,115 @@
+"""Issue 9: what a newcomer meets first: start-up errors in one line, replies and refusals that
+say what happened, sessions that end with a reason, nothing unexpected escaping as UNKNOWN."""
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+
+import grpc
+import pytest
+
+from landscape.client import Session
+from landscape.v1 import control_pb2, settings_pb2
+
+from support import error_info, locked_session, stubs, wait_until
+
+SERVER = [sys.executable, "-m", "landscape.server", "--clock", "lockstep"]
+
+
+def _start(*args, timeout=30):
+    return subprocess.run([*SERVER, *args], capture_output=True, text=True, timeout=timeout)
+
+
+def test_a_port_in_use_is_one_line_naming_the_cause_and_exits_non_zero(tmp_path):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        began = time.monotonic()
+        done = _start("--port", str(taken.getsockname()[1]), "--paths", str(tmp_path / "p.db"))
+    took = time.monotonic() - began
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert "cannot listen on 127.0.0.1:" in lines[0] and "--port" in lines[0]
+    assert "Traceback" not in done.stderr
+    print(f"refused in {took:.2f} s: {lines[0]}")
+
+
+def test_an_ipv6_address_works_with_or_without_brackets(tmp_path):
+    if not socket.has_ipv6:
+        pytest.skip("this machine has no IPv6")
+    for address in ("::1", "[::1]"):
+        proc = subprocess.Popen([*SERVER, "--address", address, "--port", "0",
+                                 "--paths", str(tmp_path / "p.db")],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            line = proc.stdout.readline()
+            if "listening on" not in line:
+                error = proc.stderr.read()
+                if "cannot listen" in error:
+                    pytest.skip(f"no IPv6 loopback here: {error.strip()}")
+                raise AssertionError(error)
+            target = line.split()[-1]
+            assert target.startswith("[::1]:")
+            with grpc.insecure_channel(target) as channel:
+                stub, _, _ = stubs(channel)
+                assert stub.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=10)
+        finally:
+            proc.terminate()
+            assert proc.wait(timeout=20) == 0
+
+
+def test_lock_held_by_another_names_the_holder(server):
+    holder = locked_session(server, "first-operator")
+    try:
+        with grpc.insecure_channel(server.target) as channel:
+            other = Session(channel, "second").open()
+            with pytest.raises(grpc.RpcError) as refused:
+                other.lock()
+            assert refused.value.code() is grpc.StatusCode.FAILED_PRECONDITION
+            assert "first-operator" in refused.value.details()
+            assert error_info(refused.value).metadata["holder"] == "first-operator"
+            other.close()
+    finally:
+        holder.close()
+
+
+def test_a_session_the_server_ends_closes_with_its_reason(server):
+    registry = server.device.sessions
+    registry.keepalive_timeout = 0.3
+    with grpc.insecure_channel(server.target) as channel:
+        session = Session(channel, "quiet").open()
+        session._interval = 3600   # it stops sending keep-alives
+        wait_until(lambda: session._closed.is_set(), timeout=5)
+        assert session.end_status is grpc.StatusCode.DEADLINE_EXCEEDED
+        assert "keep-alive" in session.end_details
+
+
+def test_success_says_what_happened(server):
+    holder = locked_session(server)
+    try:
+        device, _, _ = stubs(holder.channel)
+        reply = device.Activate(control_pb2.ActivateRequest(), timeout=10)
+        assert reply.ret_val.ret_msg == "drives on"
+        reply = device.GetMaxAccelerations(settings_pb2.GetMaxAccelerationsRequest(), timeout=5)
+        assert reply.ret_val.ret_msg and reply.units.linear and len(reply.max_joint_accels) == 6
+        assert list(reply.max_joint_accels) == pytest.approx(server.device.arm.max_acceleration)
+        assert reply.max_world_linear_accel == pytest.approx(
+            server.device.arm.max_linear_acceleration)
+    finally:
+        holder.close()
+
+
+def test_an_unexpected_failure_is_internal_with_error_info_never_unknown(server):
+    def broken():
+        raise RuntimeError("a bug")   # the status a bug in a handler must produce
+
+    server.device.motion_control_state = broken
+    with grpc.insecure_channel(server.target) as channel:
+        device, _, _ = stubs(channel)
+        with pytest.raises(grpc.RpcError) as failed:
+            device.GetMotionControlState(settings_pb2.GetMotionControlStateRequest(), timeout=5)
+    assert failed.value.code() is grpc.StatusCode.INTERNAL
+    assert error_info(failed.value).reason == "INTERNAL"
+    assert "RuntimeError: a bug" in failed.value.details()

@@ -1,0 +1,52 @@
+"""Issue 8.5: handing a long motion to the cycle process costs the cycle nothing: the
+trajectory goes through shared memory, and no cycle unpickles or copies it."""
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from landscape.server.app import serve
+from landscape.server.config import ServerConfig
+from landscape.v1 import event_service_pb2, motion_pb2, types_pb2
+
+from support import activate, locked_session, stubs, wait_until
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+
+
+def test_a_ten_minute_trajectory_is_handed_over_without_a_late_cycle():
+    server = serve(ServerConfig(port=0, clock="realtime"))
+    holder = locked_session(server)
+    try:
+        if server.link.tuning_problems:
+            pytest.skip(f"no real-time priority here: {server.link.tuning_problems}")
+        activate(holder)
+        device, _, events = stubs(holder.channel)
+        stream = events.Subscribe(event_service_pb2.SubscribeRequest())
+        header = motion_pb2.PathHeader(path_name="dwell", frame=JOINT,
+                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+        points = [types_pb2.TagStruct(joint_values=[0.1, 0, 1.5708, 0, 1.5708, 0],
+                                      time_delay=600, tag_name="long")]
+        device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=points)]),
+                        timeout=30)
+        time.sleep(0.5)
+        before = server.link.stats()
+        reply = device.PathMove(motion_pb2.PathMoveRequest(path_name="dwell"), timeout=30)
+        next(r for r in stream if r.event.event_id == "tag_reached")   # it is playing
+        time.sleep(1.0)
+        after = server.link.stats()
+        motion = server.device.motions.running
+        print(f"10-minute run ({len(motion.arrays.layout)} arrays) handed over: "
+              f"missed {after.missed - before.missed}, late max {after.late_max * 1e3:.3f} ms, "
+              f"step max {after.exec_max * 1e3:.3f} ms")
+        assert after.missed == before.missed
+        device.StopMotion(motion_pb2.StopMotionRequest(), timeout=10)
+        device.AbortMotion(motion_pb2.AbortMotionRequest(), timeout=10)
+        wait_until(lambda: server.device.motions.running is None, timeout=10)
+        assert reply.ret_val.command_id
+        stream.cancel()
+    finally:
+        holder.close()
+        server.stop(grace=None)

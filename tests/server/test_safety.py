@@ -1,0 +1,251 @@
+"""Issue 8: stops that never wait, safety actions off the callers' way, state changes that are
+compare-and-set, and queues that lose nothing that matters. Lock-step clock; races are made to
+happen in a given order by holding the clock (simulated time stands still) or a command turn."""
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import grpc
+import pytest
+
+from landscape.client import Session
+from landscape.server.sessions import Outbox
+from landscape.server.states import State
+from landscape.sim.cycle_process import EVENT, MSG, Mailbox
+from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
+
+from support import Arm, error_info, stubs, wait_until
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+SLOW = motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=[2.5, 0, 1.5708, 0, 1.5708, 0],
+                                      speed=10)
+
+
+@pytest.fixture
+def arm(tmp_path):
+    a = Arm(tmp_path, pace=1.0)
+    yield a
+    a.close()
+
+
+def _moving(arm, request=SLOW) -> str:
+    reply = arm.device.MoveAbsolute(request, timeout=5)
+    wait_until(lambda: abs(arm.server.device.feedback().velocity[0]) > 0.05, timeout=10)
+    return reply.ret_val.command_id
+
+
+def _history(arm) -> list:
+    subscription = arm.server.bus.subscribe(after_sequence=0)
+    events = []
+    while (event := subscription.get(timeout=0.1)) is not None:
+        events.append(event)
+    subscription.close()
+    return events
+
+
+# ---- 8.2 a stop never waits behind another command --------------------------------------
+
+def test_stop_motion_does_not_wait_for_an_open_path_load(arm):
+    _moving(arm)
+    release = threading.Event()
+
+    def slow_load():
+        yield motion_pb2.PathLoadRequest(header=motion_pb2.PathHeader(
+            path_name="slow", frame=JOINT, motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+            offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA))
+        release.wait(10)
+        yield motion_pb2.PathLoadRequest(tags=[types_pb2.TagStruct(
+            joint_values=[0, 0, 1.5708, 0, 1.5708, 0])])
+
+    loading = arm.device.PathLoad.future(slow_load(), timeout=30)
+    time.sleep(0.2)   # the stream is open on the server
+    began = time.monotonic()
+    arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=5)
+    took = time.monotonic() - began
+    print(f"StopMotion with a PathLoad stream open: {took * 1000:.0f} ms")
+    assert arm.server.device.state is State.PAUSED and not loading.done()
+    release.set()
+    assert loading.result().points_loaded == 1
+
+
+def test_stop_motion_does_not_wait_for_long_planning(arm):
+    _moving(arm)
+    tags = [types_pb2.TagStruct(x=0.5 + 0.1 * math.cos(i / 500), y=0.1 * math.sin(i / 500),
+                                z=0.6, roll=math.pi) for i in range(5_000)]
+    header = motion_pb2.PathHeader(
+        path_name="long", frame=types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME,
+        motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+        offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+    chunks = [motion_pb2.PathLoadRequest(header=header)] + [
+        motion_pb2.PathLoadRequest(tags=tags[i:i + 10_000]) for i in range(0, len(tags), 10_000)]
+    loading = arm.device.PathLoad.future(iter(chunks), timeout=120)
+    time.sleep(0.3)   # resolving, planning and checking 5,000 points takes a while
+    assert not loading.done()
+    began = time.monotonic()
+    arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=5)
+    took = time.monotonic() - began
+    print(f"StopMotion while a long path resolves: {took * 1000:.0f} ms")
+    assert arm.server.device.state is State.PAUSED and not loading.done()
+    loading.result()
+
+
+# ---- 8.3 and 8.4 the disconnect handler ---------------------------------------------------
+
+def test_the_disconnect_handler_holds_up_no_other_client(arm):
+    registry = arm.server.device.sessions
+    registry.keepalive_interval, registry.keepalive_timeout = 0.15, 0.6
+    _moving(arm)
+    clock = arm.server.link.clock
+    with grpc.insecure_channel(arm.server.target) as channel:
+        bystander = Session(channel, "bystander").open()
+        device, _, _ = stubs(channel)
+        clock.hold()   # the stop cannot finish while simulated time stands still
+        try:
+            arm.session.close()
+            wait_until(lambda: arm.server.device.status().lock_holder == "", timeout=5)
+            for _ in range(10):   # 1.5 s: longer than the keep-alive timeout
+                began = time.monotonic()
+                device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=2)
+                assert time.monotonic() - began < 0.5
+                time.sleep(0.15)
+            assert not bystander._closed.is_set()    # its keep-alives were heard
+        finally:
+            clock.release()
+        wait_until(lambda: arm.server.device.state is State.UNLOCKED, timeout=10)
+        assert arm.server.device.sessions.get(bystander.session_id) is not None
+        bystander.close()
+
+
+def test_losing_the_lock_holder_stops_at_full_deceleration_whatever_the_setting(arm):
+    arm.device.SetAcceleration(settings_pb2.SetAccelerationRequest(
+        accel=10, attribute=types_pb2.ACCEL_TYPE_PERCENT_ACCEL), timeout=5)
+    arm.device.SetSpeed(settings_pb2.SetSpeedRequest(
+        speed=100, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), timeout=5)
+    _moving(arm, motion_pb2.MoveAbsoluteRequest(frame=JOINT,
+                                                values=[3.0, 0, 1.5708, 0, 1.5708, 0]))
+    wait_until(lambda: abs(arm.server.device.feedback().velocity[0]) > 0.9, timeout=20)
+    arm.session.close()
+    wait_until(lambda: arm.server.device.state is State.UNLOCKED, timeout=10)
+    history = _history(arm)
+    lost = next(e for e in history if e.event_id == "alarm" and e.detail.code == 101)
+    unlocked = next(e for e in history if e.event_id == "state_changed"
+                    and e.detail.to_state == "unlocked" and e.sequence > lost.sequence)
+    took = unlocked.time - lost.time    # paced at real time: wall seconds are simulated ones
+    print(f"lock holder lost: at rest, drives off and unlocked in {took * 1000:.0f} ms")
+    assert took < 1.0
+
+
+# ---- 8.7 every transition is a compare-and-set ---------------------------------------------
+
+def test_a_resume_queued_behind_an_estop_changes_nothing(arm):
+    _moving(arm)
+    arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=5)
+    device = arm.server.device
+    with device._command_lock:   # the resume is admitted, then waits for its turn
+        resuming = arm.device.ResumeMotion.future(motion_pb2.ResumeMotionRequest(), timeout=10)
+        time.sleep(0.1)
+        arm.server.link.between_cycles(lambda c: c.panel.press_estop())
+        wait_until(lambda: device.state is State.ERROR)
+    with pytest.raises(grpc.RpcError) as refused:
+        resuming.result()
+    assert error_info(refused.value).reason == "WRONG_STATE"
+    assert device.state is State.ERROR
+
+
+def test_an_estop_during_the_disconnect_handler_stays_an_error(arm):
+    _moving(arm)
+    clock, device = arm.server.link.clock, arm.server.device
+    clock.hold()
+    try:
+        arm.session.close()
+        wait_until(lambda: device.status().lock_holder == "", timeout=5)
+        arm.server.link.between_cycles(lambda c: c.panel.press_estop())
+        wait_until(lambda: device.state is State.ERROR)
+    finally:
+        clock.release()
+    assert device.safety.wait_idle(15)
+    assert device.state is State.ERROR and device.status().lock_holder == ""
+
+
+def test_an_estop_while_activating_fails_the_activation(tmp_path):
+    arm = Arm(tmp_path)
+    try:
+        device = arm.server.device
+        arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+        arm.server.link.clock.hold()   # enabling takes cycles: it cannot finish now
+        try:
+            activating = arm.device.Activate.future(control_pb2.ActivateRequest(), timeout=10)
+            time.sleep(0.1)
+            arm.server.link.between_cycles(lambda c: c.panel.press_estop())
+            wait_until(lambda: device.state is State.ERROR)
+        finally:
+            arm.server.link.clock.release()
+        with pytest.raises(grpc.RpcError) as refused:
+            activating.result()
+        assert refused.value.code() is grpc.StatusCode.ABORTED
+        assert device.state is State.ERROR
+    finally:
+        arm.close()
+
+
+def test_a_move_planned_while_its_holder_disconnects_never_starts(arm):
+    device = arm.server.device
+    planner = device.motions.planner
+    entered, proceed = threading.Event(), threading.Event()
+    original = planner.move
+
+    def held_planning(*args, **kwargs):   # the real planner, made to take its time
+        entered.set()
+        proceed.wait(10)
+        return original(*args, **kwargs)
+
+    planner.move = held_planning
+    moving = arm.device.MoveAbsolute.future(motion_pb2.MoveAbsoluteRequest(
+        frame=JOINT, values=[1.0, 0, 1.5708, 0, 1.5708, 0]), timeout=20)
+    assert entered.wait(5)
+    arm.session.close()
+    wait_until(lambda: device.state is State.UNLOCKED, timeout=10)
+    proceed.set()
+    with pytest.raises(grpc.RpcError) as refused:
+        moving.result()
+    assert refused.value.code() in (grpc.StatusCode.PERMISSION_DENIED,
+                                    grpc.StatusCode.FAILED_PRECONDITION)
+    assert device.state is State.UNLOCKED and device.motions.running is None
+    assert not any(e.event_id == "command_started" for e in _history(arm))
+
+
+# ---- 8.9 what must arrive is never dropped -------------------------------------------------
+
+def test_the_cycles_outbox_drops_nothing_and_says_when_it_runs_high():
+    mailbox = Mailbox(high_water=100)
+    for i in range(1000):
+        mailbox.post({"op": "mark", "label": i})
+    posted = [item for item in mailbox.outbox if item[0] == MSG]
+    assert [item[1]["label"] for item in posted] == list(range(1000))
+    warnings = [item for item in mailbox.outbox if item[0] == EVENT]
+    assert len(warnings) == 1 and "outbox" in warnings[0][1]
+
+
+def test_a_sessions_outbox_is_bounded_and_overflow_is_refused():
+    outbox = Outbox(loop=None, maxsize=3)
+    assert [outbox.put(i) for i in range(5)] == [True, True, True, False, False]
+
+
+def test_an_outbox_high_water_mark_raises_an_alarm(arm):
+    arm.server.device._controller_event("the cycle's outbox holds over 10000 reports")
+    alarm = next(e for e in reversed(_history(arm)) if e.event_id == "alarm")
+    assert alarm.detail.code == 106
+
+
+def test_events_of_a_move_arrive_in_order_with_their_command_id(arm):
+    reply = arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        frame=JOINT, values=[0.3, 0, 1.5708, 0, 1.5708, 0]), timeout=5)
+    events = arm.wait_command(reply.ret_val.command_id)
+    assert [e.event_id for e in events] == ["command_started", "command_done"]
+    kinds = [(e.event_id, e.data[1] if e.event_id == "state_changed" else "")
+             for e in (x for x in _history(arm)) if e.event_id in ("state_changed",
+                                                                  "command_started")]
+    assert kinds.index(("state_changed", "moving")) < kinds.index(("command_started", ""))
+
