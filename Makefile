@@ -30,10 +30,12 @@ $(STAMP): pyproject.toml setup.py $(wildcard proto/landscape/v1/*.proto)
 # The web supervisor's page: npm packages as locked, then the Vite build the backend serves.
 FRONTEND := supervisor_gui_web/frontend
 $(FRONTEND)/node_modules/.package-lock.json: $(FRONTEND)/package.json $(FRONTEND)/package-lock.json
-	cd $(FRONTEND) && npm ci --silent --no-audit --no-fund
+	@command -v npm >/dev/null || { echo "the web supervisor's page needs Node.js and npm"; exit 1; }
+	@echo "installing the web supervisor's npm packages (as package-lock.json says)"
+	@cd $(FRONTEND) && npm ci --silent --no-audit --no-fund
 $(FRONTEND)/dist/index.html: $(FRONTEND)/node_modules/.package-lock.json $(FRONTEND)/index.html \
 		$(FRONTEND)/vite.config.js $(wildcard $(FRONTEND)/src/*)
-	cd $(FRONTEND) && npm run --silent build
+	@cd $(FRONTEND) && npm run --silent build
 
 install: $(STAMP) $(FRONTEND)/dist/index.html
 

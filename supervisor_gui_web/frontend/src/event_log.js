@@ -5,7 +5,7 @@ const MAX_ENTRIES = 1000;
 const SEVERITY = { ALARM_SEVERITY_INFO: 1, ALARM_SEVERITY_WARNING: 2, ALARM_SEVERITY_ERROR: 3, ALARM_SEVERITY_CRITICAL: 4 };
 const KIND_OF_DETAIL = {
   command: 'command', alarm: 'alarm', stateChange: 'state', digitalIo: 'io',
-  rsvpRequest: 'rsvp', rsvpAnswer: 'rsvp', eventsLost: 'alarm',
+  rsvpRequest: 'rsvp', rsvpAnswer: 'rsvp', eventsLost: 'alarm', operatorMessage: 'message',
 };
 
 function summary(event) {
@@ -18,6 +18,7 @@ function summary(event) {
   if (event.stateChange) return `${event.stateChange.fromState} → ${event.stateChange.toState} (${event.stateChange.reason})`;
   if (event.rsvpRequest) return `asks: ${event.rsvpRequest.data.join(' ')} [${event.rsvpRequest.choices.join(' / ')}]`;
   if (event.rsvpAnswer) return `answered ${event.rsvpAnswer.choice}${event.rsvpAnswer.timedOut ? ' (timed out: default)' : ''}`;
+  if (event.operatorMessage) return `${event.operatorMessage.source}: ${event.operatorMessage.text}`;
   if (event.eventsLost) return `events ${event.eventsLost.firstSequence}–${event.eventsLost.lastSequence} lost`;
   return event.data.join(' ');
 }
