@@ -68,6 +68,18 @@ class EventFeed(Feed):
     async def once(self) -> None:
         call = RPCS[SUBSCRIBE].callable(self.link.channel)(
             event_service_pb2.SubscribeRequest(after_sequence=self.last_sequence))
+        try:
+            await self._read(call)
+        except grpc.aio.AioRpcError as error:
+            if error.code() is not grpc.StatusCode.OUT_OF_RANGE:
+                raise
+            # The device restarted (its sequence numbers start again at 1): from its first event.
+            log.info("%s: %s", self.link.name, error.details())
+            self.last_sequence = 0
+            await self._read(RPCS[SUBSCRIBE].callable(self.link.channel)(
+                event_service_pb2.SubscribeRequest(after_sequence=0)))
+
+    async def _read(self, call) -> None:
         async for reply in call:
             self.working()
             event = reply.event

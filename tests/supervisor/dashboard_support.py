@@ -64,7 +64,7 @@ class Page:
     """One browser tab on the dashboard, as an operator uses it: buttons by their ids, what the
     page shows by its ids. Every wait has a timeout; errors in the page fail the test."""
 
-    TIMEOUT_MS = 15_000
+    TIMEOUT_MS = 30_000
 
     def __init__(self, chromium, url: str, name: str | None = None):
         self.context = chromium.new_context(viewport={"width": 1400, "height": 1000})

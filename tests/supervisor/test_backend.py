@@ -20,7 +20,7 @@ from support import start_server, wait_until
 
 DEVICE = "landscape.v1.DeviceService/"
 CONNECT = "landscape.v1.SessionService/Connect"
-TIMEOUT = 15.0
+TIMEOUT = 30.0
 
 
 class PageClient:
@@ -158,7 +158,7 @@ def test_closing_the_page_ends_its_session_and_the_device_releases(server):
         assert server.device.state is State.RESTING
         await page.ws.close()
     run_with_page(server, body)
-    wait_until(lambda: server.device.state is State.UNLOCKED, timeout=10)
+    wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
 
 def test_the_estop_rsvp_reaches_the_page_and_its_answer_the_device(server):

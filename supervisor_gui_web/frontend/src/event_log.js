@@ -30,19 +30,23 @@ export class EventLog {
     this.severity = document.getElementById('log-severity');
     this.text = document.getElementById('log-text');
     for (const input of [...this.kinds, this.severity, this.text]) input.addEventListener('input', () => this.refilter());
-    this.lastSequence = new Map();   // device -> newest sequence shown (replays after reconnects)
+    // Events shown, by device, sequence and time: a replay after a reconnect is not shown
+    // twice, and a restarted device's events (sequences from 1 again) are still shown.
+    this.seen = new Set();
   }
 
   // A landscape.v1.Event (JSON) of `device`.
   addEvent(device, event) {
     const sequence = Number(event.sequence);
-    if (sequence <= (this.lastSequence.get(device) || 0)) return;
-    this.lastSequence.set(device, sequence);
+    const key = `${device} ${sequence} ${event.time}`;
+    if (this.seen.has(key)) return;
+    this.seen.add(key);
+    if (this.seen.size > 2 * MAX_ENTRIES) this.seen.delete(this.seen.values().next().value);
+    const time = Date.parse(event.time);
     const detail = Object.keys(KIND_OF_DETAIL).find((key) => event[key]);
     const kind = detail ? KIND_OF_DETAIL[detail] : 'command';
     const severity = event.alarm ? SEVERITY[event.alarm.severity] || 0 : 0;
-    const time = new Date(event.time).toLocaleTimeString();
-    this.add(kind, severity, `${time} #${sequence} ${device} ${event.eventId}: ${summary(event)}`);
+    this.add(kind, severity, `${new Date(time).toLocaleTimeString()} #${sequence} ${device} ${event.eventId}: ${summary(event)}`);
   }
 
   addRefused(text) {

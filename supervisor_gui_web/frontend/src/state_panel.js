@@ -8,6 +8,7 @@ const $ = (id) => document.getElementById(id);
 function put(element, text) {
   if (element.textContent !== text) element.textContent = text;
 }
+const TEXT_HZ = 8;
 const short = (name, prefix) => (name || '').replace(prefix, '').toLowerCase() || '–';
 
 export class StatePanel {
@@ -15,6 +16,7 @@ export class StatePanel {
     this.ctx = ctx;
     this.limits = [];          // [{name, lower, upper}] in radians, from the URDF
     this.received = [];        // page clock (ms) of recent samples, for the rate received
+    this.shownAt = 0;
   }
 
   setLimits(limits) {
@@ -31,10 +33,15 @@ export class StatePanel {
   }
 
   // Called for every StateSample; `age` is ms from the cycle that produced it (or NaN).
+  // The text is written at most TEXT_HZ times a second (a state change or an e-stop at once):
+  // faster is unreadable, and each write costs a repaint the next sample would wait behind.
   sample(sample, age) {
     const now = performance.now();
     this.received.push(now);
     while (this.received[0] < now - 2000) this.received.shift();
+    const urgent = sample.deviceState !== this.shownState || sample.estop !== this.shownEstop;
+    if (!urgent && now - this.shownAt < 1000 / TEXT_HZ) return;
+    [this.shownAt, this.shownState, this.shownEstop] = [now, sample.deviceState, sample.estop];
     const units = this.ctx.model.units;
     const sampleUnits = sample.units || units;
     const angle = (v) => fromSI(toSI(v, 'angular', sampleUnits), 'angular', units);
@@ -52,8 +59,6 @@ export class StatePanel {
     put($('st-pose'), `${frame}: ${['x', 'y', 'z'].map((k) => fmt(length(p[k] || 0))).join(' ')} ${symbol(units.linear)}, `
       + `${['roll', 'pitch', 'yaw'].map((k) => fmt(angle(p[k] || 0))).join(' ')} ${symbol(units.angular)}`);
     const rate = this.received.length / 2;
-    if (now - (this.cycleShown || 0) < 250) return this.joints(sample, sampleUnits, units);   // a readable pace
-    this.cycleShown = now;
     put($('st-cycle'), sample.sequence && sample.sequence !== '0'
       ? `#${sample.sequence}, t ${fmt(sample.controllerTime, 2)} s, skipped ${sample.skipped}, age ${fmt(age, 1)} ms, ${fmt(rate, 0)}/s`
       : `no cycle number, ${fmt(rate, 0)}/s`);
