@@ -13,6 +13,8 @@ import pytest
 from google.protobuf import any_pb2, json_format
 from google.rpc import error_details_pb2
 
+from landscape.server.app import serve
+from landscape.server.config import ServerConfig
 from landscape.server.states import State
 from landscape.supervisor import DashboardConfig, DeviceTarget, start
 from landscape.v1 import event_service_pb2, settings_pb2, state_service_pb2, types_pb2
@@ -211,3 +213,27 @@ def test_make_run_command_line_serves_the_page(server):
         proc.terminate()
         code = proc.wait(timeout=20)
     assert code == 0
+
+
+def test_a_restarted_device_server_is_followed_from_its_first_event():
+    first = start_server()
+    port = first.port
+    second = None
+
+    async def body(page, dashboard):
+        nonlocal second
+        await page.call(CONNECT, {"hello": {"clientName": "before-restart"}})
+        await page.call(DEVICE + "Lock")   # events 2 and on: the first run gets ahead
+        await page.until(lambda f: "locked by before-restart" in json.dumps(f))
+        await asyncio.to_thread(first.stop, None)
+        second = await asyncio.to_thread(serve, ServerConfig(port=port, clock="lockstep"))
+        page.frames.clear()
+        restarted = await page.until(
+            lambda f: f.get("reply", {}).get("event", {}).get("sequence") == "1", timeout=30)
+        assert restarted["reply"]["event"]["stateChange"]["toState"] == "unlocked"
+
+    try:
+        run_with_page(first, body)
+    finally:
+        if second is not None:
+            second.stop(grace=None)
