@@ -8,6 +8,9 @@ import URDFLoader from 'urdf-loader';
 
 const TRAIL_POINTS = 600;
 const SOFTWARE_FPS = 15;
+// Changes smaller than these are not drawn (rad, and m or rad for the tool pose).
+const STILL_RAD = 1e-5;
+const STILL_M = 1e-5;
 
 function rendererName(renderer) {
   const gl = renderer.getContext();
@@ -160,14 +163,21 @@ export class CellView {
     }
   }
 
+  // Joint values in radians, joint 1 first; an arm at rest costs no frame.
   setJoints(values) {
     if (!this.robot) return;
+    const last = this.shownJoints || [];
+    if (values.length === last.length && values.every((q, i) => Math.abs(q - last[i]) < STILL_RAD)) return;
+    this.shownJoints = values;
     this.jointNames.forEach((name, i) => { if (i < values.length) this.robot.setJointValue(name, values[i]); });
     this.requestRender();
   }
 
   // The tool tip in the robot base frame, meters and radians: the tool frame and the trail.
   setToolPose(pose) {
+    const last = this.shownPose;
+    if (last && ['x', 'y', 'z', 'roll', 'pitch', 'yaw'].every((k) => Math.abs(pose[k] - last[k]) < STILL_M)) return;
+    this.shownPose = pose;
     placePose(this.toolFrame, [pose.x, pose.y, pose.z], [pose.roll, pose.pitch, pose.yaw]);
     this.toolFrame.visible = true;
     const t = this.trail;
