@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import ipaddress
 import logging
 import signal
+import socket
 
 from landscape.supervisor import app
 from landscape.supervisor.config import (DEFAULT_DISPLAY_RATE_HZ, DEFAULT_HOST, DEFAULT_PORT,
@@ -38,9 +40,20 @@ def parse_args(argv=None) -> DashboardConfig:
         parser.error(str(error))
 
 
+def _loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:   # a name: loopback if every address it has is
+        return all(ipaddress.ip_address(info[4][0]).is_loopback
+                   for info in socket.getaddrinfo(host, None))
+
+
 async def serve(config: DashboardConfig) -> None:
     running = await app.start(config)
     print(f"web supervisor on {running.url}", flush=True)
+    if not _loopback(config.host):
+        logging.warning("serving beyond loopback without TLS or login: whoever reaches %s can "
+                        "command the devices through it", running.url)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

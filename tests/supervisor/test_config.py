@@ -34,3 +34,10 @@ def test_the_command_line_serves_loopback_by_default():
 def test_settings_that_cannot_work_are_refused(devices, rate, message):
     with pytest.raises(ValueError, match=message):
         DashboardConfig(devices=devices, display_rate_hz=rate)
+
+
+@pytest.mark.parametrize("host, loopback", [("127.0.0.1", True), ("localhost", True),
+                                            ("::1", True), ("[::1]", True), ("0.0.0.0", False)])
+def test_serving_beyond_loopback_is_told_apart(host, loopback):
+    from landscape.supervisor.__main__ import _loopback
+    assert _loopback(host) is loopback
