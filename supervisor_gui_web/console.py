@@ -182,8 +182,9 @@ class Console:
         self._send(link.name, CONNECT, side.session_call_id,
                    reply=session_service_pb2.ConnectResponse(rsvp_request=request))
         try:
-            return await asyncio.wait_for(future, request.timeout_ms / 1000.0)
-        except asyncio.TimeoutError:
+            async with asyncio.timeout(request.timeout_ms / 1000.0):
+                return await future
+        except TimeoutError:
             return request.default_choice, list(request.data)
         finally:
             side.rsvp_answers.pop(request.rsvp_id, None)

@@ -122,9 +122,10 @@ class StatusPoll(Feed):
             for rpc in STATUS_READS:
                 await self._read(rpc)
             self.working()
-            try:
-                await asyncio.wait_for(self._kick.wait(), self.PERIOD_S)
-            except asyncio.TimeoutError:
+            try:   # asyncio.timeout, not wait_for: 3.11's wait_for can lose the task's cancel
+                async with asyncio.timeout(self.PERIOD_S):
+                    await self._kick.wait()
+            except TimeoutError:
                 pass
 
     async def _read(self, rpc: str) -> None:
