@@ -34,7 +34,7 @@ def test_lock_and_activate_through_the_buttons(chromium, dashboard, cell_server)
 
 
 def test_path_run_reaches_every_tag_in_the_log(chromium, dashboard, cell_server):
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard.url + "?render=full")   # a sharp picture for the README
     page.take_control()
     page.page.fill("#speed", "30")
     page.click("btn-speed")

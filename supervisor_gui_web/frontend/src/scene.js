@@ -35,7 +35,9 @@ export class CellView {
     // Without a GPU (a software rasterizer such as SwiftShader) every pixel costs the page's
     // CPU: draw at half resolution and at most SOFTWARE_FPS frames a second, so the live
     // state never waits long behind a frame.
-    this.software = /swiftshader|llvmpipe|software/i.test(rendererName(this.renderer));
+    // ?render=full keeps full resolution and rate all the same (for pictures of the page).
+    const full = new URLSearchParams(location.search).get('render') === 'full';
+    this.software = !full && /swiftshader|llvmpipe|software/i.test(rendererName(this.renderer));
     this.renderer.setPixelRatio(this.software ? 0.5 : window.devicePixelRatio);
     this.minFrameMs = this.software ? 1000 / SOFTWARE_FPS : 0;
     this.lastFrame = 0;
