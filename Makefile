@@ -7,7 +7,7 @@ GRPCURL_VERSION := v1.9.3
 GRPCURL := .tools/bin/grpcurl
 PORT ?= 50051
 
-.PHONY: help install run test lint proto bench clean tools
+.PHONY: help install run test lint proto bench clean tools clients clients-go clients-ts
 
 help:
 	@echo "make run      install, then start the device server on 127.0.0.1:$(PORT)"
@@ -16,6 +16,7 @@ help:
 	@echo "make proto    regenerate the Python stubs from proto/"
 	@echo "make bench    run the benchmarks in bench/ and print their figures"
 	@echo "make tools    build grpcurl $(GRPCURL_VERSION) into .tools/bin"
+	@echo "make clients  build the Go and TypeScript example clients (clients/)"
 	@echo "make clean    remove the virtualenv, generated stubs and caches"
 
 # Editable install; setup.py generates the landscape.v1 stubs from proto/ on every build.
@@ -61,6 +62,15 @@ $(GRPCURL):
 	else echo "make tools: no Go on this machine, so no grpcurl (its tests will skip)"; fi
 
 tools: $(GRPCURL)
+
+# The Go and TypeScript clients (clients/README.md); stubs and builds stay out of git.
+clients: clients-go clients-ts
+
+clients-go: install
+	PYTHON=$(CURDIR)/$(PY) clients/go/build.sh
+
+clients-ts:
+	cd clients/ts && npm ci --no-audit --no-fund --loglevel=error && npx tsc -p .
 
 clean:
 	rm -rf $(VENV) .tools gen build *.egg-info .pytest_cache

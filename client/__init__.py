@@ -1,5 +1,29 @@
-"""Python client helpers for a LandScape device server."""
-from landscape.client.aio_session import AsyncSession
-from landscape.client.session import Session
+"""Python client for a LandScape device server (landscape.v1 over gRPC).
 
-__all__ = ["AsyncSession", "Session"]
+    from landscape.client import Frame, Robot
+
+    with Robot("127.0.0.1:50051", "me") as robot, robot.control():
+        robot.move_absolute([0.5, 0, 1.57, 0, 1.57, 0], Frame.JOINT).wait(timeout=30)
+
+`Robot` (blocking) and `AsyncRobot` (asyncio) have a method per command of the contract;
+errors are the exceptions below (module errors). `Session` and `AsyncSession` are the
+session alone, for programs that use the generated stubs directly.
+"""
+from landscape.client.aio import AsyncCommand, AsyncRobot
+from landscape.client.aio_session import AsyncSession
+from landscape.client.command import Command
+from landscape.client.errors import (CommandAborted, CommandFailed, CommandRefused,
+                                     CommandTimeout, LandscapeError, NotImplementedByServer,
+                                     NotLockHolder, TransportError, WrongState)
+from landscape.client.robot import Robot, connect
+from landscape.client.session import Session
+from landscape.client.values import (AccelType, AngularUnit, DeviceState, Frame, LinearUnit,
+                                     Motion, Offset, Pose, SpeedType, TagPoint)
+
+__all__ = [
+    "Robot", "AsyncRobot", "connect", "Command", "AsyncCommand", "Session", "AsyncSession",
+    "Frame", "Motion", "Offset", "SpeedType", "AccelType", "LinearUnit", "AngularUnit",
+    "DeviceState", "Pose", "TagPoint",
+    "LandscapeError", "CommandRefused", "WrongState", "NotLockHolder", "NotImplementedByServer",
+    "TransportError", "CommandFailed", "CommandAborted", "CommandTimeout",
+]

@@ -29,6 +29,7 @@ class Outcome:
 
     result: str
     message: str = ""
+    time: float = 0.0       # unix s the device published the end
 
 
 class EventRouter:
@@ -74,7 +75,8 @@ class EventRouter:
                     self.last_sequence = event.sequence
                     if event.HasField("command") and event.command.phase in _FINAL:
                         self._resolve(event.command.command_id,
-                                      Outcome(_FINAL[event.command.phase], event.command.message))
+                                      Outcome(_FINAL[event.command.phase], event.command.message,
+                                              event.time.ToNanoseconds() / 1e9))
             except grpc.aio.AioRpcError as error:
                 log.warning("event stream ended: %s %s", error.code().name, error.details())
             await asyncio.sleep(RETRY_PERIOD)

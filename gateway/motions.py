@@ -128,16 +128,15 @@ async def _run(session, rpc: str, request, accel: float | None = None) -> None:
         session.motion_start = None
     command_id = reply.ret_val.command_id
     outcome = await session.link.events.outcome(command_id)
+    session.motion_ended = outcome.time
     if outcome.result != "done":
         raise CrclError(f"the device's {rpc} {command_id} {outcome.result}"
                         f"{': ' + outcome.message if outcome.message else ''}")
 
 
 async def _settled(session):
-    """The live state once the motion has ended (a sample newer than the done event)."""
-    feed = session.link.feed
-    latest = feed.latest
-    return await feed.newer_than(latest.sequence if latest else -1)
+    """The live state once the motion has ended: a sample of a cycle after its done event."""
+    return await session.link.feed.taken_after(session.motion_ended)
 
 
 def _check_pose(session, goal: np.ndarray, tolerance: ToleranceSi, live) -> str:

@@ -12,7 +12,9 @@ import copy
 import socket
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from lxml import etree
 
@@ -26,6 +28,10 @@ XSI = "http://www.w3.org/2001/XMLSchema-instance"
 
 class ProgramFailed(Exception):
     """A command ended in CRCL_Error (or the gateway went away); the text says which and why."""
+
+
+# What a run may raise: the program failed, the gateway is unreachable, the file is not CRCL.
+FAILURES = (ProgramFailed, OSError, xmlsafe.XmlRefused, parse.CrclParseError)
 
 
 def instances(path: Path) -> list[tuple[m.Command, bytes]]:
@@ -51,7 +57,11 @@ def instances(path: Path) -> list[tuple[m.Command, bytes]]:
 class Client:
     def __init__(self, address: str, timeout: float):
         host, port = address.rsplit(":", 1)
-        self.sock = socket.create_connection((host, int(port)), timeout=timeout)
+        try:
+            self.sock = socket.create_connection((host.strip("[]"), int(port)), timeout=timeout)
+        except OSError as error:
+            raise ProgramFailed(f"cannot reach the CRCL gateway at {address}: "
+                                f"{error.strerror or error}") from None
         self.splitter = DocumentSplitter()
         self.pending: list[bytes] = []
 
@@ -78,9 +88,30 @@ def _get_status(command_id: int) -> bytes:
             f'</CRCLCommand></CRCLCommandInstance>').encode()
 
 
+@dataclass(frozen=True)
+class Progress:
+    """One command of a program run, as it ended."""
+
+    index: int            # 0-based, in the program with its loops unrolled
+    total: int
+    kind: str             # e.g. "MoveTo"
+    command_id: int
+    state: str            # CRCL_Done or CRCL_Error
+    description: str
+    seconds: float
+
+    def __str__(self) -> str:
+        return (f"[{self.index + 1}/{self.total}] {self.kind} (CommandID {self.command_id}): "
+                f"{self.state} in {self.seconds:.3f} s"
+                f"{' - ' + self.description if self.description else ''}")
+
+
 def run(path: Path, address: str, poll: float = 0.005, timeout: float = 300.0,
-        out=sys.stdout) -> int:
-    """Runs the program; returns how many commands were done. Raises ProgramFailed."""
+        report: Callable[[Progress], None] | None = None, out=sys.stdout) -> int:
+    """Runs the program; returns how many commands were done. Raises ProgramFailed (and
+    OSError, xmlsafe.XmlRefused, parse.CrclParseError). `report` gets each command's Progress
+    (default: printed to `out`)."""
+    report = report or (lambda progress: print(progress, file=out, flush=True))
     commands = instances(path)
     client = Client(address, timeout)
     for index, (command, document) in enumerate(commands):
@@ -97,9 +128,8 @@ def run(path: Path, address: str, poll: float = 0.005, timeout: float = 300.0,
                     raise ProgramFailed(f"command {index} ({command.KIND}, CommandID "
                                         f"{command.command_id}): not done in {timeout:g} s")
                 time.sleep(poll)
-        print(f"[{index + 1}/{len(commands)}] {command.KIND} (CommandID {command.command_id}): "
-              f"{state} in {time.monotonic() - started:.3f} s"
-              f"{' - ' + description if description else ''}", file=out, flush=True)
+        report(Progress(index, len(commands), command.KIND, command.command_id, state,
+                        description, time.monotonic() - started))
         if state == "CRCL_Error":
             raise ProgramFailed(f"command {index} ({command.KIND}, CommandID "
                                 f"{command.command_id}) failed: {description}")
@@ -116,7 +146,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     try:
         count = run(args.program, args.gateway, args.poll, args.timeout)
-    except (ProgramFailed, OSError, xmlsafe.XmlRefused, parse.CrclParseError) as error:
+    except FAILURES as error:
         print(f"program failed: {error}", file=sys.stderr)
         sys.exit(1)
     print(f"program done: {count} commands")

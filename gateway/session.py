@@ -63,6 +63,7 @@ class CrclSession:
         self._running_lasts = False         # the running command is preempted by the next
         self._must_halt = False             # a preempted motion may still move the arm
         self.motion_start: asyncio.Future | None = None   # a motion call in flight
+        self.motion_ended = 0.0    # unix s the last device motion ended (its done event)
         self.listeners: list = []           # called with no argument when the record changes
 
     # ---- documents -------------------------------------------------------------------------

@@ -43,6 +43,7 @@ class LiveState:
     end_effector_state: str = ""
     sensors: dict[str, tuple[float, ...]] = field(default_factory=dict)
     received: float = 0.0                 # time.monotonic() when it arrived
+    time: float = 0.0                     # unix s of the controller cycle it was taken in
 
 
 def _si(units: types_pb2.Units, joints, pose: types_pb2.Pose) -> tuple[np.ndarray, np.ndarray]:
@@ -64,7 +65,8 @@ def _from_sample(sample: state_service_pb2.StateSample) -> LiveState:
         joint_torques=np.asarray(sample.joint_torques),
         command_id=sample.command_id, end_effector=sample.end_effector,
         end_effector_state=sample.end_effector_state,
-        sensors={s.name: tuple(s.values) for s in sample.sensors}, received=time.monotonic())
+        sensors={s.name: tuple(s.values) for s in sample.sensors}, received=time.monotonic(),
+        time=sample.time.ToNanoseconds() / 1e9)
 
 
 class StateFeed:
@@ -97,10 +99,18 @@ class StateFeed:
 
     async def newer_than(self, sequence: int, timeout: float = 1.0) -> LiveState | None:
         """The first sample after `sequence`, or the latest one if none comes within timeout."""
+        return await self._first(lambda s: s.sequence > sequence, timeout)
+
+    async def taken_after(self, unix_s: float, timeout: float = 1.0) -> LiveState | None:
+        """The first sample of a cycle at or after `unix_s` (an event's time), or the latest
+        one if none comes within timeout."""
+        return await self._first(lambda s: s.time >= unix_s, timeout)
+
+    async def _first(self, condition, timeout: float) -> LiveState | None:
         async with self._changed:
             try:
                 await asyncio.wait_for(self._changed.wait_for(
-                    lambda: self.latest is not None and self.latest.sequence > sequence), timeout)
+                    lambda: self.latest is not None and condition(self.latest)), timeout)
             except asyncio.TimeoutError:
                 pass
         return self.latest

@@ -21,7 +21,8 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                     reports its label when its sample is passed
                    {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
   cycle -> server  {"op": "controller", "enable": EnableState value, "estop": bool} on change
-                   {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label"}
+                   {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label",
+                    "wall_time"} (wall_time: unix s of the cycle)
                    {"op": "paused", "id"}  {"op": "resumed", "id"}  {"op": "done", "id"}
                    {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
 """
@@ -189,7 +190,7 @@ class Executor:
             motion.advance()
             marks = motion.marks
             while motion.next_mark < len(marks) and marks[motion.next_mark][0] <= motion.s:
-                self._reports.append({"op": "mark", "id": motion.id,
+                self._reports.append({"op": "mark", "id": motion.id, "wall_time": time.time(),
                                       "label": int(marks[motion.next_mark][1])})
                 motion.next_mark += 1
             if motion.s >= motion.last and not motion.next_segment():

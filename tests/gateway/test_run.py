@@ -3,8 +3,10 @@ and one the arm can do."""
 from __future__ import annotations
 
 import io
+import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from lxml import etree
@@ -72,3 +74,17 @@ def test_the_command_line_runner(gateway, tmp_path):
                              f"127.0.0.1:{gateway.port}"], capture_output=True, text=True, timeout=120)
     assert failed.returncode == 1
     assert "program failed: command 1 (ActuateJoints, CommandID 2) failed" in failed.stderr
+
+
+def test_the_landscape_cli_runs_a_program_through_the_gateway(gateway, tmp_path):
+    """`landscape crcl run` (issue 15) uses this runner."""
+    path = tmp_path / "program.xml"
+    path.write_bytes(reachable_program())
+    landscape = Path(sys.executable).with_name("landscape")   # the installed console script
+    done = subprocess.run([str(landscape), "--json", "crcl", "run", str(path), "--gateway",
+                           f"127.0.0.1:{gateway.port}"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert len(result["commands"]) == 13
+    assert all(c["state"] == "CRCL_Done" for c in result["commands"])

@@ -1,0 +1,443 @@
+"""Live state, watchers and motion start (issue 12), each beside a baseline measured in the same
+run. Prints figures, no pass/fail.
+
+- State fan-out: 50 StateService.StreamState subscribers at 250 Hz while a path runs: samples
+  per second per subscriber, gaps, p99 sample age (receive - the cycle's time), cycle overruns
+  and the server's CPU; baseline: a bare grpc.aio server streaming a message of the same size
+  every 4 ms to 50 subscribers.
+- 1,000 idle event subscribers: the server's resident memory, and the unary call latency
+  (GetDeviceState) beside them, against the latency with none.
+- Command to motion: from the call to the first moving cycle (the cycle's own time stamp, as
+  the cycle process took it) and to the client seeing it on the state stream, p50/p99, for a
+  joint MoveAbsolute and a 100-point PathMove; baseline: a bare unary echo's round trip.
+- Event latency: tag events of a path from the cycle that passed the tag to 1 and 50
+  subscribers, p50/p99; baseline: a bare stream stamped and sent on a 4 ms tick.
+
+The device server runs here on the real-time clock (its cycle process apart); every client runs
+in a child process, as supervisors would. Run: .venv/bin/python bench/bench_state.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import math
+import multiprocessing as mp
+import os
+import statistics
+import threading
+import time
+
+import grpc
+import numpy as np
+from google.protobuf import wrappers_pb2
+
+from landscape.client import AsyncSession
+from landscape.server.app import serve
+from landscape.server.config import ServerConfig
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
+                          event_service_pb2_grpc, motion_pb2, state_service_pb2,
+                          state_service_pb2_grpc, types_pb2)
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+HOME = [0.0, 0.0, 1.5708, 0.0, 1.5708, 0.0]
+OWN_CONNECTION = [("grpc.use_local_subchannel_pool", 1)]
+
+
+def pct(values, q: float) -> float:
+    return float(np.percentile(values, q)) if len(values) else math.nan
+
+
+def rss_mb(pid: int | None = None) -> float:
+    with open(f"/proc/{pid or os.getpid()}/status") as status:
+        kb = next(int(line.split()[1]) for line in status if line.startswith("VmRSS"))
+    return kb / 1024
+
+
+# -- the baseline server: bare grpc.aio, in this process like the device server ----------------
+
+def _sample_size_message() -> state_service_pb2.StreamStateResponse:
+    sample = state_service_pb2.StateSample(
+        sequence=123456, controller_time=493.824, joint_positions=[0.1] * 6,
+        joint_velocities=[0.2] * 6, commanded_positions=[0.1] * 6, joint_torques=[1.5] * 6,
+        tool_pose=types_pb2.Pose(x=0.5, y=0.1, z=0.6, roll=3.1, pitch=0.01, yaw=0.2),
+        device_state=types_pb2.DEVICE_STATE_MOVING, motion_control_state="running_trajectory",
+        control_mode="power_on", command_id="PathMove-17", point_name="ring", tag_name="t7",
+        units=types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS,
+                              angular=types_pb2.ANGULAR_UNIT_RADIANS))
+    return state_service_pb2.StreamStateResponse(sample=sample)
+
+
+async def _ticking(request: wrappers_pb2.UInt64Value, context):
+    """Every 4 ms (on one grid for every stream) a message of a state sample's size, stamped."""
+    message = _sample_size_message()
+    due = math.ceil(time.time() / 0.004) * 0.004
+    for i in range(request.value):
+        due += 0.004
+        await asyncio.sleep(max(0.0, due - time.time()))
+        message.sample.sequence = i
+        message.sample.time.FromNanoseconds(round(due * 1e9))
+        yield message
+
+
+async def _echo(request: wrappers_pb2.UInt64Value, context):
+    return request
+
+
+class Bare:
+    def __init__(self):
+        self.loop = asyncio.new_event_loop()
+        threading.Thread(target=self.loop.run_forever, daemon=True).start()
+        self.server, port = asyncio.run_coroutine_threadsafe(self._start(), self.loop).result()
+        self.target = f"127.0.0.1:{port}"
+
+    async def _start(self):
+        server = grpc.aio.server()
+        handlers = {"Tick": grpc.unary_stream_rpc_method_handler(
+            _ticking, request_deserializer=wrappers_pb2.UInt64Value.FromString,
+            response_serializer=state_service_pb2.StreamStateResponse.SerializeToString),
+            "Echo": grpc.unary_unary_rpc_method_handler(
+            _echo, request_deserializer=wrappers_pb2.UInt64Value.FromString,
+            response_serializer=wrappers_pb2.UInt64Value.SerializeToString)}
+        server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler("bench.Bare",
+                                                                             handlers),))
+        port = server.add_insecure_port("127.0.0.1:0")
+        await server.start()
+        return server, port
+
+    def stop(self):
+        asyncio.run_coroutine_threadsafe(self.server.stop(None), self.loop).result()
+        self.loop.call_soon_threadsafe(self.loop.stop)
+
+
+# -- children ----------------------------------------------------------------------------------
+
+def _in_child(func, *args):
+    """Run func(*args) in a spawned child; returns its result (through a queue)."""
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_child_main, args=(queue, func, args), daemon=True)
+    proc.start()
+    return proc, queue
+
+
+def _child_main(queue, func, args):
+    queue.put(asyncio.run(func(*args)))
+
+
+async def watchers(target: str, n: int, seconds: float, bare: bool):
+    """n streams read for `seconds`: per stream (count, gaps, ages in ms)."""
+    async def one(channel):
+        if bare:
+            call = channel.unary_stream(
+                "/bench.Bare/Tick", request_serializer=wrappers_pb2.UInt64Value.SerializeToString,
+                response_deserializer=state_service_pb2.StreamStateResponse.FromString)(
+                wrappers_pb2.UInt64Value(value=int(seconds * 300)))
+        else:
+            call = state_service_pb2_grpc.StateServiceStub(channel).StreamState(
+                state_service_pb2.StreamStateRequest(rate_hz=250))
+        count, gaps, ages, last = 0, 0, [], None
+        end = time.time() + seconds
+        async for message in call:
+            if message.WhichOneof("message") != "sample":
+                continue
+            now = time.time()
+            sample = message.sample
+            ages.append((now - sample.time.ToNanoseconds() / 1e9) * 1000)
+            if last is not None and sample.sequence != last + 1:
+                gaps += 1
+            last, count = sample.sequence, count + 1
+            if now > end:
+                break
+        call.cancel()
+        return count, gaps, ages
+
+    channel = grpc.aio.insecure_channel(target, options=OWN_CONNECTION)
+    try:
+        return await asyncio.gather(*(one(channel) for _ in range(n)))
+    finally:
+        await channel.close()
+
+
+async def idle_subscribers(target: str, n: int, hold: float, ready):
+    """n event subscriptions on n // 50 connections, held idle for `hold` s."""
+    channels = [grpc.aio.insecure_channel(target, options=OWN_CONNECTION)
+                for _ in range(max(1, n // 50))]
+    calls = [event_service_pb2_grpc.EventServiceStub(channels[i % len(channels)]).Subscribe(
+        event_service_pb2.SubscribeRequest()) for i in range(n)]
+    await asyncio.gather(*(c.wait_for_connection() for c in calls))
+    ready.set()
+    await asyncio.sleep(hold)
+    for call in calls:
+        call.cancel()
+    for channel in channels:
+        await channel.close()
+    return n
+
+
+async def unary_latency(target: str, n: int, bare: bool):
+    async with grpc.aio.insecure_channel(target) as channel:
+        if bare:
+            call = channel.unary_unary(
+                "/bench.Bare/Echo", request_serializer=wrappers_pb2.UInt64Value.SerializeToString,
+                response_deserializer=wrappers_pb2.UInt64Value.FromString)
+            request = wrappers_pb2.UInt64Value(value=1)
+        else:
+            call = device_service_pb2_grpc.DeviceServiceStub(channel).GetDeviceState
+            request = control_pb2.GetDeviceStateRequest()
+        out = []
+        for _ in range(n):
+            began = time.perf_counter()
+            await call(request)
+            out.append((time.perf_counter() - began) * 1000)
+        return out
+
+
+async def motion_starts(target: str, runs: int):
+    """A lock holder that starts motions and times them on the state stream: per run and kind,
+    (call -> first moving cycle, call -> the client sees it), ms."""
+    async with grpc.aio.insecure_channel(target) as channel, \
+            AsyncSession(channel, "bench") as session:
+        await session.lock()
+        device = device_service_pb2_grpc.DeviceServiceStub(channel)
+        md = session.metadata()
+        await device.Activate(control_pb2.ActivateRequest(), metadata=md)
+        stream = state_service_pb2_grpc.StateServiceStub(channel).StreamState(
+            state_service_pb2.StreamStateRequest(units=types_pb2.Units(
+                linear=types_pb2.LINEAR_UNIT_METERS, angular=types_pb2.ANGULAR_UNIT_RADIANS)))
+        samples = stream.__aiter__()
+
+        async def first_moving(rest, began):
+            while True:
+                sample = (await samples.__anext__()).sample
+                if not sample.ListFields():
+                    continue
+                if np.max(np.abs(np.array(sample.commanded_positions) - rest)) > 1e-7:
+                    return ((sample.time.ToNanoseconds() / 1e9 - began) * 1000,
+                            (time.time() - began) * 1000)
+
+        async def at_rest():
+            while True:
+                sample = (await samples.__anext__()).sample
+                if sample.ListFields() and sample.device_state == types_pb2.DEVICE_STATE_RESTING:
+                    return np.array(sample.commanded_positions)
+
+        ring = [[0.3 * math.sin(i / 15), 0.2 * math.sin(i / 25), 1.5708 + 0.1 * math.cos(i / 20),
+                 0.0, 1.5708, 0.0] for i in range(100)]
+        header = motion_pb2.PathHeader(path_name="bench100", frame=JOINT,
+                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+        try:
+            await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=[
+                types_pb2.TagStruct(joint_values=q, transition_speed=40) for q in ring])]),
+                metadata=md)
+        except grpc.aio.AioRpcError:
+            pass   # loaded by an earlier run (paths are kept)
+        out = {"joint move": [], "100-point path": []}
+        for i in range(runs):
+            rest = await at_rest()
+            goal = list(HOME)
+            goal[0] = 0.2 if i % 2 == 0 else -0.2
+            began = time.time()
+            await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=goal),
+                                      metadata=md)
+            out["joint move"].append(await first_moving(rest, began))
+            await at_rest()
+            await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT,
+                                                                     values=ring[0]), metadata=md)
+            rest = await at_rest()
+            began = time.time()
+            await device.PathMove(motion_pb2.PathMoveRequest(path_name="bench100"), metadata=md)
+            out["100-point path"].append(await first_moving(rest, began))
+        stream.cancel()
+        await device.Deactivate(control_pb2.DeactivateRequest(), metadata=md)
+        return out
+
+
+async def event_watchers(target: str, n: int, until_tag: str, bare: bool, ticks: int):
+    """n event streams until the tag named `until_tag`: (sequence, receive time) per tag event;
+    bare: receive - stamp of the bare tick stream, ms."""
+    async def one(channel):
+        got = []
+        if bare:
+            call = channel.unary_stream(
+                "/bench.Bare/Tick", request_serializer=wrappers_pb2.UInt64Value.SerializeToString,
+                response_deserializer=state_service_pb2.StreamStateResponse.FromString)(
+                wrappers_pb2.UInt64Value(value=ticks))
+            async for message in call:
+                got.append((time.time() - message.sample.time.ToNanoseconds() / 1e9) * 1000)
+            return got
+        call = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
+            event_service_pb2.SubscribeRequest())
+        async for reply in call:
+            event = reply.event
+            if event.event_id == "tag_reached":
+                got.append((event.sequence, time.time()))
+                if event.command.tag_name == until_tag:
+                    break
+        call.cancel()
+        return got
+
+    channel = grpc.aio.insecure_channel(target, options=OWN_CONNECTION)
+    try:
+        return await asyncio.gather(*(one(channel) for _ in range(n)))
+    finally:
+        await channel.close()
+
+
+# -- sections ------------------------------------------------------------------------------------
+
+class Holder:
+    """The lock holder in this process: runs a long blended ring path while others watch."""
+
+    def __init__(self, server):
+        from landscape.client import Session
+        self.session = Session(grpc.insecure_channel(server.target), "holder").open()
+        self.session.lock()
+        self.device = device_service_pb2_grpc.DeviceServiceStub(self.session.channel)
+        self.device.Activate(control_pb2.ActivateRequest(), timeout=10)
+        header = motion_pb2.PathHeader(path_name="tags", frame=JOINT,
+                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+        tags = [types_pb2.TagStruct(
+            joint_values=[0.4 * math.sin(2 * math.pi * i / 50), 0.1 * math.cos(2 * math.pi * i / 50),
+                          1.5708, 0.0, 1.5708, 0.0], tag_name=f"t{i}", transition_speed=30)
+            for i in range(50)]
+        try:
+            self.device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=tags)]),
+                                 timeout=60)
+        except grpc.RpcError:
+            pass
+
+    def run(self, cycles: int):
+        return self.device.PathMove(motion_pb2.PathMoveRequest(path_name="tags",
+                                                               number_of_cycles=cycles))
+
+    def stop(self):
+        try:
+            self.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=10)
+            self.device.AbortMotion(motion_pb2.AbortMotionRequest(), timeout=10)
+        except grpc.RpcError:
+            pass   # it had ended already
+
+    def close(self):
+        self.session.close()
+
+
+def fan_out(server, bare: Bare, holder: Holder, seconds: float):
+    print(f"\nstate fan-out: 50 subscribers at 250 Hz for {seconds:g} s (5 processes x 10)")
+    for label, target, is_bare in (("device server", server.target, False),
+                                   ("bare stream", bare.target, True)):
+        if not is_bare:
+            holder.run(cycles=1000)
+        before, cpu0 = server.link.stats(), time.process_time()
+        children = [_in_child(watchers, target, 10, seconds, is_bare) for _ in range(5)]
+        results = [r for _, q in children for r in q.get(timeout=seconds + 120)]
+        cpu = (time.process_time() - cpu0) / seconds * 100
+        after = server.link.stats()
+        if not is_bare:
+            holder.stop()
+        rates = [c / seconds for c, _, _ in results]
+        ages = [a for _, _, ages in results for a in ages]
+        gaps = sum(g for _, g, _ in results)
+        print(f"  {label:13s}: {statistics.mean(rates):6.1f} samples/s per subscriber "
+              f"(min {min(rates):5.1f}), gaps {gaps}, age p50 {pct(ages, 50):6.2f} ms "
+              f"p99 {pct(ages, 99):7.2f} ms, this process's CPU {cpu:5.1f} %, cycle overruns "
+              f"{after.overruns - before.overruns}, late p99 {after.late_p99 * 1e3:.3f} ms")
+
+
+def idle(server, bare: Bare, n: int):
+    print(f"\n{n} idle event subscribers:")
+    quiet = unary_latency_in_child(server.target, False)
+    rss0 = rss_mb()
+    ctx = mp.get_context("spawn")
+    ready = ctx.Event()
+    proc, queue = _in_child(idle_subscribers, server.target, n, 20.0, ready)
+    ready.wait(120)
+    time.sleep(1.0)
+    rss1 = rss_mb()
+    busy = unary_latency_in_child(server.target, False)
+    echo = unary_latency_in_child(bare.target, True)
+    queue.get(timeout=120)
+    print(f"  server memory {rss0:.0f} MB -> {rss1:.0f} MB with them "
+          f"({(rss1 - rss0) * 1024 / n:.1f} kB each)")
+    print(f"  GetDeviceState p50/p99: {pct(quiet, 50):.3f} / {pct(quiet, 99):.3f} ms alone, "
+          f"{pct(busy, 50):.3f} / {pct(busy, 99):.3f} ms beside them "
+          f"(x{pct(busy, 50) / pct(quiet, 50):.2f}); bare echo {pct(echo, 50):.3f} / "
+          f"{pct(echo, 99):.3f} ms")
+
+
+def unary_latency_in_child(target: str, is_bare: bool, n: int = 2000):
+    _, queue = _in_child(unary_latency, target, n, is_bare)
+    return queue.get(timeout=300)
+
+
+def starts(server, bare: Bare, runs: int):
+    print(f"\ncommand to motion, {runs} runs each, ms p50 / p99:")
+    _, queue = _in_child(motion_starts, server.target, runs)
+    out = queue.get(timeout=600)
+    for kind, pairs in out.items():
+        cycle = [c for c, _ in pairs]
+        seen = [s for _, s in pairs]
+        print(f"  {kind:15s}: first moving cycle {pct(cycle, 50):6.2f} / {pct(cycle, 99):6.2f}"
+              f"   client sees it {pct(seen, 50):6.2f} / {pct(seen, 99):6.2f}")
+    echo = unary_latency_in_child(bare.target, True, 500)
+    print(f"  baseline, a bare unary echo round trip: {pct(echo, 50):.3f} / {pct(echo, 99):.3f}")
+
+
+def event_latency(server, bare: Bare, holder: Holder):
+    print("\nevent latency, the cycle that passed a tag -> a subscriber receives it, ms:")
+    motions = server.device.motions
+    cycle_of: dict[int, float] = {}
+    original = motions.on_report
+
+    def on_report(msg):   # which cycle each tag event comes from (the executor stamps it)
+        original(msg)
+        if msg.get("op") == "mark":
+            cycle_of[server.bus.last_sequence] = msg["wall_time"]
+    motions.on_report = on_report
+    try:
+        for n in (1, 50):
+            before = server.bus.subscriber_count
+            children = [_in_child(event_watchers, server.target, min(n, 10), "t49", False, 0)
+                        for _ in range(max(1, n // 10))]
+            deadline = time.monotonic() + 120
+            while server.bus.subscriber_count < before + n and time.monotonic() < deadline:
+                time.sleep(0.05)
+            holder.run(cycles=1)
+            got = [g for _, q in children for g in q.get(timeout=300)]
+            latencies = [(t - cycle_of[s]) * 1000 for stream in got for s, t in stream
+                         if s in cycle_of]
+            base = [x for _, q in [_in_child(event_watchers, bare.target, min(n, 10), "", True,
+                                             250) for _ in range(max(1, n // 10))]
+                    for stream in q.get(timeout=120) for x in stream]
+            print(f"  {n:2d} subscriber(s): p50 {pct(latencies, 50):6.2f} p99 "
+                  f"{pct(latencies, 99):6.2f} ({len(latencies)} events)   bare tick stream "
+                  f"p50 {pct(base, 50):6.2f} p99 {pct(base, 99):6.2f}")
+            time.sleep(2.0)
+    finally:
+        motions.on_report = original
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="shorter runs, for CI")
+    args = parser.parse_args()
+    server = serve(ServerConfig(port=0, clock="realtime"))
+    bare = Bare()
+    holder = Holder(server)
+    try:
+        print(f"state sample message: {_sample_size_message().ByteSize()} bytes; real-time "
+              f"priority: {'no: ' + '; '.join(server.link.tuning_problems) if server.link.tuning_problems else 'yes'}")
+        fan_out(server, bare, holder, 3.0 if args.quick else 10.0)
+        event_latency(server, bare, holder)
+        holder.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+        holder.close()
+        idle(server, bare, 200 if args.quick else 1000)
+        starts(server, bare, 10 if args.quick else 40)
+    finally:
+        bare.stop()
+        server.stop(grace=None)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,192 @@
+"""Safety under load (issue 8): how fast a stop reaches the arm, and what a long hand-over
+costs the cycle. Prints figures beside their same-run baselines, no pass/fail.
+
+- Stop latency: StopMotion sent -> the first decelerating cycle (the cycle's own time stamp,
+  from the state stream, every cycle), p50/p99, with the server idle (the baseline), with a
+  PathLoad stream held open, and while long paths are being planned (resolved, timed and
+  collision-checked: the command turn and the interpreter busy). Goal: one cycle, 4 ms.
+- Hand-over: cycle lateness p99/max and missed deadlines while a 10-minute trajectory is
+  handed to the cycle process, beside the same window with no hand-over. Goal: 0 missed.
+
+The device server runs here on the real-time clock; the lock holder and the loader are child
+processes. Run: .venv/bin/python bench/bench_stop.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import math
+import multiprocessing as mp
+import time
+
+import grpc
+import numpy as np
+
+from landscape.client import AsyncSession
+from landscape.server.app import serve
+from landscape.server.config import ServerConfig
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, state_service_pb2,
+                          state_service_pb2_grpc, types_pb2)
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+BASE = types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
+HEADER = dict(motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+              offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+
+
+def pct(values, q):
+    return float(np.percentile(values, q)) if len(values) else math.nan
+
+
+async def stops(target: str, trials: int, load: str, lease_out, go):
+    """The lock holder: `trials` moves, each stopped mid-way; per trial, ms from sending
+    StopMotion to the first cycle whose commanded step is shorter than the one before."""
+    async with grpc.aio.insecure_channel(target) as channel, \
+            AsyncSession(channel, "holder") as session:
+        await session.lock()
+        lease_out.put(session.lease)
+        md = session.metadata()
+        device = device_service_pb2_grpc.DeviceServiceStub(channel)
+        await device.Activate(control_pb2.ActivateRequest(), metadata=md)
+        stream = state_service_pb2_grpc.StateServiceStub(channel).StreamState(
+            state_service_pb2.StreamStateRequest())
+        samples = stream.__aiter__()
+        # The load is in place (waited for off the loop: the session's keep-alives go on).
+        await asyncio.get_running_loop().run_in_executor(None, go.wait, 120)
+        out = []
+        for i in range(trials):
+            goal = [1.2 if i % 2 == 0 else -1.2, 0, 1.5708, 0, 1.5708, 0]
+            await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+                frame=JOINT, values=goal, speed=40), metadata=md)
+            await asyncio.sleep(0.4)
+            sent = time.time()
+            stopping = asyncio.ensure_future(device.StopMotion(motion_pb2.StopMotionRequest(),
+                                                               metadata=md))
+            previous, step = None, None
+            while True:
+                sample = (await samples.__anext__()).sample
+                if not sample.ListFields():
+                    continue
+                q = sample.commanded_positions[0]
+                if previous is not None:
+                    new_step = abs(q - previous)
+                    if (step is not None and sample.time.ToNanoseconds() / 1e9 > sent
+                            and new_step < step - 1e-9):
+                        out.append((sample.time.ToNanoseconds() / 1e9 - sent) * 1000)
+                        break
+                    step = new_step
+                previous = q
+            await stopping
+            await device.AbortMotion(motion_pb2.AbortMotionRequest(), metadata=md)
+        stream.cancel()
+        await device.Deactivate(control_pb2.DeactivateRequest(), metadata=md)
+        return out
+
+
+async def loader(target: str, lease: str, load: str, seconds: float, ready):
+    """Keeps the server busy for `seconds`: a PathLoad stream held open, or long paths
+    planned one after the other."""
+    md = (("landscape-lease", lease),)
+    async with grpc.aio.insecure_channel(target) as channel:
+        device = device_service_pb2_grpc.DeviceServiceStub(channel)
+        if load == "open PathLoad stream":
+            async def held():
+                yield motion_pb2.PathLoadRequest(header=motion_pb2.PathHeader(
+                    path_name="held", frame=JOINT, **HEADER))
+                ready.set()
+                await asyncio.sleep(seconds)
+            try:
+                await device.PathLoad(held(), metadata=md)
+            except grpc.aio.AioRpcError:
+                pass
+            return
+        tags = [types_pb2.TagStruct(x=0.5 + 0.1 * math.cos(i / 300), y=0.1 * math.sin(i / 300),
+                                    z=0.6, roll=math.pi) for i in range(2000)]
+        end = time.time() + seconds
+        ready.set()
+        while time.time() < end:
+            try:
+                await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=motion_pb2.PathHeader(
+                    path_name="busy", frame=BASE, **HEADER), tags=tags)]), metadata=md)
+                await device.PathClearPath(motion_pb2.PathClearPathRequest(path_name="busy"),
+                                           metadata=md)
+            except grpc.aio.AioRpcError:
+                pass
+
+
+def _child(func, *args):
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_run, args=(queue, func, args), daemon=True)
+    proc.start()
+    return proc, queue
+
+
+def _run(queue, func, args):
+    queue.put(asyncio.run(func(*args)))
+
+
+def stop_latency(server, trials: int) -> None:
+    print(f"\nstop latency, StopMotion sent -> first decelerating cycle, {trials} stops, ms:")
+    ctx = mp.get_context("spawn")
+    for load in ("idle (baseline)", "open PathLoad stream", "long paths being planned"):
+        lease_out, go, busy = ctx.Queue(), ctx.Event(), None
+        _, result = _child(stops, server.target, trials, load, lease_out, go)
+        lease = lease_out.get(timeout=120)
+        if load.startswith("idle"):
+            go.set()
+        else:
+            ready = ctx.Event()
+            busy = _child(loader, server.target, lease, load, trials * 2.0 + 30, ready)
+            ready.wait(120)
+            time.sleep(0.5)
+            go.set()
+        latencies = result.get(timeout=trials * 10 + 300)
+        del busy   # the loader's queue had to live until it started
+        print(f"  {load:25s}: p50 {pct(latencies, 50):6.2f}  p99 {pct(latencies, 99):6.2f}  "
+              f"max {max(latencies):6.2f}  (cycles: p99 {pct(latencies, 99) / 4:.1f})")
+        while server.device.status().locked:
+            time.sleep(0.1)
+
+
+def handover(server) -> None:
+    print("\nhand-over of a 10-minute trajectory (a path dwelling 600 s), cycle timing:")
+    from landscape.client import Session
+    session = Session(grpc.insecure_channel(server.target), "handover").open()
+    session.lock()
+    device = device_service_pb2_grpc.DeviceServiceStub(session.channel)
+    device.Activate(control_pb2.ActivateRequest(), timeout=10)
+    device.PathLoad(iter([motion_pb2.PathLoadRequest(
+        header=motion_pb2.PathHeader(path_name="dwell", frame=JOINT, **HEADER),
+        tags=[types_pb2.TagStruct(joint_values=[0.1, 0, 1.5708, 0, 1.5708, 0],
+                                  time_delay=600)])]), timeout=60)
+    for label, run in (("no hand-over (baseline)", False), ("10-minute hand-over", True)):
+        server.link.clock.reset_stats()
+        if run:
+            device.PathMove(motion_pb2.PathMoveRequest(path_name="dwell"), timeout=60)
+        time.sleep(2.0)
+        stats = server.link.stats()
+        print(f"  {label:25s}: missed {stats.missed}, overruns {stats.overruns}, late p99 "
+              f"{stats.late_p99 * 1e3:.3f} ms, max {stats.late_max * 1e3:.3f} ms, step max "
+              f"{stats.exec_max * 1e3:.3f} ms")
+    device.StopMotion(motion_pb2.StopMotionRequest(), timeout=10)
+    device.AbortMotion(motion_pb2.AbortMotionRequest(), timeout=10)
+    session.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer stops, for CI")
+    args = parser.parse_args()
+    server = serve(ServerConfig(port=0, clock="realtime"))
+    try:
+        problems = server.link.tuning_problems
+        print(f"real-time priority: {'no: ' + '; '.join(problems) if problems else 'yes'}")
+        stop_latency(server, 8 if args.quick else 40)
+        handover(server)
+    finally:
+        server.stop(grace=None)
+
+
+if __name__ == "__main__":
+    main()

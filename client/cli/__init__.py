@@ -1,0 +1,1 @@
+"""The `landscape` command-line tool (console script); see app.py."""
