@@ -4,8 +4,8 @@ from __future__ import annotations
 import grpc
 import pytest
 
-from landscape.client import (CommandAborted, DeviceState, Frame,
-                              NotLockHolder, Robot, TagPoint, WrongState)
+from landscape.client import (CommandAborted, DeviceState, Frame, NotLockHolder, Robot,
+                              TagPoint, WrongState)
 from landscape.client import errors
 from landscape.server.states import State
 from landscape.v1 import control_pb2
