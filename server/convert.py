@@ -102,6 +102,24 @@ def matrix_to_pose(matrix: np.ndarray, units: Units) -> types_pb2.Pose:
     return types_pb2.Pose(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw)
 
 
+# ---- the cell ----------------------------------------------------------------------------
+
+_BODY_KINDS = {"fixture": control_pb2.CellBody.KIND_FIXTURE, "tool": control_pb2.CellBody.KIND_TOOL,
+               "part": control_pb2.CellBody.KIND_PART, "zone": control_pb2.CellBody.KIND_ZONE}
+
+
+def cell_body_to_pb(body) -> control_pb2.CellBody:
+    """A cell_view.Body; poses and sizes in m and rad whatever the device's units."""
+    message = control_pb2.CellBody(name=body.name, kind=_BODY_KINDS[body.kind],
+                                   color=list(body.color), urdf=body.urdf,
+                                   attached_to=body.attached_to)
+    if body.pose is not None:
+        message.pose.CopyFrom(matrix_to_pose(body.pose, Units()))
+    if body.size is not None:
+        message.size.CopyFrom(types_pb2.Vector3(x=body.size[0], y=body.size[1], z=body.size[2]))
+    return message
+
+
 # ---- moves and paths -------------------------------------------------------------------------
 
 FRAMES = {types_pb2.REFERENCE_FRAME_JOINT_FRAME: Frame.JOINT,

@@ -27,6 +27,7 @@ from landscape.server.errors import ParamError
 from landscape.server.feedback import CMD, IO, QD, SENSORS, SEQ, TAU, TIME, WALL, Q
 from landscape.server.targets import Frame
 from landscape.server.units import Units
+from landscape.sim.kinematics import PinocchioModel
 from landscape.v1 import state_service_pb2 as pb
 
 
@@ -55,6 +56,7 @@ class StateHub:
         self._messages: dict = {}      # (sequence, view) -> StateSample, the newest few
         self._conversions = conversions
         self._poses: dict[int, np.ndarray] = {}   # sequence -> flange pose (4, 4), newest few
+        self._model = PinocchioModel(device.arm)  # one pose in ~5 us (the numpy FK: ~60 us)
 
     def attach(self, loop: asyncio.AbstractEventLoop) -> None:
         """Start listening to the ring's wake-ups on `loop` (the server's)."""
@@ -149,7 +151,7 @@ class StateHub:
         Forward kinematics runs once per cycle, whoever asks (streams and position reads)."""
         flange = self._poses.get(sequence)
         if flange is None:
-            flange = self.device.kinematics.forward(joints)
+            flange = self._model.forward(joints)
             if len(self._poses) >= 8:
                 self._poses.pop(next(iter(self._poses)))
             self._poses[sequence] = flange

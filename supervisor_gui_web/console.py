@@ -22,7 +22,7 @@ from landscape.supervisor import wire
 from landscape.supervisor.device_link import DeviceLink
 from landscape.supervisor.outbox import Outbox
 from landscape.supervisor.rpc_table import CONNECT, JOG, LOCK, RPCS, Rpc
-from landscape.supervisor.session import PageSession
+from landscape.client import AsyncSession
 from landscape.v1 import control_pb2, session_service_pb2, types_pb2
 
 log = logging.getLogger(__name__)
@@ -42,7 +42,7 @@ class Refused(Exception):
 @dataclass
 class _DeviceSide:
     """What this browser has open on one device."""
-    session: PageSession | None = None
+    session: AsyncSession | None = None
     session_call_id: int | None = None
     rsvp_answers: dict[str, asyncio.Future] = field(default_factory=dict)
     jog: "_Stream | None" = None
@@ -151,7 +151,7 @@ class Console:
                 raise Refused(grpc.StatusCode.ALREADY_EXISTS,
                               f"this page already has session {side.session.session_id}")
             name = message.hello.client_name or self.client_name
-            session = PageSession(link.channel, name,
+            session = AsyncSession(link.channel, name,
                                    on_rsvp=lambda request: self._ask_page(link, side, request))
             await session.open()
             side.session, side.session_call_id = session, call_id
@@ -164,7 +164,7 @@ class Console:
             raise Refused(grpc.StatusCode.INVALID_ARGUMENT,
                           "the page sends hello or rsvp_answer; the backend keeps the session alive")
 
-    def _watch_session_end(self, link: DeviceLink, session: PageSession, call_id) -> None:
+    def _watch_session_end(self, link: DeviceLink, session: AsyncSession, call_id) -> None:
         async def wait_end():
             await session.ended.wait()
             code = session.end_status or grpc.StatusCode.OK

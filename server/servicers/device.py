@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import asyncio
 
-from landscape.server import convert, path_planning, services
+from landscape.server import cell_view, convert, path_planning, services
 from landscape.server.device import Device
 from landscape.server.errors import ControllerFailure, Stopped
 from landscape.server.servicers.guard import blocking, guarded, lease_of
 from landscape.server.targets import Frame
+from landscape.server.units import Units, pose_matrix
 from landscape.server.workcell import Workcell
 from landscape.sim.arm import urdf
 from landscape.v1 import (control_pb2, end_effector_pb2, motion_pb2, sensing_pb2, settings_pb2,
@@ -330,6 +331,15 @@ class DeviceServicer(services.DEVICE.servicer_base):
         estop, door_open = self.device.operate_panel(action)
         return control_pb2.OperatePanelResponse(ret_val=convert.ok(action), estop_pressed=estop,
                                                 door_open=door_open)
+
+    def GetCellDescription(self, request, context):
+        scene = self.device.collisions
+        base = scene.cell.base
+        return control_pb2.GetCellDescriptionResponse(
+            ret_val=convert.ok(), cell_name=scene.cell.name,
+            base=convert.matrix_to_pose(pose_matrix(base.xyz, base.rpy), Units()),
+            floor=scene.cell.world.floor,
+            bodies=[convert.cell_body_to_pb(body) for body in cell_view.bodies(scene)])
 
     def GetRobotDescription(self, request, context):
         arm = self.device.arm

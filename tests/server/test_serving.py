@@ -107,3 +107,19 @@ def test_stream_caps_are_per_client_and_never_cost_a_session():
                 stream.cancel()
     finally:
         server.stop(grace=None)
+
+
+def test_the_cell_description_names_every_body_where_the_device_knows_it(channel, server):
+    stub = device_service_pb2_grpc.DeviceServiceStub(channel)
+    reply = stub.GetCellDescription(control_pb2.GetCellDescriptionRequest(), timeout=5)
+    cell = server.device.collisions.cell
+    by_name = {b.name: b for b in reply.bodies}
+    assert reply.cell_name == cell.name and reply.floor == cell.world.floor
+    table = by_name["table"]
+    assert table.kind == control_pb2.CellBody.KIND_FIXTURE
+    assert (table.pose.x, table.pose.z, table.size.z) == (0.6, 0.1, 0.2)   # the cell file's
+    for tool in cell.world.tools:
+        assert by_name[tool.name].urdf.startswith("<?xml") and not by_name[tool.name].attached_to
+        assert by_name[tool.name].pose.z == pytest.approx(tool.slot.xyz[2])
+    assert {p.name for p in cell.world.parts} <= set(by_name)
+    assert {z.name for z in cell.world.zones} <= set(by_name)
