@@ -10,7 +10,7 @@ import pytest
 from landscape.server.states import State
 from landscape.v1 import digital_io_service_pb2 as io_pb
 from landscape.v1 import end_effector_pb2 as ee
-from landscape.v1 import motion_pb2, sensing_pb2, types_pb2
+from landscape.v1 import control_pb2, motion_pb2, sensing_pb2, types_pb2
 
 from support import Arm, error_info, stubs
 
@@ -51,6 +51,12 @@ def _only_part(arm, keep: str) -> None:
             _world(arm, lambda c, n=name: c.panel.remove_part(n))
 
 
+def _attached(arm) -> dict[str, str]:
+    """What the device's cell description says moves with the arm."""
+    cell = arm.device.GetCellDescription(control_pb2.GetCellDescriptionRequest())
+    return {body.name: body.attached_to for body in cell.bodies if body.attached_to}
+
+
 def _lift(arm, dz: float) -> None:
     reply = arm.device.MoveRelative(motion_pb2.MoveRelativeRequest(
         frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME, values=[0, 0, dz, 0, 0, 0],
@@ -85,6 +91,7 @@ def _pick_and_place(arm, tool: str, part: str, grip_height: float, held_state: s
     _lift(arm, 0.1)
     lifted = _part(arm, part)
     assert lifted == pytest.approx(start + [0, 0, 0.1], abs=2e-3)   # it came along
+    assert _attached(arm) == {tool: "flange", part: "tool"}          # as the device knows it
     assert _inputs(arm) & (PICK_BIT | PLACE_BIT) == 0               # out of the pick zone
 
     arm.move_down_to(PLACE_X, start[1], start[2] + grip_height + 0.02)
@@ -94,6 +101,7 @@ def _pick_and_place(arm, tool: str, part: str, grip_height: float, held_state: s
     assert _state(arm)[1] in ("open", "off")
     _lift(arm, 0.1)
     placed = _part(arm, part)
+    assert _attached(arm) == {tool: "flange"}
     print(f"\n{part} placed with the {tool} at {np.round(placed, 4)}")
     assert np.linalg.norm(placed - [PLACE_X, start[1], start[2]]) < 0.005
     assert _inputs(arm) & (PICK_BIT | PLACE_BIT) == PLACE_BIT
