@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sys
 import threading
 from dataclasses import dataclass
 
@@ -120,6 +121,9 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     """Start a device server with its controller; returns once it listens (config.port 0 picks
     a free port) and, if config.start_device, once the controller is initialised. Raises
     StartupError (one line: cause and fix) if the address cannot be had."""
+    # A thread that computes (planning a long path) keeps the interpreter for up to the switch
+    # interval before the event loop or a stop gets it back: 1 ms instead of Python's 5.
+    sys.setswitchinterval(0.001)
     runner = _LoopThread()
     try:
         server, port = runner.run(_bind(config))

@@ -247,11 +247,19 @@ class MotionControl:
 
     def stop_motion(self, timeout: float = 10.0) -> None:
         """Seed 3.6.1: decelerate along the path and hold (Paused); blocks until at rest."""
+        self.wait_at_rest(self.request_stop(), timeout)
+
+    def request_stop(self) -> RunningMotion:
+        """StopMotion's first half, which waits for nothing: the stop is on its way to the
+        cycle when this returns (the running motion, for wait_at_rest)."""
         with self.device._state_lock:
             motion = self._motion
             if motion is None or self.device.state is not State.MOVING:
                 raise WrongState("no motion is running", state=self.device.state.value)
             self.send({"op": "stop"})
+            return motion
+
+    def wait_at_rest(self, motion: RunningMotion, timeout: float = 10.0) -> None:
         if not self._wait(motion, AT_REST, timeout):
             raise ControllerFailure(f"the arm did not come to rest within {timeout:g} s")
 
@@ -270,11 +278,17 @@ class MotionControl:
 
     def abort_motion(self, timeout: float = 10.0) -> None:
         """Seed 3.6.2: drop the stopped motion (and the queue); the arm stays where it is."""
+        self.wait_ended(self.request_abort(), timeout)
+
+    def request_abort(self) -> RunningMotion | None:
+        """AbortMotion's first half, which waits for nothing (None: nothing was queued)."""
         motion = self._motion
-        if motion is None:
-            return  # nothing queued: the queue is already clear
-        self.send({"op": "abort"})
-        if not self._wait(motion, ENDED, timeout):
+        if motion is not None:
+            self.send({"op": "abort"})
+        return motion
+
+    def wait_ended(self, motion: RunningMotion | None, timeout: float = 10.0) -> None:
+        if motion is not None and not self._wait(motion, ENDED, timeout):
             raise ControllerFailure(f"the abort did not finish within {timeout:g} s")
 
     def stop_now(self) -> None:

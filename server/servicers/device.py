@@ -195,16 +195,22 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.started(self.device.motions.path_move(request.path_name, cycles)))
 
     # ---- 3.6 interruptions ----
-    def StopMotion(self, request, context):
-        self.device.motions.stop_motion()
+    # Stops are sent to the cycle from the event loop, at once; only the wait for the arm to
+    # come to rest takes a thread (DESIGN.md 5: a stop never waits behind anything).
+    async def StopMotion(self, request, context):
+        motions = self.device.motions
+        motion = motions.request_stop()
+        await self.dispatch.run(self.dispatch.immediate, motions.wait_at_rest, motion)
         return motion_pb2.StopMotionResponse(ret_val=convert.ok())
 
     def ResumeMotion(self, request, context):
         self.device.motions.resume_motion()
         return motion_pb2.ResumeMotionResponse(ret_val=convert.ok())
 
-    def AbortMotion(self, request, context):
-        self.device.motions.abort_motion()
+    async def AbortMotion(self, request, context):
+        motions = self.device.motions
+        motion = motions.request_abort()
+        await self.dispatch.run(self.dispatch.immediate, motions.wait_ended, motion)
         return motion_pb2.AbortMotionResponse(ret_val=convert.ok())
 
     def GetTagId(self, request, context):
