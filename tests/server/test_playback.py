@@ -1,10 +1,10 @@
-"""The executor's stop and restart along a trajectory (executor.py), without a controller."""
+"""Playback's stop and restart along a trajectory (playback.py), without a controller."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from landscape.server.executor import _Motion
+from landscape.server.playback import Motion
 from landscape.server.motion.timing import time_path
 from landscape.server.motion.trajectory import Limits
 from landscape.sim.arm import arm_model
@@ -20,12 +20,12 @@ PATHS = {
 }
 
 
-def motion(segments, limits: Limits) -> _Motion:
-    return _Motion({"id": "m", "acceleration": limits.acceleration, "segments": [
+def motion(segments, limits: Limits) -> Motion:
+    return Motion({"id": "m", "acceleration": limits.acceleration, "segments": [
         {"positions": t.positions, "velocities": t.velocities} for t in segments]}, DT)
 
 
-def play(m: _Motion, commands: dict[int, str], max_cycles: int):
+def play(m: Motion, commands: dict[int, str], max_cycles: int):
     """The positions and velocities the executor commands, cycle by cycle, as Executor._play
     does (segments back to back, held at rest before and after); commands: cycle -> "stop",
     "resume" or "restart" (resume as soon as the rate reaches 0)."""
