@@ -34,7 +34,17 @@ $(STAMP): pyproject.toml setup.py $(wildcard proto/landscape/v1/*.proto)
 	@PYTHONWARNINGS=ignore $(PY) -m pip install -q -e '.[dev]'
 	@touch $@
 
-install: $(STAMP)
+# The web supervisor's page: npm packages as locked, then the Vite build the backend serves.
+FRONTEND := supervisor_gui_web/frontend
+$(FRONTEND)/node_modules/.package-lock.json: $(FRONTEND)/package.json $(FRONTEND)/package-lock.json
+	@command -v npm >/dev/null || { echo "the web supervisor's page needs Node.js and npm"; exit 1; }
+	@echo "installing the web supervisor's npm packages (as package-lock.json says)"
+	@cd $(FRONTEND) && npm ci --silent --no-audit --no-fund
+$(FRONTEND)/dist/index.html: $(FRONTEND)/node_modules/.package-lock.json $(FRONTEND)/index.html \
+		$(FRONTEND)/vite.config.js $(wildcard $(FRONTEND)/src/*)
+	@cd $(FRONTEND) && npm run --silent build
+
+install: $(STAMP) $(FRONTEND)/dist/index.html
 
 proto: install
 	$(PY) -c 'import setup; setup.generate_stubs()'

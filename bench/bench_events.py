@@ -25,6 +25,7 @@ import threading
 import time
 
 import grpc
+from common import BareServer
 from google.protobuf import wrappers_pb2
 
 from landscape.server import events
@@ -84,30 +85,19 @@ class Served:
         self.device_server = serve(ServerConfig(port=0, clock="lockstep", start_device=False))
         self.bus = self.device_server.bus
         self.target = self.device_server.target
-        self._loop = asyncio.new_event_loop()
-        threading.Thread(target=self._loop.run_forever, daemon=True).start()
-        self.baseline, port = asyncio.run_coroutine_threadsafe(self._bare(), self._loop).result()
-        self.baseline_target = f"127.0.0.1:{port}"
-
-    async def _bare(self):
-        server = grpc.aio.server()
-        server.add_generic_rpc_handlers((_baseline_handler(),))
-        port = server.add_insecure_port("127.0.0.1:0")
-        await server.start()
-        return server, port
+        self.baseline = _baseline()
+        self.baseline_target = self.baseline.target
 
     def stop(self) -> None:
-        asyncio.run_coroutine_threadsafe(self.baseline.stop(None), self._loop).result()
-        self._loop.call_soon_threadsafe(self._loop.stop)
+        self.baseline.stop()
         self.device_server.stop(grace=None)
 
 
-def _baseline_handler():
-    handlers = {name: grpc.unary_stream_rpc_method_handler(
+def _baseline() -> BareServer:
+    return BareServer("bench.Echo", {name: grpc.unary_stream_rpc_method_handler(
         fn, request_deserializer=wrappers_pb2.UInt64Value.FromString,
         response_serializer=pb.SubscribeResponse.SerializeToString)
-        for name, fn in (("Burst", _burst), ("Tick", _tick))}
-    return grpc.method_handlers_generic_handler("bench.Echo", handlers)
+        for name, fn in (("Burst", _burst), ("Tick", _tick))})
 
 
 # -- Clients, in a child process -------------------------------------------------------------

@@ -24,11 +24,11 @@ import math
 import multiprocessing as mp
 import os
 import statistics
-import threading
 import time
 
 import grpc
 import numpy as np
+from common import BareServer, in_child, pct
 from google.protobuf import wrappers_pb2
 
 from landscape.client import AsyncSession
@@ -41,10 +41,6 @@ from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 HOME = [0.0, 0.0, 1.5708, 0.0, 1.5708, 0.0]
 OWN_CONNECTION = [("grpc.use_local_subchannel_pool", 1)]
-
-
-def pct(values, q: float) -> float:
-    return float(np.percentile(values, q)) if len(values) else math.nan
 
 
 def rss_mb(pid: int | None = None) -> float:
@@ -83,46 +79,17 @@ async def _echo(request: wrappers_pb2.UInt64Value, context):
     return request
 
 
-class Bare:
-    def __init__(self):
-        self.loop = asyncio.new_event_loop()
-        threading.Thread(target=self.loop.run_forever, daemon=True).start()
-        self.server, port = asyncio.run_coroutine_threadsafe(self._start(), self.loop).result()
-        self.target = f"127.0.0.1:{port}"
-
-    async def _start(self):
-        server = grpc.aio.server()
-        handlers = {"Tick": grpc.unary_stream_rpc_method_handler(
+def bare_server() -> BareServer:
+    return BareServer("bench.Bare", {
+        "Tick": grpc.unary_stream_rpc_method_handler(
             _ticking, request_deserializer=wrappers_pb2.UInt64Value.FromString,
             response_serializer=state_service_pb2.StreamStateResponse.SerializeToString),
-            "Echo": grpc.unary_unary_rpc_method_handler(
+        "Echo": grpc.unary_unary_rpc_method_handler(
             _echo, request_deserializer=wrappers_pb2.UInt64Value.FromString,
-            response_serializer=wrappers_pb2.UInt64Value.SerializeToString)}
-        server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler("bench.Bare",
-                                                                             handlers),))
-        port = server.add_insecure_port("127.0.0.1:0")
-        await server.start()
-        return server, port
-
-    def stop(self):
-        asyncio.run_coroutine_threadsafe(self.server.stop(None), self.loop).result()
-        self.loop.call_soon_threadsafe(self.loop.stop)
+            response_serializer=wrappers_pb2.UInt64Value.SerializeToString)})
 
 
 # -- children ----------------------------------------------------------------------------------
-
-def _in_child(func, *args):
-    """Run func(*args) in a spawned child; returns its result (through a queue)."""
-    ctx = mp.get_context("spawn")
-    queue = ctx.Queue()
-    proc = ctx.Process(target=_child_main, args=(queue, func, args), daemon=True)
-    proc.start()
-    return proc, queue
-
-
-def _child_main(queue, func, args):
-    queue.put(asyncio.run(func(*args)))
-
 
 async def watchers(target: str, n: int, seconds: float, bare: bool):
     """n streams read for `seconds`: per stream (count, gaps, ages in ms)."""
@@ -323,14 +290,14 @@ class Holder:
         self.session.close()
 
 
-def fan_out(server, bare: Bare, holder: Holder, seconds: float):
+def fan_out(server, bare: BareServer, holder: Holder, seconds: float):
     print(f"\nstate fan-out: 50 subscribers at 250 Hz for {seconds:g} s (5 processes x 10)")
     for label, target, is_bare in (("device server", server.target, False),
                                    ("bare stream", bare.target, True)):
         if not is_bare:
             holder.run(cycles=1000)
         before, cpu0 = server.link.stats(), time.process_time()
-        children = [_in_child(watchers, target, 10, seconds, is_bare) for _ in range(5)]
+        children = [in_child(watchers, target, 10, seconds, is_bare) for _ in range(5)]
         results = [r for _, q in children for r in q.get(timeout=seconds + 120)]
         cpu = (time.process_time() - cpu0) / seconds * 100
         after = server.link.stats()
@@ -345,13 +312,13 @@ def fan_out(server, bare: Bare, holder: Holder, seconds: float):
               f"{after.overruns - before.overruns}, late p99 {after.late_p99 * 1e3:.3f} ms")
 
 
-def idle(server, bare: Bare, n: int):
+def idle(server, bare: BareServer, n: int):
     print(f"\n{n} idle event subscribers:")
     quiet = unary_latency_in_child(server.target, False)
     rss0 = rss_mb()
     ctx = mp.get_context("spawn")
     ready = ctx.Event()
-    proc, queue = _in_child(idle_subscribers, server.target, n, 20.0, ready)
+    proc, queue = in_child(idle_subscribers, server.target, n, 20.0, ready)
     ready.wait(120)
     time.sleep(1.0)
     rss1 = rss_mb()
@@ -367,13 +334,13 @@ def idle(server, bare: Bare, n: int):
 
 
 def unary_latency_in_child(target: str, is_bare: bool, n: int = 2000):
-    _, queue = _in_child(unary_latency, target, n, is_bare)
+    _, queue = in_child(unary_latency, target, n, is_bare)
     return queue.get(timeout=300)
 
 
-def starts(server, bare: Bare, runs: int):
+def starts(server, bare: BareServer, runs: int):
     print(f"\ncommand to motion, {runs} runs each, ms p50 / p99:")
-    _, queue = _in_child(motion_starts, server.target, runs)
+    _, queue = in_child(motion_starts, server.target, runs)
     out = queue.get(timeout=600)
     for kind, pairs in out.items():
         cycle = [c for c, _ in pairs]
@@ -384,7 +351,7 @@ def starts(server, bare: Bare, runs: int):
     print(f"  baseline, a bare unary echo round trip: {pct(echo, 50):.3f} / {pct(echo, 99):.3f}")
 
 
-def event_latency(server, bare: Bare, holder: Holder):
+def event_latency(server, bare: BareServer, holder: Holder):
     print("\nevent latency, the cycle that passed a tag -> a subscriber receives it, ms:")
     motions = server.device.motions
     cycle_of: dict[int, float] = {}
@@ -398,7 +365,7 @@ def event_latency(server, bare: Bare, holder: Holder):
     try:
         for n in (1, 50):
             before = server.bus.subscriber_count
-            children = [_in_child(event_watchers, server.target, min(n, 10), "t49", False, 0)
+            children = [in_child(event_watchers, server.target, min(n, 10), "t49", False, 0)
                         for _ in range(max(1, n // 10))]
             deadline = time.monotonic() + 120
             while server.bus.subscriber_count < before + n and time.monotonic() < deadline:
@@ -407,7 +374,7 @@ def event_latency(server, bare: Bare, holder: Holder):
             got = [g for _, q in children for g in q.get(timeout=300)]
             latencies = [(t - cycle_of[s]) * 1000 for stream in got for s, t in stream
                          if s in cycle_of]
-            base = [x for _, q in [_in_child(event_watchers, bare.target, min(n, 10), "", True,
+            base = [x for _, q in [in_child(event_watchers, bare.target, min(n, 10), "", True,
                                              250) for _ in range(max(1, n // 10))]
                     for stream in q.get(timeout=120) for x in stream]
             print(f"  {n:2d} subscriber(s): p50 {pct(latencies, 50):6.2f} p99 "
@@ -423,7 +390,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="shorter runs, for CI")
     args = parser.parse_args()
     server = serve(ServerConfig(port=0, clock="realtime"))
-    bare = Bare()
+    bare = bare_server()
     holder = Holder(server)
     try:
         print(f"state sample message: {_sample_size_message().ByteSize()} bytes; real-time "

@@ -20,7 +20,7 @@ import multiprocessing as mp
 import time
 
 import grpc
-import numpy as np
+from common import in_child, pct
 
 from landscape.client import AsyncSession
 from landscape.server.app import serve
@@ -32,10 +32,6 @@ JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 BASE = types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
 HEADER = dict(motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
               offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
-
-
-def pct(values, q):
-    return float(np.percentile(values, q)) if len(values) else math.nan
 
 
 async def stops(target: str, trials: int, load: str, lease_out, go):
@@ -114,30 +110,18 @@ async def loader(target: str, lease: str, load: str, seconds: float, ready):
                 pass
 
 
-def _child(func, *args):
-    ctx = mp.get_context("spawn")
-    queue = ctx.Queue()
-    proc = ctx.Process(target=_run, args=(queue, func, args), daemon=True)
-    proc.start()
-    return proc, queue
-
-
-def _run(queue, func, args):
-    queue.put(asyncio.run(func(*args)))
-
-
 def stop_latency(server, trials: int) -> None:
     print(f"\nstop latency, StopMotion sent -> first decelerating cycle, {trials} stops, ms:")
     ctx = mp.get_context("spawn")
     for load in ("idle (baseline)", "open PathLoad stream", "long paths being planned"):
         lease_out, go, busy = ctx.Queue(), ctx.Event(), None
-        _, result = _child(stops, server.target, trials, load, lease_out, go)
+        _, result = in_child(stops, server.target, trials, load, lease_out, go)
         lease = lease_out.get(timeout=120)
         if load.startswith("idle"):
             go.set()
         else:
             ready = ctx.Event()
-            busy = _child(loader, server.target, lease, load, trials * 2.0 + 30, ready)
+            busy = in_child(loader, server.target, lease, load, trials * 2.0 + 30, ready)
             ready.wait(120)
             time.sleep(0.5)
             go.set()

@@ -96,8 +96,9 @@ class AsyncSession:
             await self._outgoing.put(pb.ConnectRequest(keep_alive=pb.KeepAlive(counter=counter)))
 
     async def _read(self) -> None:
+        # read(), as open() did: grpc.aio refuses iterating a call that was read from.
         try:
-            async for message in self._call:
+            while (message := await self._call.read()) is not grpc.aio.EOF:
                 if message.WhichOneof("message") == "rsvp_request":
                     await self._answer(message.rsvp_request)
         except grpc.aio.AioRpcError as error:

@@ -1,10 +1,9 @@
 """Pick and place: take the gripper from the rack, move block_1 from the pick zone to the place
 zone of the default cell, put the gripper back.
 
-Written against the contract. It needs the tool commands (GetTool, ActivateTool,
-DeactivateTool, PutTool), which this device server does not carry out yet: until they land it
-stops at the first of them with the server's UNIMPLEMENTED message (exit code 2), and the arm
-is handed back (stopped, drives off, unlocked) as always.
+Written against the contract, with the tool commands (GetTool, ActivateTool, DeactivateTool,
+PutTool). A server without them stops it at the first one with its UNIMPLEMENTED message
+(exit code 2), and the arm is handed back (stopped, drives off, unlocked) as always.
 
 Start a device server (`make run`), then:  .venv/bin/python examples/02_pick_and_place.py
 """
@@ -20,6 +19,8 @@ PLACE = (0.73, -0.15, 0.24)      # the same height in the place zone
 GRIPPER_LENGTH = 0.16            # mounting plate to finger tips
 CLEARANCE = 0.10                 # approach and retreat height above a grasp
 GRASP_DEPTH = 0.02               # fingers close around the upper half of the block
+SET_DOWN_GAP = 0.006             # let go this far above the table: closer is a contact the
+                                 # collision check refuses (MoveReact touches down instead)
 DOWN = (math.pi, 0.0, math.pi)   # roll, pitch, yaw: the tool axis pointing down
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -53,7 +54,7 @@ with Robot(args.target, client_name="pick-and-place") as robot, robot.control():
 
         robot.move_absolute(above(PLACE, CLEARANCE), Frame.WORLD, point_name="over-place",
                             speed=30).wait(timeout=60)
-        straight_to(robot, above(PLACE, -GRASP_DEPTH), "set-down")
+        straight_to(robot, above(PLACE, -GRASP_DEPTH + SET_DOWN_GAP), "set-down")
         robot.deactivate_tool("gripper")                # needs DeactivateTool: let go
         straight_to(robot, above(PLACE, CLEARANCE), "retreat")
 

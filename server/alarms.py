@@ -6,3 +6,5 @@ CONTROLLER = 103          # the controller reported an error
 MOTION = 104              # a motion failed, or ended with a warning
 CONTROLLER_LOST = 105     # the controller's process died or fell silent; Reset restarts it
 OVERFLOW = 106            # a bounded queue overflowed (what was dropped is said)
+PANIC = 107               # a compliant motion panicked (force or travel beyond its envelope)
+DIGITAL_IO = 108          # a signalDigitalIO watch fired (its callback type CLIENT_ALARM)

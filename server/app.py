@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sys
 import threading
 from dataclasses import dataclass
 
@@ -35,6 +36,7 @@ from landscape.server.servicers.guard import Dispatch
 from landscape.server.servicers.session import SessionServicer
 from landscape.server.servicers.state import StateServicer
 from landscape.server.state_stream import StateHub
+from landscape.server.workcell import Workcell, build_workcell
 from landscape.sim.cell import load_cell
 
 log = logging.getLogger(__name__)
@@ -75,6 +77,7 @@ class RunningServer:
     address: str
     bus: EventBus
     device: Device
+    workcell: Workcell
     link: ControllerLink
     hub: StateHub
     dispatch: Dispatch
@@ -129,6 +132,9 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     problem = tls.exposure_problem(config.address, config.security)
     if problem:
         raise StartupError(problem)
+    # A thread that computes (planning a long path) keeps the interpreter for up to the switch
+    # interval before the event loop or a stop gets it back: 1 ms instead of Python's 5.
+    sys.setswitchinterval(0.001)
     security = _security_layer(config.security)
     runner = _LoopThread()
     try:
@@ -149,12 +155,14 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs,
                     reset_settings=config.reset_settings,
                     collisions=CollisionScene(cell, config.collision_margin))
-    hub = StateHub(device, max_lag=250 if config.clock == "realtime" else 8)
+    workcell = build_workcell(device, cell)
+    hub = StateHub(device, workcell, max_lag=250 if config.clock == "realtime" else 8)
     dispatch, limits = Dispatch(), StreamLimits(config.stream_caps)
     try:
         if config.start_device:
             device.start()
-        health_servicer = runner.run(_start(server, device, bus, hub, dispatch, limits))
+        health_servicer = runner.run(_start(server, device, workcell, bus, hub, dispatch,
+                                            limits))
     except BaseException:
         device.close()
         link.stop()
@@ -163,8 +171,8 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         if security.audit is not None:
             security.audit.close()
         raise
-    running = RunningServer(server, health_servicer, port, config.address, bus, device, link,
-                            hub, dispatch, limits, runner, security)
+    running = RunningServer(server, health_servicer, port, config.address, bus, device, workcell,
+                            link, hub, dispatch, limits, runner, security)
     device.on_health = running.set_serving
     log.debug("device server listening on %s", listen_address(config.address, port))
     return running
@@ -211,11 +219,11 @@ async def _bind(config: ServerConfig,
     return server, port
 
 
-async def _start(server, device, bus, hub, dispatch, limits):
+async def _start(server, device, workcell, bus, hub, dispatch, limits):
     hub.attach(asyncio.get_running_loop())
     servicers = {
-        services.DEVICE: DeviceServicer(device, hub, dispatch, limits),
-        services.DIGITAL_IO: DigitalIOServicer(device, dispatch, limits),
+        services.DEVICE: DeviceServicer(device, workcell, hub, dispatch, limits),
+        services.DIGITAL_IO: DigitalIOServicer(device, workcell, dispatch, limits),
         services.EVENTS: EventServicer(device, bus, dispatch, limits),
         services.SESSIONS: SessionServicer(device, dispatch, limits),
         services.STATE: StateServicer(device, hub, dispatch, limits),

@@ -37,7 +37,8 @@ def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox
     from landscape.sim.bullet_controller import BulletController  # pybullet: only here
     from landscape.sim.cell import load_cell
     cell = load_cell(cell_path)
-    return BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time, ring))
+    return BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time, ring,
+                                                  cell.arm))
 
 
 class ControllerLink:

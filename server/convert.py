@@ -16,7 +16,8 @@ from landscape.server.settings import Kind
 from landscape.server.states import State
 from landscape.server.targets import Frame
 from landscape.server.units import AngularUnit, LinearUnit, Units
-from landscape.v1 import control_pb2, event_service_pb2, types_pb2
+from landscape.v1 import (control_pb2, digital_io_service_pb2, event_service_pb2, sensing_pb2,
+                          types_pb2)
 
 # ---- return values, states, units, settings --------------------------------------------------
 
@@ -99,6 +100,24 @@ def pose_to_matrix(pose: types_pb2.Pose, units: Units) -> np.ndarray:
 def matrix_to_pose(matrix: np.ndarray, units: Units) -> types_pb2.Pose:
     x, y, z, roll, pitch, yaw = (float(v) for v in units.matrix_to_pose(matrix))
     return types_pb2.Pose(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw)
+
+
+# ---- the cell ----------------------------------------------------------------------------
+
+_BODY_KINDS = {"fixture": control_pb2.CellBody.KIND_FIXTURE, "tool": control_pb2.CellBody.KIND_TOOL,
+               "part": control_pb2.CellBody.KIND_PART, "zone": control_pb2.CellBody.KIND_ZONE}
+
+
+def cell_body_to_pb(body) -> control_pb2.CellBody:
+    """A cell_view.Body; poses and sizes in m and rad whatever the device's units."""
+    message = control_pb2.CellBody(name=body.name, kind=_BODY_KINDS[body.kind],
+                                   color=list(body.color), urdf=body.urdf,
+                                   attached_to=body.attached_to)
+    if body.pose is not None:
+        message.pose.CopyFrom(matrix_to_pose(body.pose, Units()))
+    if body.size is not None:
+        message.size.CopyFrom(types_pb2.Vector3(x=body.size[0], y=body.size[1], z=body.size[2]))
+    return message
 
 
 # ---- moves and paths -------------------------------------------------------------------------
@@ -260,3 +279,55 @@ _DETAILS = {
     events.RsvpAnswer: _rsvp_answer, events.OperatorMessage: _operator_message,
     events.EventsLost: _events_lost,
 }
+
+
+# ---- sensors, guarded and compliant motion, jog (sensing.py, guarded.py, jogging.py) ---------
+
+def sensor_to_pb(kind: str, values: np.ndarray, units: Units) -> list[float]:
+    """A reading (sensing.py, SI) in the client's units: forces N, torques N * length unit,
+    distances in the length unit."""
+    values = np.asarray(values, dtype=float)
+    if kind == "force_torque":
+        return [*values[:3].tolist(), *units.length_from_si(values[3:]).tolist()]
+    return units.length_from_si(values).tolist()
+
+
+def sensor_to_si(kind: str, values, units: Units) -> np.ndarray:
+    """Thresholds and envelopes of a sensor's components (forces N; distances in the length
+    unit) in SI."""
+    values = np.asarray(values, dtype=float)
+    return values.copy() if kind == "force_torque" else units.length_to_si(values)
+
+
+def vector3(v: types_pb2.Vector3) -> np.ndarray:
+    return np.array([v.x, v.y, v.z])
+
+
+def lengths3(v: types_pb2.Vector3, units: Units) -> np.ndarray:
+    return units.length_to_si(vector3(v))
+
+
+def comply_arrays(request, units: Units) -> dict:
+    """ComplyRequest's arrays in SI, as guarded.GuardedMotion.comply takes them: lengths and
+    angles of the travel distances, gains per length unit."""
+    travel = np.asarray(request.max_travel_distances, dtype=float)
+    if travel.size == 6:
+        travel = np.concatenate([units.length_to_si(travel[:3]), units.angle_to_si(travel[3:])])
+    thresholds = np.asarray(request.thresholds, dtype=float)
+    if thresholds.size == 6:   # torques in N * length unit
+        thresholds = np.concatenate([thresholds[:3], units.length_to_si(thresholds[3:])])
+    return {"thresholds": thresholds, "travel": travel,
+            "kp": units.length_to_si(np.asarray(request.proportional_gains, dtype=float)),
+            "kd": units.length_to_si(np.asarray(request.differential_gains, dtype=float)),
+            "motion": lengths3(request.motion, units),
+            "compliance": lengths3(request.compliance, units)}
+
+
+MANUAL_CONTROL = {sensing_pb2.MANUAL_CONTROL_TYPE_TEACHPENDANT: "teachpendant",
+                  sensing_pb2.MANUAL_CONTROL_TYPE_SPACEBALL: "spaceball",
+                  sensing_pb2.MANUAL_CONTROL_TYPE_OFF: "off"}
+
+CALLBACKS = {digital_io_service_pb2.CALLBACK_TYPE_CLIENT_EVENT: "event",
+             digital_io_service_pb2.CALLBACK_TYPE_CLIENT_ALARM: "alarm",
+             digital_io_service_pb2.CALLBACK_TYPE_CLIENT_EVENT_RSVP: "event_rsvp",
+             digital_io_service_pb2.CALLBACK_TYPE_CLIENT_ALARM_RSVP: "alarm_rsvp"}

@@ -36,19 +36,16 @@ from landscape.server.feedback import Sample
 from landscape.server.motion_control import MotionControl
 from landscape.server.paths import PathStore
 from landscape.server.rsvp import RsvpBroker
-from landscape.server.safety import SafetyWorker
+from landscape.server.safety import SafetyActions, SafetyWorker
 from landscape.server.sessions import Session, SessionRegistry
 from landscape.server.settings import MotionSettings
 from landscape.server.states import Lease, State
 from landscape.sim.arm import ArmModel
-from landscape.sim.controller import EnableState, EstopState, InitState, Status
+from landscape.sim.controller import EnableState, InitState, Status
 from landscape.sim.clock import CycleProcessError
 from landscape.sim.kinematics import Kinematics
 
 log = logging.getLogger(__name__)
-
-ESTOP_RELEASED_QUESTION = "estop_released"   # RSVP to the lock holder: reset now?
-RESET, STAY = "reset", "stay"
 
 # A safety stop brakes at the arm's full deceleration: the TX90 at full speed stops within
 # max velocity / max acceleration = 1/3 s (main axes) and 1/5 s (wrist), then settles.
@@ -66,7 +63,7 @@ class DeviceStatus:
     command_id: str
 
 
-class Device:
+class Device(SafetyActions):
     def __init__(self, link, bus: EventBus, arm: ArmModel, *, collisions: CollisionScene,
                  paths: PathStore | None = None,
                  outputs: set[str] = frozenset(), enable_timeout: float = 5.0,
@@ -102,6 +99,11 @@ class Device:
         self._state_lock = threading.RLock()
         self._command_lock = threading.Lock()
         self.motions = MotionControl(self, self._store, set(outputs))
+        self.manual_control = "off"        # seed 3.7.3: "teachpendant", "spaceball" or "off"
+        # The cell's other parts (app.py wires them): reports from the cycle by "op", and
+        # what to do each time the controller has (re)started.
+        self.report_handlers: dict[str, Callable[[dict], None]] = {}
+        self.on_controller_start: list[Callable[[], None]] = []
 
     @property
     def controller(self):
@@ -124,6 +126,8 @@ class Device:
                 raise ControllerFailure("the controller did not initialise")
         if not self._wait_controller(lambda: self.link.feedback.head >= 0, timeout):
             raise ControllerFailure("no feedback from the controller")
+        for started in self.on_controller_start:
+            started()
 
     def close(self, timeout: float = 5.0) -> None:
         """Leave the arm safe: the lock holder's session ends (the disconnect handler stops,
@@ -140,6 +144,10 @@ class Device:
         return self._state
 
     @property
+    def lock_holder(self) -> Session | None:
+        return self._holder
+
+    @property
     def settings(self) -> MotionSettings:
         return self._settings
 
@@ -151,7 +159,7 @@ class Device:
         with self._state_lock:
             return DeviceStatus(self._state, self._holder is not None,
                                 self._holder.client_name if self._holder else "", self._error,
-                                self._estop, "off", self.motions.running_id)
+                                self._estop, self.manual_control, self.motions.running_id)
 
     def _transition(self, expected, new: State, reason: str) -> State:
         """Compare-and-set: move to `new` if the state is one of `expected` (else WrongState);
@@ -196,6 +204,12 @@ class Device:
                 yield
             finally:
                 self._local.epoch = None
+
+    def check_holder(self, what: str, lease: str | None) -> None:
+        """For a read-only RPC's parts that change something (vendor commands): the lock
+        holder's lease while the device is locked, anyone's call when it is not."""
+        with self._state_lock:
+            self._check_lease(what, states.Rule(states.ALL, Lease.HOLDER_IF_LOCKED, "-"), lease)
 
     def check_epoch(self) -> None:
         """Called with `_state_lock` held before a command acts: the lock must not have
@@ -245,6 +259,7 @@ class Device:
                                  f"released by {holder.client_name}")
             self._holder = self._lease = None
             self._epoch += 1
+            self.manual_control = "off"
 
     def activate(self) -> None:
         self._command_controller("enable")
@@ -303,7 +318,10 @@ class Device:
         """Press or release the e-stop, open or close the door, as a person at the cell would
         (`action` names a Panel method); returns (e-stop pressed, door open)."""
         log.warning("operator panel: %s", action)
-        return self.link.between_cycles(_operate_panel, action)
+        estop, door_open = self.link.between_cycles(_operate_panel, action)
+        # Returns once the device has seen the e-stop as it is now (the next cycle's report).
+        self._wait_controller(lambda: self._estop == estop or self.link.lost is not None, 1.0)
+        return estop, door_open
 
     def _command_controller(self, method: str) -> None:
         try:
@@ -341,102 +359,6 @@ class Device:
                 return states.ROBOT_STOPPED_ON_ERROR, states.CONTROLLER_ERROR
             power = states.POWER_ON if self._power is EnableState.ENABLED else states.POWER_OFF
             return self.motions.motion_state, power
-
-    # ---- safety ----------------------------------------------------------------------------
-
-    def _session_ended(self, session: Session, reason: str) -> None:
-        """A session ended (any thread): its questions take their defaults; if it held the
-        lock, the seed's disconnect handler (2.2) runs on the safety worker."""
-        self.rsvp.abandon(session)
-        with self._state_lock:
-            if self._holder is not session:
-                return
-            self._holder = self._lease = None
-            self._epoch += 1
-        self.bus.alarm(Severity.WARNING, alarms.LOCK_HOLDER_LOST,
-                       f"lock holder {session.client_name} disconnected ({reason}): stopping, "
-                       f"powering down and releasing")
-        self.motions.stop_now()   # reaches the cycle at once; the waiting is the worker's
-        self.safety.submit(lambda: self._disconnect_handler(session, reason),
-                           f"disconnect handler for {session.client_name}")
-
-    def _disconnect_handler(self, session: Session, reason: str) -> None:
-        if self._state in states.ACTIVE:
-            self._power_down(f"lock holder {session.client_name} gone")
-        with self._state_lock:
-            if self._state is State.INACTIVE:
-                self._transition({State.INACTIVE}, State.UNLOCKED,
-                                 f"lock holder {session.client_name} gone: {reason}")
-        self.bus.alarm(Severity.WARNING, alarms.LOCK_HOLDER_LOST,
-                       f"lock holder {session.client_name} gone: motion stopped, drives off, "
-                       f"lock released")
-
-    def _fault(self, code: int, message: str) -> bool:
-        """Into Error (from any state but Idle and Error); False if it was there already."""
-        with self._state_lock:
-            if self._state in (State.ERROR, State.IDLE):
-                return False
-            self._error = message
-            self._transition(set(State), State.ERROR, message)
-        self.bus.alarm(Severity.CRITICAL if code in (alarms.ESTOP, alarms.CONTROLLER_LOST)
-                       else Severity.ERROR, code, message)
-        return True
-
-    def controller_lost(self, reason: str) -> None:
-        """The link lost the controller (its process died or fell silent): Error, an alarm
-        naming the cause, the running command failed, health NOT_SERVING. The lock stays with
-        its holder, who resets (which restarts the controller) or releases."""
-        self.on_health(False)
-        self._fault(alarms.CONTROLLER_LOST, f"controller lost: {reason}")
-        self.motions.fail_running(f"controller lost: {reason}")
-        with self._controller_changed:
-            self._controller_changed.notify_all()
-
-    def _controller_event(self, text: str) -> None:
-        """The controller's event function (LLI 5.2.1): its errors fault an active device. It
-        comes before the Executor's report of the same cycle, so the e-stop is asked for."""
-        log.warning("controller: %s", text)
-        if "outbox" in text:
-            self.bus.alarm(Severity.ERROR, alarms.OVERFLOW, f"controller: {text}")
-            return
-        try:
-            estop = self.controller.state().estop is EstopState.ESTOP
-        except (CycleProcessError, TimeoutError):
-            return   # the controller is gone: the link reports that
-        if estop:
-            self._fault(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
-        elif self._state in states.ACTIVE:
-            if self._fault(alarms.CONTROLLER, f"controller error: {text}"):
-                with contextlib.suppress(ControllerFailure):
-                    self._command_controller("disable")
-        else:
-            self.bus.alarm(Severity.WARNING, alarms.CONTROLLER, f"controller: {text}")
-
-    def on_cycle_message(self, msg: dict) -> None:
-        """The Executor's reports (executor.py), in order, on the link's dispatch thread."""
-        if msg.get("op") != "controller":
-            self.motions.on_report(msg)
-            return
-        estop, was_estop = bool(msg["estop"]), self._estop
-        with self._controller_changed:
-            self._power, self._estop = EnableState(msg["enable"]), estop
-            self._controller_changed.notify_all()
-        if estop and not was_estop:
-            self._fault(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
-        elif was_estop and not estop and self._holder is not None:
-            holder = self._holder
-            threading.Thread(target=self._offer_reset, args=(holder,), daemon=True,
-                             name="rsvp-estop-released").start()
-
-    def _offer_reset(self, holder: Session) -> None:
-        """The e-stop was released: ask the lock holder whether to reset now (default: stay)."""
-        answer = self.rsvp.ask(holder, ESTOP_RELEASED_QUESTION, ("e-stop released; reset now?",),
-                               (RESET, STAY), STAY, self.rsvp_timeout, alarm=True)
-        if answer.choice == RESET and self._holder is holder:
-            try:
-                self.reset()
-            except EstopActive as refused:  # pressed again meanwhile
-                self.bus.alarm(Severity.WARNING, alarms.ESTOP, str(refused))
 
 
 def _operate_panel(controller, action: str) -> tuple[bool, bool]:

@@ -41,6 +41,12 @@ class EstopActive(CommandError):
     status, reason = grpc.StatusCode.FAILED_PRECONDITION, "ESTOP_ACTIVE"
 
 
+class ManualControlMode(CommandError):
+    """Jog needs manual control on; every other motion needs it off (seed 3.7.3)."""
+
+    status, reason = grpc.StatusCode.FAILED_PRECONDITION, "MANUAL_CONTROL"
+
+
 class NotLockHolder(CommandError):
     status, reason = grpc.StatusCode.PERMISSION_DENIED, "NOT_LOCK_HOLDER"
 
@@ -88,6 +94,13 @@ class Unreachable(OutOfRange):
     metadata names where (a point index or a fraction of the path) when known."""
 
     reason = "UNREACHABLE"
+
+
+class Stopped(CommandError):
+    """A session of the caller's (a jog) ended by something else than the caller: the deadman,
+    a stop, the lock changing hands."""
+
+    status, reason = grpc.StatusCode.ABORTED, "STOPPED"
 
 
 class ResourceExhausted(CommandError):

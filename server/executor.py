@@ -4,27 +4,33 @@ Every cycle (LLI 5.3.10) it reads the feedback, takes the server's messages, com
 setpoint and sets it. While the drives are not enabled it commands the measured position, so
 that enabling starts from where the arm is and never jumps (LLI 5.3.3).
 
-A motion is a timed trajectory sampled at the cycle time (motion/trajectory.py), played one
-sample per cycle. Stopping and resuming scale time, not space: a play rate r in [0, 1] advances
-the sample index by r per cycle, so the arm slows down and speeds up along the planned path and
-never leaves it (seed 3.6). Played at rate r, joint j moves at v_j r and accelerates at
-a_j r^2 + v_j dr/dt (v, a: the trajectory's at rate 1); each cycle the rate changes as fast as
-keeping every joint's acceleration within its limit allows. Keeping the rate always qualifies
-(the trajectory is within the limits at r = 1, so at any r <= 1), so a stop or a restart never
-asks more of a joint than its limit.
+A motion is a timed trajectory played one sample per cycle, stopped and resumed along its path
+within the acceleration limits (playback.py).
+
+A motion may carry a sensor loop (force_control.py): a guard (moveReact) that stops it when a
+sensor crosses a threshold, a compliance (comply) that shifts its setpoints to hold a force.
+Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. Sensors,
+the I/O image and the I/O watches are read every cycle (cycle_inputs.py), so the loops see
+this cycle's readings.
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
   server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2 (ramps that start and
                     resume), "stop_acceleration": (6,) rad/s^2 (stops: the arm's own),
-                    "arrays": SharedArrays of `pack_run`}: segments played in order; a mark
-                    reports its label when its sample is passed
+                    "arrays": SharedArrays of run_arrays.pack_run, optional "guard": GuardSpec,
+                    "comply": ComplySpec}: segments played in order; a mark reports its label
+                    when its sample is passed
+                   {"op": "comply", "id", "spec": ComplySpec}: compliance for the running motion
                    {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
+                   the jog messages (jog_control.py) and the I/O ones (cycle_inputs.py)
   cycle -> server  {"op": "controller", "enable": EnableState value, "estop": bool} on change
                    {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label",
                     "wall_time"} (wall_time: unix s of the cycle)
                    {"op": "paused", "id"}  {"op": "resumed", "id"}  {"op": "done", "id"}
                    {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
+                   a guarded motion's end adds "guard": {"event": "triggered" | "envelope" |
+                   "full distance", "values": (3,), "position": (6,) rad}; a compliant one's
+                   "comply": {"offset": (3,) m, "force": (3,) N, "panic": code or None}
 """
 from __future__ import annotations
 
@@ -32,132 +38,78 @@ import time
 
 import numpy as np
 
-from landscape.server.feedback import (CMD, ENABLE, ESTOP, QD, SEQ, TAU, TIME, WALL, WIDTH, Q,
-                                       FeedbackRing)
+from landscape.server.cycle_inputs import CycleSensors, IoMonitor
+from landscape.server.feedback import (CMD, ENABLE, ESTOP, IO, QD, SENSORS, SEQ, TAU, TIME, WALL,
+                                       WIDTH, Q, FeedbackRing)
+from landscape.server.force_control import RANGE_KIND, Admittance, ThresholdMonitor, vector
+from landscape.server.jog_control import JogIntegrator
+from landscape.server.playback import Motion, brake
+from landscape.server.run_arrays import Segments
+from landscape.sim.arm import ArmModel
 from landscape.sim.controller import Controller, EnableState, EstopState, JointCmd
 from landscape.sim.shared_array import SharedArrays
 
 # At rest means: every joint this close to its command (rad) and this slow (rad/s); an arm that
-# is not there after SETTLE_TIMEOUT (s) is reported anyway, with its following error.
+# is not there after SETTLE_TIMEOUT (s) is reported anyway, with its following error. An arm in
+# contact (a motion with a sensor loop) rests where the contact lets it: SETTLE_CONTACT (rad).
 SETTLE_POSITION = 1e-5
+SETTLE_CONTACT = 1e-3
 SETTLE_VELOCITY = 1e-3
 SETTLE_TIMEOUT = 1.0
 
 
-class _Motion:
-    """A run: trajectory segments played back to back (each starts where the last one ended)."""
-
-    def __init__(self, msg: dict, dt: float):
-        self.id = msg["id"]
-        self.dt = dt
-        self.segments = msg["segments"]   # a sequence; read one segment at a time
-        self._load(0)
-        # rad/s^2 per joint: the ramps' limit, `run_limit` to start and resume; a stop sets
-        # `stop_limit` (the arm's own, by default the same).
-        self.limit = self.run_limit = self.stop_limit = np.asarray(msg["acceleration"], dtype=float)
-        self.rate = 1.0         # samples per cycle
-        self.target_rate = 1.0  # 0 while stopping, 1 while running or resuming
-        self.paused = False
-        self.abort_when_paused = False
-        self.settling: str | None = None   # what to report once the arm has settled
-        self.settle_cycles = 0
-
-    def _load(self, index: int) -> None:
-        self.segment = index
-        segment = self.segments[index]
-        self.positions = np.asarray(segment["positions"], dtype=float)
-        self.velocities = np.asarray(segment["velocities"], dtype=float)
-        # The trajectory's acceleration at rate 1, sample i to i + 1 (rad/s^2): precomputed by
-        # the server for a run, so that loading a long segment costs the cycle nothing.
-        self.accelerations = segment.get("accelerations")
-        if self.accelerations is None:
-            self.accelerations = np.diff(self.velocities, axis=0,
-                                         append=self.velocities[-1:]) / self.dt
-        self.marks = segment.get("marks", ())   # (sample, label) rows, in order
-        self.next_mark = 0
-        self.s = 0.0
-
-    def next_segment(self) -> bool:
-        """At the end of a segment: go on with the next one, if any."""
-        if self.segment + 1 >= len(self.segments):
-            return False
-        self._load(self.segment + 1)
-        return True
-
-    @property
-    def last(self) -> int:
-        return len(self.positions) - 1
-
-    def sample(self, table: np.ndarray) -> np.ndarray:
-        i = min(int(self.s), self.last)
-        frac = self.s - i
-        if frac == 0.0 or i == self.last:
-            return table[i]
-        return table[i] + frac * (table[i + 1] - table[i])
-
-    @property
-    def ramping(self) -> bool:
-        return self.rate != self.target_rate
-
-    def advance(self) -> None:
-        if self.ramping:
-            self.rate = self._next_rate()
-        self.s = min(self.s + self.rate, float(self.last))
-
-    def _next_rate(self) -> float:
-        """The rate one cycle on, moving towards the target as fast as the limits allow.
-
-        Joint j's commanded velocity goes from v r to about v r' + a dt r'^2 (the path's own
-        change over the r' samples played), so its acceleration is A r'^2 + B (r' - r) with
-        B = |v| / dt and A = a sign(v); the next rate is the root of that equal to -limit
-        (stopping) or +limit (resuming), taken over the joints that bind.
-        """
-        i = min(int(self.s), self.last)
-        v, r = self.sample(self.velocities), self.rate
-        moving = np.abs(v) > 1e-9
-        if not np.any(moving):   # nothing moves here: the rate can jump
-            return self.target_rate
-        stopping = self.target_rate < r
-        b = np.abs(v[moving]) / self.dt
-        # The step may cross into the next sample interval: take the less favourable of the two.
-        signed = self.accelerations[i:i + 2, moving] * np.sign(v[moving])
-        a = signed.min(axis=0) if stopping else signed.max(axis=0)
-        c = b * r + (-self.limit[moving] if stopping else self.limit[moving])
-        # Root of a x^2 + b x - c = 0 in the form that stays exact as a goes to 0.
-        roots = 2 * c / (b + np.sqrt(np.maximum(b * b + 4 * a * c, 0.0)))
-        if stopping:
-            return min(max(float(np.max(roots)), self.target_rate), r)
-        return max(min(float(np.min(roots)), self.target_rate), r)
-
-
 class Executor:
     """The cyclic function. `ring` receives every cycle's feedback (feedback.py); reports go to
-    the server through `mailbox`, in order, after that cycle's row."""
+    the server through `mailbox`, in order, after that cycle's row. `arm`: the arm model for
+    the loops that need its Jacobian (jog, comply); without it they are refused."""
 
-    def __init__(self, mailbox, cycle_time: float, ring: FeedbackRing | None = None):
+    def __init__(self, mailbox, cycle_time: float, ring: FeedbackRing | None = None,
+                 arm: ArmModel | None = None):
         self.mailbox = mailbox
         self.cycle_time = cycle_time
         self.ring = ring
         self._sequence = ring.head + 1 if ring is not None else 0   # goes on after a restart
         self._row = np.full(WIDTH, np.nan)
         self._hold: np.ndarray | None = None   # commanded position when not moving, rad
-        self._motion: _Motion | None = None
+        self._motion: Motion | None = None
+        self._jog: JogIntegrator | None = None
         self._arrays: SharedArrays | None = None   # the running motion's trajectory block
         self._last_state = None
         self._reports: list[dict] = []   # reports of this cycle, posted after its row
+        self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
+        self._sensors = CycleSensors()
+        self._io = IoMonitor()
+        self._tip = None
+        if arm is not None:
+            from landscape.server.tip_model import TipModel   # pinocchio: only where it runs
+            self._tip = TipModel(arm)
+
+    @property
+    def sequence(self) -> int:
+        """The sequence number the next cycle's row gets."""
+        return self._sequence
 
     def __call__(self, ctrl: Controller) -> bool:
         fbk = ctrl.get()
         state = ctrl.state()
         enabled = state.enable is EnableState.ENABLED
         while (msg := self.mailbox.poll()) is not None:
-            self._handle(msg)
+            self._handle(msg, fbk)
+        sensors = self._sensors.read(ctrl, self._sequence)
+        self._io.poll(ctrl, self._sequence, self._reports)
         if not enabled or self._hold is None:
             self._hold = fbk.pos.copy()
             if self._motion is not None and not enabled:
                 self._end("failed", message="drives disabled during the motion")
+            if self._jog is not None and not enabled:
+                self._end_jog("failed", "drives disabled while jogging")
         if self._motion is not None:
-            pos, vel = self._play(self._motion, fbk)
+            pos, vel = self._play(self._motion, fbk, sensors)
+        elif self._jog is not None:
+            pos, vel = self._jog.step()
+            self._hold = pos.copy()
+            if self._jog.finished:
+                self._end_jog(*self._jog.ending)
         else:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
@@ -182,10 +134,12 @@ class Executor:
         row[Q], row[QD], row[CMD], row[TAU] = fbk.pos, fbk.vel, pos, fbk.torque
         row[ENABLE] = int(state.enable)
         row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
+        row[SENSORS] = self._sensors.values
+        row[IO] = self._io.image
         self.ring.write(self._sequence, row)
         self._sequence += 1
 
-    def _play(self, motion: _Motion, fbk) -> tuple[np.ndarray, np.ndarray]:
+    def _play(self, motion: Motion, fbk, sensors) -> tuple[np.ndarray, np.ndarray]:
         if motion.settling is None:
             motion.advance()
             marks = motion.marks
@@ -193,19 +147,31 @@ class Executor:
                 self._reports.append({"op": "mark", "id": motion.id, "wall_time": time.time(),
                                       "label": int(marks[motion.next_mark][1])})
                 motion.next_mark += 1
+            running = motion.target_rate == 1.0 and not motion.paused
+            if running:
+                self._watch(motion, fbk, sensors)
             if motion.s >= motion.last and not motion.next_segment():
-                motion.settling = "done"
+                if not (motion.compliance is not None and motion.compliance.holding):
+                    motion.settling = motion.end_as or "done"
             elif motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused:
-                motion.settling = "aborted" if motion.abort_when_paused else "paused"
-            else:
-                self._hold = motion.sample(motion.positions).copy()   # outlives the motion's arrays
-                return self._hold, motion.sample(motion.velocities) * motion.rate
-            self._hold = motion.sample(motion.positions).copy()   # outlives the motion's arrays
+                motion.settling = motion.end_as or ("aborted" if motion.abort_when_paused
+                                                    else "paused")
+            if motion.settling is None:
+                # outlives the motion's arrays
+                self._hold = self._shifted(motion, sensors, running and motion.settling is None)
+                velocity = motion.sample(motion.velocities) * motion.rate
+                if motion.compliance is not None:
+                    velocity = velocity + (self._hold - self._last_setpoint) / self.cycle_time
+                self._last_setpoint = self._hold
+                return self._hold, velocity
+            self._hold = self._shifted(motion, sensors, False)
         # At the end of the motion or of a stop ramp: hold until the arm has settled there, so
         # "done" and "paused" mean the arm is at rest where the command says.
         motion.settle_cycles += 1
         error = float(np.max(np.abs(fbk.pos - self._hold)))
-        settled = error < SETTLE_POSITION and float(np.max(np.abs(fbk.vel))) < SETTLE_VELOCITY
+        in_contact = motion.compliance is not None or "guard" in motion.outcome
+        tolerance = SETTLE_CONTACT if in_contact else SETTLE_POSITION
+        settled = error < tolerance and float(np.max(np.abs(fbk.vel))) < SETTLE_VELOCITY
         if settled or motion.settle_cycles * self.cycle_time > SETTLE_TIMEOUT:
             note = {} if settled else {"message": f"not settled within {SETTLE_TIMEOUT:g} s "
                                                   f"(following error {error:.2e} rad)"}
@@ -213,19 +179,79 @@ class Executor:
                 motion.paused, motion.settling, motion.settle_cycles = True, None, 0
                 self._reports.append({"op": "paused", "id": motion.id, **note})
             else:
-                self._end(motion.settling, **note)
+                if "message" in motion.outcome and "message" in note:
+                    note["message"] = f"{motion.outcome['message']}; {note['message']}"
+                if motion.compliance is not None:
+                    motion.outcome["comply"] = motion.compliance.summary(sensors)
+                self._end(motion.settling, **{**motion.outcome, **note})
         return self._hold, np.zeros_like(self._hold)
 
-    def _handle(self, msg: dict) -> None:
+    # ---- sensor loops ----------------------------------------------------------------------
+
+    def _watch(self, motion: Motion, fbk, sensors) -> None:
+        """A running motion's sensor loops: a guard that fires, or a compliance that must stop,
+        brake the motion at the arm's full deceleration."""
+        if motion.guard is not None:
+            verdict = motion.guard.check(sensors)
+            if verdict is not None:
+                event, values = verdict
+                motion.guard = None
+                self._sensors.watch_range = False
+                motion.outcome["guard"] = {"event": event, "values": values.tolist(),
+                                           "position": fbk.pos.tolist()}
+                if event == "envelope":
+                    motion.outcome["message"] = (f"sensor reading {vector(values)} left its "
+                                                 f"envelope")
+                brake(motion, "done" if event == "triggered" else "failed")
+        compliance = motion.compliance
+        if compliance is not None and compliance.problem is not None and motion.end_as is None:
+            motion.outcome["message"] = compliance.problem
+            brake(motion, "failed")
+
+    def _shifted(self, motion: Motion, sensors, active: bool) -> np.ndarray:
+        """The motion's setpoint now: planned, shifted by its compliance if it has one."""
+        planned = motion.sample(motion.positions)
+        compliance = motion.compliance
+        if compliance is None:
+            return planned.copy()
+        return compliance.shift(planned, sensors, active)
+
+    def _attach(self, motion: Motion, msg: dict) -> None:
+        """The run's sensor loops (a missing arm model refuses a compliance)."""
+        guard, comply = msg.get("guard"), msg.get("comply")
+        if guard is not None:
+            motion.guard = ThresholdMonitor(guard)
+            self._sensors.watch_range = guard.kind == RANGE_KIND
+            motion.outcome["guard"] = {"event": "full distance"}
+        if comply is not None:
+            motion.compliance = Admittance(comply, self._tip, self.cycle_time)
+            self._last_setpoint = motion.sample(motion.positions).copy()
+
+    # ---- messages ----------------------------------------------------------------------------
+
+    def _handle(self, msg: dict, fbk) -> None:
         op, motion = msg.get("op"), self._motion
-        if op == "run":
+        if op in ("io_image", "watch", "unwatch"):
+            self._io.handle(msg)
+        elif op in ("jog", "jog_velocity", "jog_end"):
+            self._handle_jog(msg, fbk)
+        elif op == "run":
             if motion is not None:
                 self._end("aborted")
             self._arrays = msg["arrays"]
-            self._motion = _Motion({**msg, "segments": _Segments(self._arrays.open())},
+            self._motion = Motion({**msg, "segments": Segments(self._arrays.open())},
                                    self.cycle_time)
             self._motion.stop_limit = np.asarray(msg["stop_acceleration"], dtype=float)
             self._reports.append({"op": "started", "id": msg["id"], "wall_time": time.time()})
+            if msg.get("comply") is not None and self._tip is None:
+                self._end("failed", message="this controller has no arm model for comply")
+            else:
+                self._attach(self._motion, msg)
+        elif op == "comply" and motion is not None and motion.id == msg["id"]:
+            if motion.compliance is None and self._tip is not None:
+                self._attach(motion, {"comply": msg["spec"]})
+        elif self._jog is not None and op in ("stop", "abort"):
+            self._jog.end("aborted", f"{op} while jogging")
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
             motion.limit = motion.stop_limit   # stops brake at the arm's full deceleration
             motion.target_rate = 0.0
@@ -242,47 +268,34 @@ class Executor:
                 motion.abort_when_paused = True
                 motion.target_rate = 0.0
 
+    def _handle_jog(self, msg: dict, fbk) -> None:
+        op, jog = msg["op"], self._jog
+        if op == "jog":
+            self._reports.append({"op": "started", "id": msg["id"], "wall_time": time.time()})
+            if self._motion is not None or jog is not None or self._tip is None:
+                why = ("this controller has no arm model for jogging" if self._tip is None
+                       else "the arm is moving")
+                self._reports.append({"op": "failed", "id": msg["id"], "message": why})
+                return
+            start = self._hold if self._hold is not None else fbk.pos
+            self._jog = JogIntegrator(msg["id"], start, msg["limits"], self._tip,
+                                      np.asarray(msg["tool_offset"], dtype=float),
+                                      self.cycle_time)
+        elif jog is not None and op == "jog_velocity":
+            jog.command(msg)
+        elif jog is not None and op == "jog_end":
+            jog.end("done")
+
+    def _end_jog(self, how: str, message: str = "") -> None:
+        self._reports.append({"op": how, "id": self._jog.id,
+                              **({"message": message} if message else {})})
+        self._jog = None
+
     def _end(self, how: str, **details) -> None:
         self._reports.append({"op": how, "id": self._motion.id, **details})
         self._motion = None
+        self._sensors.watch_range = False
         if self._arrays is not None:
             self._arrays.close()
             self._arrays = None
 
-
-class _Segments:
-    """The segments of a run, read from its shared arrays when played (not all at once: a run
-    may have many): "positions", "velocities", "accelerations" (N, 6), "marks" (M, 2) as
-    (sample in its segment, label), and "segments" (S, 4): row start, row end, first mark,
-    end of marks."""
-
-    def __init__(self, arrays: dict):
-        self._a = arrays
-
-    def __len__(self) -> int:
-        return len(self._a["segments"])
-
-    def __getitem__(self, index: int) -> dict:
-        start, end, m0, m1 = (int(v) for v in self._a["segments"][index])
-        return {"positions": self._a["positions"][start:end],
-                "velocities": self._a["velocities"][start:end],
-                "accelerations": self._a["accelerations"][start:end],
-                "marks": self._a["marks"][m0:m1]}
-
-
-def pack_run(trajectories, dt: float) -> dict[str, np.ndarray]:
-    """The arrays of a run of back-to-back trajectories, for `_Segments` (server side)."""
-    rows = [0]
-    marks, segments = [], []
-    for t in trajectories:
-        m0 = len(marks)
-        marks.extend(t.marks)
-        segments.append((rows[-1], rows[-1] + len(t), m0, len(marks)))
-        rows.append(rows[-1] + len(t))
-    positions = np.concatenate([t.positions for t in trajectories])
-    velocities = np.concatenate([t.velocities for t in trajectories])
-    accelerations = np.concatenate([
-        np.diff(t.velocities, axis=0, append=t.velocities[-1:]) / dt for t in trajectories])
-    return {"positions": positions, "velocities": velocities, "accelerations": accelerations,
-            "marks": np.array(marks, dtype=np.int64).reshape(-1, 2),
-            "segments": np.array(segments, dtype=np.int64).reshape(-1, 4)}

@@ -10,7 +10,11 @@ A wake-up byte goes down a pipe after a row is written, at most once per `tick_p
 time, so the server's event loop can sleep on the pipe instead of polling.
 
 Row layout (float64): see the column constants below. Angles rad, velocities rad/s, torques
-N*m, times s.
+N*m, times s. The sensor columns hold the cell's first force/torque sensor (read every cycle)
+and its first range sensor (read every RANGE_PERIOD cycles, every cycle while a guarded move
+watches it; between two reads the last one stays); `ring_sensors` says which sensors those are.
+The I/O columns mirror up to IO_UNITS units of digital I/O, each read every cycle through the
+mask the server asked for (executor "io_image"): a bit field as a float, exact to 2**53.
 """
 from __future__ import annotations
 
@@ -30,7 +34,12 @@ CMD = slice(15, 21)        # the setpoint of this cycle
 TAU = slice(21, 27)        # measured joint torques
 ENABLE, ESTOP = 27, 28     # EnableState value, 1.0 while the e-stop is pressed
 SENSORS = slice(29, 36)    # force/torque (6: N, N*m) and range (1: m), NaN when not read
-WIDTH = 36
+FORCE_TORQUE = slice(0, 6)  # ... within SENSORS: flange frame, about the flange origin, tared
+RANGE = 6                  # ... m along the tool axis from the tip; NaN: nothing in range
+IO = slice(36, 40)         # I/O image: one unit's masked bits per column, NaN when not mirrored
+IO_UNITS = 4
+WIDTH = 40
+RANGE_PERIOD = 5           # cycles between two reads of the range sensor (20 ms at 4 ms)
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,12 +56,24 @@ class Sample:
     enable: EnableState
     estop: bool
     sensors: np.ndarray    # (7,): fx, fy, fz (N), tx, ty, tz (N*m), range (m); NaN if unread
+    io: np.ndarray         # (IO_UNITS,): the mirrored units' masked bits, NaN if not mirrored
 
     @classmethod
     def of(cls, row: np.ndarray) -> "Sample":
         return cls(int(row[SEQ]), float(row[TIME]), float(row[WALL]), row[Q], row[QD],
                    row[CMD], row[TAU], EnableState(int(row[ENABLE])), bool(row[ESTOP]),
-                   row[SENSORS])
+                   row[SENSORS], row[IO])
+
+
+def ring_sensors(sensors) -> dict[str, slice | int]:
+    """Which of the cell's sensors (SensorInfo, in order) the ring carries, and where within
+    SENSORS: the first force/torque sensor and the first range sensor."""
+    places: dict[str, slice | int] = {}
+    for kind, place in (("force_torque", FORCE_TORQUE), ("laser_range", RANGE)):
+        first = next((s for s in sensors if s.kind == kind), None)
+        if first is not None:
+            places[first.name] = place
+    return places
 
 
 class FeedbackRing:

@@ -17,15 +17,16 @@ import itertools
 import logging
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from landscape.server import alarms, aux_commands, path_planning, states
 from landscape.server.collision import check_motion
-from landscape.server.errors import Collision, ControllerFailure, NotFound, WrongState
+from landscape.server.errors import (Collision, ControllerFailure, ManualControlMode, NotFound,
+                                     WrongState)
 from landscape.server.events import Phase, Severity
-from landscape.server.executor import pack_run
+from landscape.server.run_arrays import pack_run
 from landscape.server.moves import Planner
 from landscape.server.paths import PathLibrary, PathStore
 from landscape.server.states import State
@@ -55,6 +56,9 @@ class RunningMotion:
     arrays: SharedArrays | None = None
     phase: str = "running"        # running, paused, done, failed, aborted
     started_wall: float | None = None   # unix s of its first cycle, from the cycle
+    # The final report's message, from the report (sensor loops: guarded.py); may act on it.
+    finish: Callable[[dict], str] | None = None
+    report: dict = field(default_factory=dict)   # the final report, once it came
 
 
 class MotionControl:
@@ -160,41 +164,73 @@ class MotionControl:
             offset += trajectory.duration
 
     def start(self, command: str, point_name: str, trajectories: list,
-              tags: dict | None = None, aux: dict | None = None, *, allow=(),
-              exclude=()) -> str:
+              tags: dict | None = None, aux: dict | None = None, *, allow=(), exclude=(),
+              loops: dict | None = None, finish: Callable[[dict], str] | None = None) -> str:
         """Hand planned trajectories to the executor, to play back to back; Resting -> Moving.
         `tags` maps mark labels to (tag name, tag index) for tag events, `aux` to the aux
-        commands run there; `allow` and `exclude` as in check_collisions, which runs first.
-        Returns the command id that the started / tag / done / failed events name (seed:
-        CMD_STARTED_OK)."""
+        commands run there; `allow` and `exclude` as in check_collisions, which runs first;
+        `loops` adds the sensor loops of the run message (executor.py: "guard", "comply") and
+        `finish(report) -> message` words its end. Returns the command id that the started /
+        tag / done / failed events name (seed: CMD_STARTED_OK)."""
+        return self._start(command, point_name, trajectories, tags, aux, allow=allow,
+                           exclude=exclude, loops=loops, finish=finish).command_id
+
+    def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
+               exclude=(), loops=None, finish=None) -> RunningMotion:
         self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow,
                               exclude=exclude)
-        device = self.device
-        arrays = device.link.share(pack_run(trajectories, self.planner.dt))
-        command_id = f"{command}-{next(self._ids)}"
-        motion = RunningMotion(command_id, command, point_name, tags or {}, aux or {}, arrays)
+        arrays = self.device.link.share(pack_run(trajectories, self.planner.dt))
+        motion = RunningMotion(f"{command}-{next(self._ids)}", command, point_name, tags or {},
+                               aux or {}, arrays, finish=finish)
         try:
-            with device._state_lock:
-                device.check_epoch()
-                if device.state is not State.RESTING or self._holds:
-                    raise WrongState(f"{command} needs the arm at rest, it is "
-                                     f"{device.state.value}", state=device.state.value)
-                self._motion = motion
-                try:
-                    device.link.send({"op": "run", "id": command_id, "arrays": arrays,
-                                      "acceleration": device.settings.joint_accelerations,
-                                      "stop_acceleration": np.asarray(device.arm.max_acceleration)})
-                except CycleProcessError as error:
-                    self._motion = None
-                    raise ControllerFailure(f"the controller is gone: {error}") from None
-                self.motion_state = states.RUNNING_TRAJECTORY
-                device._transition({State.RESTING}, State.MOVING,
-                                   f"{command} {point_name}".strip())
-                self.bus.command(command_id, command, Phase.STARTED, point_name)
+            self._begin(motion, {"op": "run", "id": motion.command_id, "arrays": arrays,
+                                 **self._ramps(), **(loops or {})})
         except BaseException:
             arrays.discard()
             raise
-        return command_id
+        return motion
+
+    def start_jog(self, message: dict) -> RunningMotion:
+        """A jog session (jogging.py) as a motion: Resting -> Moving until it ends."""
+        motion = RunningMotion(f"Jog-{next(self._ids)}", "Jog", "", {})
+        self._begin(motion, {**message, "op": "jog", "id": motion.command_id})
+        return motion
+
+    def play(self, command: str, point_name: str, trajectory, timeout: float, *,
+             allow=()) -> RunningMotion:
+        """Start one planned motion and wait until it ends or pauses (for commands that move
+        the arm in steps, tooling.py); the motion says how it ended."""
+        motion = self._start(command, point_name, [trajectory], allow=allow)
+        self._wait(motion, AT_REST, timeout)
+        return motion
+
+    def _ramps(self) -> dict:
+        return {"acceleration": self.device.settings.joint_accelerations,
+                "stop_acceleration": np.asarray(self.device.arm.max_acceleration)}
+
+    def _begin(self, motion: RunningMotion, message: dict) -> None:
+        """Register the motion, hand it to the cycle, then Moving and "started" (all under the
+        state lock, so no report overtakes the start)."""
+        device, command = self.device, motion.command
+        with device._state_lock:
+            device.check_epoch()
+            if device.state is not State.RESTING or self._holds:
+                raise WrongState(f"{command} needs the arm at rest, it is "
+                                 f"{device.state.value}", state=device.state.value)
+            if device.manual_control != "off" and command != "Jog":
+                raise ManualControlMode(f"the arm is under manual control "
+                                        f"({device.manual_control}): only Jog moves it; "
+                                        f"ManualControl(off) first")
+            self._motion = motion
+            try:
+                device.link.send(message)
+            except CycleProcessError as error:
+                self._motion = None
+                raise ControllerFailure(f"the controller is gone: {error}") from None
+            self.motion_state = states.RUNNING_TRAJECTORY
+            device._transition({State.RESTING}, State.MOVING,
+                               f"{command} {motion.point_name}".strip())
+            self.bus.command(motion.command_id, command, Phase.STARTED, motion.point_name)
 
     @contextlib.contextmanager
     def no_new_motion(self):
@@ -211,11 +247,19 @@ class MotionControl:
 
     def stop_motion(self, timeout: float = 10.0) -> None:
         """Seed 3.6.1: decelerate along the path and hold (Paused); blocks until at rest."""
+        self.wait_at_rest(self.request_stop(), timeout)
+
+    def request_stop(self) -> RunningMotion:
+        """StopMotion's first half, which waits for nothing: the stop is on its way to the
+        cycle when this returns (the running motion, for wait_at_rest)."""
         with self.device._state_lock:
             motion = self._motion
             if motion is None or self.device.state is not State.MOVING:
                 raise WrongState("no motion is running", state=self.device.state.value)
-            self._send({"op": "stop"})
+            self.send({"op": "stop"})
+            return motion
+
+    def wait_at_rest(self, motion: RunningMotion, timeout: float = 10.0) -> None:
         if not self._wait(motion, AT_REST, timeout):
             raise ControllerFailure(f"the arm did not come to rest within {timeout:g} s")
 
@@ -226,7 +270,7 @@ class MotionControl:
             motion = self._motion
             if motion is None or motion.phase != "paused" or device.state is not State.PAUSED:
                 raise WrongState("no paused motion to resume", state=device.state.value)
-            self._send({"op": "resume"})
+            self.send({"op": "resume"})
             motion.phase = "running"
             self.motion_state = states.RUNNING_TRAJECTORY
             device._transition({State.PAUSED}, State.MOVING, "resumed")
@@ -234,11 +278,17 @@ class MotionControl:
 
     def abort_motion(self, timeout: float = 10.0) -> None:
         """Seed 3.6.2: drop the stopped motion (and the queue); the arm stays where it is."""
+        self.wait_ended(self.request_abort(), timeout)
+
+    def request_abort(self) -> RunningMotion | None:
+        """AbortMotion's first half, which waits for nothing (None: nothing was queued)."""
         motion = self._motion
-        if motion is None:
-            return  # nothing queued: the queue is already clear
-        self._send({"op": "abort"})
-        if not self._wait(motion, ENDED, timeout):
+        if motion is not None:
+            self.send({"op": "abort"})
+        return motion
+
+    def wait_ended(self, motion: RunningMotion | None, timeout: float = 10.0) -> None:
+        if motion is not None and not self._wait(motion, ENDED, timeout):
             raise ControllerFailure(f"the abort did not finish within {timeout:g} s")
 
     def stop_now(self) -> None:
@@ -261,7 +311,8 @@ class MotionControl:
         if motion is not None:
             self.on_report({"op": "failed", "id": motion.command_id, "message": message})
 
-    def _send(self, msg: dict) -> None:
+    def send(self, msg: dict) -> None:
+        """A message to the cycle (executor.py); ControllerFailure if it is gone."""
         try:
             self.device.link.send(msg)
         except CycleProcessError as error:
@@ -291,6 +342,11 @@ class MotionControl:
             return   # the state moved when the resume was sent
         phase = {"paused": Phase.PAUSED, "done": Phase.DONE, "failed": Phase.FAILED,
                  "aborted": Phase.ABORTED}[op]
+        warning = msg.get("message", "")   # the cycle's own words: a problem
+        if op in ENDED:
+            motion.report = msg
+            if motion.finish is not None:
+                msg = {**msg, "message": motion.finish(msg)}
         with device._state_lock:
             motion.phase = op
             if op == "paused":
@@ -307,7 +363,7 @@ class MotionControl:
                                        f"{motion.command} {op}")
             self.bus.command(motion.command_id, motion.command, phase, motion.point_name,
                              message=msg.get("message", ""))
-        if op == "failed" or msg.get("message"):  # seed 3.4.1: an error alarm names the command
+        if op == "failed" or warning:  # seed 3.4.1: an error alarm names the command
             self.bus.alarm(Severity.ERROR if op == "failed" else Severity.WARNING,
                            alarms.MOTION, f"{motion.command} {motion.point_name}: "
                            f"{msg.get('message', op)}".strip(), motion.command_id)

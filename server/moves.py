@@ -7,9 +7,9 @@ import numpy as np
 
 from landscape.server.errors import OutOfRange, ParamError, Unreachable
 from landscape.server.motion.cartesian import arc, straight_line, tool_pose
-from landscape.server.motion.timing import time_path
-from landscape.server.motion.trajectory import Limits, PlanningError, Trajectory
-from landscape.server.settings import MotionSettings
+from landscape.server.motion.timing import duration_lower_bound, time_path
+from landscape.server.motion.trajectory import Limits, PlanningError, Reason, Trajectory
+from landscape.server.settings import MAX_MOTION_SECONDS, MIN_PERCENT, MotionSettings
 from landscape.server.targets import Frame, check_joints, check_pose_values, goal_tip
 from landscape.sim.kinematics import Config, Kinematics, PosNeg, Shoulder
 
@@ -28,11 +28,15 @@ class Planner:
         speed = settings.speed_percent if speed_percent is None else speed_percent
         if not math.isfinite(speed):
             raise ParamError(f"move speed must be a finite number, got {speed}")
-        if not 0 < speed <= 100:
-            raise OutOfRange(f"move speed must be above 0 and at most 100 %, got {speed}")
+        if not MIN_PERCENT <= speed <= 100:
+            raise OutOfRange(f"move speed must be at least {MIN_PERCENT:g} % and at most 100 %, "
+                             f"got {speed:g} %", field="speed", minimum=f"{MIN_PERCENT:g} %",
+                             maximum="100 %")
+        # Seed 3.2.1: the percents apply to joint and Cartesian moves alike; the absolute
+        # Cartesian speeds and accelerations are caps of their own, not scaled by them.
         return Limits.scaled(self.arm, speed, settings.accel_percent,
-                             settings.linear_speed * speed / 100.0,
-                             settings.angular_speed * speed / 100.0)
+                             settings.linear_speed, settings.angular_speed,
+                             settings.linear_accel, settings.angular_accel)
 
     def move(self, q_now, settings: MotionSettings, frame: Frame, values: np.ndarray,
              relative: bool, straight: bool, speed_percent: float | None) -> Trajectory:
@@ -97,14 +101,34 @@ class Planner:
             raise _unreachable(error) from None
         return self.timed(path, limits, tool_pose(self.kinematics, tool_offset))
 
-    def timed(self, waypoints: np.ndarray, limits: Limits, tool_path=None) -> Trajectory:
+    def timed(self, waypoints: np.ndarray, limits: Limits, tool_path=None, *, stops=None,
+              max_duration: float = MAX_MOTION_SECONDS,
+              pass_speeds: dict[int, float] | None = None) -> Trajectory:
+        """time_path, refused before any planning if it cannot end within max_duration (s),
+        and bounded by it while it plans."""
+        check_duration(waypoints, limits, max_duration, stops, tool_path)
         try:
-            return time_path(waypoints, limits, self.dt, tool_path=tool_path)
+            return time_path(waypoints, limits, self.dt, stops=stops, tool_path=tool_path,
+                             max_duration=max_duration, pass_speeds=pass_speeds)
         except PlanningError as error:
             raise _unreachable(error) from None
 
 
-def _unreachable(error: PlanningError) -> Unreachable:
+def check_duration(waypoints: np.ndarray, limits: Limits, max_duration: float, stops=None,
+                   tool_path=None, before: float = 0.0) -> None:
+    """OutOfRange naming the speed or the acceleration if the motion through `waypoints`, after
+    `before` s of other motion, cannot end within max_duration (s), by a cheap lower bound."""
+    least, what = duration_lower_bound(waypoints, limits, stops, tool_path)
+    if before + least > max_duration:
+        raise OutOfRange(f"the motion would last at least {before + least:.4g} s at the set "
+                         f"{what}; a motion lasts at most {MAX_MOTION_SECONDS:g} s",
+                         field=what, maximum=f"{MAX_MOTION_SECONDS:g} s")
+
+
+def _unreachable(error: PlanningError) -> OutOfRange:
+    if error.reason is Reason.TOO_LONG:
+        return OutOfRange(f"{error}; a motion lasts at most {MAX_MOTION_SECONDS:g} s",
+                          field="duration", maximum=f"{MAX_MOTION_SECONDS:g} s")
     where = {}
     if error.index is not None:
         where["index"] = str(error.index)

@@ -17,16 +17,32 @@ DEFAULT_ACCEL_PERCENT = 50.0
 MAX_TOOL_OFFSET = 2.0           # m; no real tool for this class of arm is longer
 MAX_WORLD_OFFSET = 100.0        # m
 
+# Bounds that keep a motion's duration, sample count and memory bounded before planning starts
+# (a tiny positive rate would otherwise plan a motion of years, and allocate terabytes):
+# - every speed and acceleration setting is at least MIN_RATE_FRACTION of its maximum
+#   (0.01 %: 0.01 % speed, 0.0002 m/s, ...);
+# - one planned motion (a move, or one pass of a path with its approach and dwells) lasts at
+#   most MAX_MOTION_SECONDS: at the 4 ms cycle 300,000 samples, about 29 MB of positions and
+#   velocities (twice the 10-minute trajectory a cell may need); a point's dwell likewise.
+MIN_RATE_FRACTION = 1e-4
+MIN_PERCENT = 100.0 * MIN_RATE_FRACTION
+MAX_MOTION_SECONDS = 1200.0
+
 
 def finite(name: str, *values: float) -> None:
     if not all(math.isfinite(v) for v in values):
         raise ParamError(f"{name} must be a finite number, got {', '.join(map(repr, values))}")
 
 
-def positive_at_most(name: str, value: float, maximum: float, unit: str = "") -> float:
+def rate_in_range(name: str, value: float, maximum: float, unit: str = "") -> float:
+    """A speed or acceleration from MIN_RATE_FRACTION of its maximum to the maximum; beyond,
+    OutOfRange naming the field and its bounds."""
     finite(name, value)
-    if not 0.0 < value <= maximum * (1 + 1e-12):
-        raise OutOfRange(f"{name} must be above 0 and at most {maximum:g}{unit}, got {value:g}{unit}")
+    minimum = maximum * MIN_RATE_FRACTION
+    if not minimum * (1 - 1e-12) <= value <= maximum * (1 + 1e-12):
+        raise OutOfRange(f"{name} must be at least {minimum:g}{unit} and at most "
+                         f"{maximum:g}{unit}, got {value:g}{unit}", field=name.replace(" ", "_"),
+                         minimum=f"{minimum:g}{unit}", maximum=f"{maximum:g}{unit}")
     return float(value)
 
 
@@ -71,25 +87,25 @@ class MotionSettings:
                 Kind.ANGULAR: self.with_angular_accel}[kind](value)
 
     def with_speed_percent(self, value: float) -> "MotionSettings":
-        return replace(self, speed_percent=positive_at_most("percent speed", value, 100.0, " %"))
+        return replace(self, speed_percent=rate_in_range("percent speed", value, 100.0, " %"))
 
     def with_linear_speed(self, value: float) -> "MotionSettings":
-        return replace(self, linear_speed=positive_at_most(
+        return replace(self, linear_speed=rate_in_range(
             "linear speed", value, self.arm.max_linear_velocity, " m/s"))
 
     def with_angular_speed(self, value: float) -> "MotionSettings":
-        return replace(self, angular_speed=positive_at_most(
+        return replace(self, angular_speed=rate_in_range(
             "angular speed", value, self.arm.max_angular_velocity, " rad/s"))
 
     def with_accel_percent(self, value: float) -> "MotionSettings":
-        return replace(self, accel_percent=positive_at_most("percent accel", value, 100.0, " %"))
+        return replace(self, accel_percent=rate_in_range("percent accel", value, 100.0, " %"))
 
     def with_linear_accel(self, value: float) -> "MotionSettings":
-        return replace(self, linear_accel=positive_at_most(
+        return replace(self, linear_accel=rate_in_range(
             "linear accel", value, self.arm.max_linear_acceleration, " m/s^2"))
 
     def with_angular_accel(self, value: float) -> "MotionSettings":
-        return replace(self, angular_accel=positive_at_most(
+        return replace(self, angular_accel=rate_in_range(
             "angular accel", value, self.arm.max_angular_acceleration, " rad/s^2"))
 
     def with_tool_offset(self, matrix: np.ndarray) -> "MotionSettings":

@@ -103,6 +103,7 @@ RULES: dict[str, Rule] = {
     "Reset": Rule(frozenset({State.ERROR}), Lease.HOLDER_IF_LOCKED, "-"),
     "GetDeviceState": _read("-"),
     "GetRobotDescription": _read("-"),
+    "GetCellDescription": _read("-"),
     # The operator panel: no lease (the e-stop works whoever holds the lock); admin only.
     "OperatePanel": _read("-"),
     # 4 DIGITAL_IO

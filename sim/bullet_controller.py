@@ -46,8 +46,8 @@ with silenced():   # pybullet's banner
 from landscape.sim.cell import PANEL_WIRES, Cell
 from landscape.sim.controller import (
     CalibState, Controller, CyclicFunction, DioStatus, DoutValue, EnableState, EstopState,
-    EventFunc, InitState, IoctrlCode, IoId, IoType, JointCmd, JointFbk, SettleState, State,
-    Status)
+    EventFunc, InitState, IoctrlCode, IoId, IoType, IoUnit, JointCmd, JointFbk, SensorInfo,
+    SettleState, State, Status)
 from landscape.sim.dio import DigitalIO
 from landscape.sim.kinematics import Config, Kinematics, ReversingResult
 from landscape.sim.panel import Panel
@@ -76,8 +76,7 @@ class BulletController(Controller):
 
     Besides the LLI calls: `cycle_time` (s), `time` (simulated s), `step()`, `cyclic` (the cyclic
     function; may be replaced between cycles), `world`, `panel`
-    (e-stop, door, parts by hand), `dio` (I/O by unit and bit field), `sensor(name)` and
-    `tare(name)`, `sensor_names`, `last_record_path`.
+    (e-stop, door, parts by hand), `dio` (the I/O by name and by unit), `last_record_path`.
     """
 
     def __init__(self, cell: Cell, cyclic: CyclicFunction | None = None):
@@ -97,6 +96,10 @@ class BulletController(Controller):
         self.panel = Panel(self.world, self._on_estop)
         self.dio = DigitalIO(cell.io, self._read_wire, self.world.set_output)
         self._sensors = {s.name: SENSOR_CLASSES[s.kind](self.world, s) for s in cell.sensors}
+        self._io_map = tuple(
+            IoUnit(u.id, u.name, u.direction,
+                   tuple(sorted((s.bit, s.name) for s in cell.io.signals if s.unit == u.id)))
+            for u in cell.io.units)
         self._kin = Kinematics(arm)
         self._recorder = None
         self.last_record_path: str | None = None
@@ -497,11 +500,23 @@ class BulletController(Controller):
         self.dio.write(io.name, value == DoutValue.ONE)
         return Status.OK
 
-    # ---- sensors ------------------------------------------------------------------------------
+    # ---- cell: I/O by unit, sensors ------------------------------------------------------------
 
-    @property
-    def sensor_names(self) -> list[str]:
-        return list(self._sensors)
+    def io_map(self) -> tuple[IoUnit, ...]:
+        return self._io_map
+
+    def read_io_unit(self, unit: int, mask: int = -1) -> int:
+        return self.dio.read_unit(unit, mask)
+
+    def write_io_unit(self, unit: int, bits_on: int, bits_off: int) -> Status:
+        try:
+            self.dio.write_unit(unit, bits_on, bits_off)
+        except (KeyError, ValueError) as exc:
+            return self._refuse(f"write_io_unit refused: {exc.args[0]}")
+        return Status.OK
+
+    def sensor_map(self) -> tuple[SensorInfo, ...]:
+        return tuple(SensorInfo(s.name, s.kind) for s in self.cell.sensors)
 
     def _sensor(self, name: str):
         try:
@@ -509,13 +524,14 @@ class BulletController(Controller):
         except KeyError:
             raise KeyError(f"no sensor {name!r} (sensors: {', '.join(self._sensors)})") from None
 
-    def sensor(self, name: str) -> np.ndarray:
+    def read_sensor(self, name: str) -> np.ndarray:
         """The present reading of a sensor of the cell (shape and units: sim/sensors.py)."""
         return self._sensor(name).read()
 
-    def tare(self, name: str) -> None:
+    def tare_sensor(self, name: str) -> Status:
         """Zero a sensor at its present reading."""
         self._sensor(name).tare()
+        return Status.OK
 
     # ---- LLI: kinematics (flange in the base_link frame) --------------------------------------
 

@@ -35,6 +35,9 @@ SENSOR_KINDS = ("force_torque", "laser_range")
 PANEL_WIRES = ("estop", "door_closed")
 WORLD_INPUT_WIRES = ("gripper_closed", "vacuum_ok", "tool_present")
 INPUT_WIRES = PANEL_WIRES + WORLD_INPUT_WIRES + ("none",)   # plus "zone:<zone name>"
+# and "tool_id:<bit>": bit <bit> of the coupled tool's id (0 with no tool), as a tool changer's
+# coded identification pins give it.
+MAX_TOOL_ID_BITS = 8
 OUTPUT_WIRES = ("toolchanger_lock", "gripper_close", "vacuum_on", "none")
 MAX_BITS = 32   # a LandScape bit field is a long
 
@@ -101,14 +104,17 @@ class ToolSpec:
     frame moved by `length` along z. Gripper: stroke = finger gap when open (m), finger_speed
     (m/s of each finger). Vacuum cup: cup_radius (m). contact_stiffness (N/m) and
     contact_damping (N*s/m): the compliance of the tool's contacts (pybullet's soft contact,
-    per contact point: a flat face touching a flat surface has about four), so that pressing
-    on something gives a force that grows with the depth instead of saturating the drives."""
+    per contact point: a flat finger face on a flat surface has about four, the cup's lip one),
+    so that pressing
+    on something gives a force that grows with the depth instead of saturating the drives.
+    id: the number its identification pins code (1 .. 2**MAX_TOOL_ID_BITS - 1), unique."""
 
     name: str
     kind: str
     slot: Pose
     mass: float
     length: float
+    id: int = 1
     stroke: float = 0.08
     finger_speed: float = 0.2
     cup_radius: float = 0.02
@@ -175,7 +181,7 @@ class IoSpec:
 
 @dataclass(frozen=True)
 class SensorSpec:
-    """A sensor read through `BulletController.sensor(name)`. Laser: range from min_range to
+    """A sensor read through `Controller.read_sensor(name)`. Laser: range from min_range to
     max_range (m), from the tool tip moved by `offset` (m, tool frame), along the tool's z."""
 
     name: str
@@ -379,12 +385,13 @@ def _box(t: _Table, *, part: bool) -> BoxSpec:
     return spec
 
 
-def _tool(t: _Table) -> ToolSpec:
+def _tool(t: _Table, index: int) -> ToolSpec:
     d = ToolSpec("", "", Pose(), 0.0, 0.0)
     kind = t.string("kind", choices=TOOL_KINDS)
     spec = ToolSpec(
         name=t.string("name"), kind=kind, slot=t.pose(),
         mass=t.number("mass", positive=True), length=t.number("length", positive=True),
+        id=t.integer("id", index + 1, low=1, high=2 ** MAX_TOOL_ID_BITS - 1),
         stroke=t.number("stroke", d.stroke, positive=True) if kind == "parallel_gripper"
         else d.stroke,
         finger_speed=t.number("finger_speed", d.finger_speed, positive=True)
@@ -407,7 +414,7 @@ def _zone(t: _Table) -> ZoneSpec:
 def _world(t: _Table) -> WorldSpec:
     d = WorldSpec()
     fixtures = tuple(_box(x, part=False) for x in t.tables("fixtures"))
-    tools = tuple(_tool(x) for x in t.tables("tools"))
+    tools = tuple(_tool(x, i) for i, x in enumerate(t.tables("tools")))
     parts = tuple(_box(x, part=True) for x in t.tables("parts"))
     zones = tuple(_zone(x) for x in t.tables("zones"))
     spec = WorldSpec(
@@ -418,6 +425,9 @@ def _world(t: _Table) -> WorldSpec:
     )
     _unique(fixtures + parts, "fixtures or parts", t, "parts")
     _unique(tools, "tools", t, "tools")
+    ids = [tool.id for tool in tools]
+    if len(set(ids)) != len(ids):
+        t.fail("tools", "two tools share an id")
     _unique(zones, "zones", t, "zones")
     t.done()
     return spec
@@ -444,10 +454,12 @@ def _io(t: _Table, world: WorldSpec) -> IoSpec:
         bit = s.integer("bit", low=0, high=MAX_BITS - 1)
         wire = s.string("wire", name if name in INPUT_WIRES + OUTPUT_WIRES else "none")
         if direction[unit] == "input":
-            ok = wire in INPUT_WIRES or (wire.startswith("zone:") and wire[5:] in zones)
+            ok = (wire in INPUT_WIRES or (wire.startswith("zone:") and wire[5:] in zones)
+                  or wire in {f"tool_id:{b}" for b in range(MAX_TOOL_ID_BITS)})
             if not ok:
-                s.fail("wire", f"an input wire is one of {', '.join(INPUT_WIRES)} or zone:<name> "
-                               f"(zones: {', '.join(sorted(zones)) or 'none'}); got {wire!r}")
+                s.fail("wire", f"an input wire is one of {', '.join(INPUT_WIRES)}, zone:<name> "
+                               f"(zones: {', '.join(sorted(zones)) or 'none'}) or tool_id:<bit> "
+                               f"(0..{MAX_TOOL_ID_BITS - 1}); got {wire!r}")
         elif wire not in OUTPUT_WIRES:
             s.fail("wire", f"an output wire is one of {', '.join(OUTPUT_WIRES)}; got {wire!r}")
         signals.append(IoSignalSpec(name, unit, bit, wire, direction[unit]))

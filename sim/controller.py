@@ -9,8 +9,15 @@ once per cycle, `get` first, from the cyclic function; `init`, `home`, `destroy`
 and the recorder's `rec_init`/`rec_store` belong to the asynchronous side; `enable`, `disable`,
 `state` and `ioctrl` may be called from either.
 
-Units: joint positions in rad, velocities in rad/s, torques in N*m, Cartesian positions in m.
-Joint arrays have shape (n_joints,), joint 1 first.
+Beyond the LLI (section "cell" below): what a supervisory cell needs from its controller and
+the LLI has no call for, shaped so that a CS8 binding could offer them from its fieldbus image
+and its sensor drivers: the I/O map and whole units by bit field (LandScape's DIGITAL_IO,
+seed 4), and the cell's sensors by name (F/T, range) with tare. These read the latest image,
+never wait, and may be called from either context (the cyclic function reads sensors every
+cycle); writing outputs belongs to the asynchronous side, as LLI_writeDout does.
+
+Units: joint positions in rad, velocities in rad/s, torques in N*m, Cartesian positions in m,
+forces in N. Joint arrays have shape (n_joints,), joint 1 first.
 """
 from __future__ import annotations
 
@@ -135,6 +142,44 @@ class JointFbk:
     torque: np.ndarray
 
 
+@dataclass(frozen=True)
+class IoUnit:
+    """One unit of the cell's digital I/O (the CS8's cell.cf): `id`, `name`, `direction`
+    ("input" or "output": a unit is all one or the other) and its named bits as (bit, name)
+    pairs, bit 0 being the value 1 of the unit's bit field."""
+
+    id: int
+    name: str
+    direction: str
+    bits: tuple[tuple[int, str], ...]
+
+    @property
+    def mask(self) -> int:
+        """The declared bits as a bit field."""
+        mask = 0
+        for bit, _ in self.bits:
+            mask |= 1 << bit
+        return mask
+
+    def bit_of(self, name: str) -> int | None:
+        return next((bit for bit, n in self.bits if n == name), None)
+
+
+@dataclass(frozen=True)
+class SensorInfo:
+    """A sensor of the cell: its `name` and `kind`, "force_torque" (reads (6,): fx, fy, fz in N,
+    tx, ty, tz in N*m, in the flange frame, about its origin: the load the tool side puts on
+    the flange) or "laser_range" (reads (1,): distance in m along the tool axis from the tool
+    tip to the first surface, NaN with nothing in range)."""
+
+    name: str
+    kind: str
+
+    @property
+    def size(self) -> int:
+        return 6 if self.kind == "force_torque" else 1
+
+
 # LLI_EventFunc: receives the event description.
 EventFunc = Callable[[str], None]
 # The cyclic function of LLI_construct; it returns False (an error) to have the drives disabled.
@@ -207,6 +252,34 @@ class Controller(abc.ABC):
     def reverse_kin(self, joints_in: np.ndarray, target: np.ndarray, config: Config,
                     joint_range: tuple[np.ndarray, np.ndarray] | None = None
                     ) -> tuple[np.ndarray | None, ReversingResult]: ...
+
+    # -- cell: I/O by unit and bit field, sensors (see the module docstring)
+    @abc.abstractmethod
+    def io_map(self) -> tuple[IoUnit, ...]:
+        """Every unit of the cell's digital I/O."""
+
+    @abc.abstractmethod
+    def read_io_unit(self, unit: int, mask: int = -1) -> int:
+        """The unit's bits as a bit field, only those of `mask` read (the others 0); an unknown
+        unit raises KeyError."""
+
+    @abc.abstractmethod
+    def write_io_unit(self, unit: int, bits_on: int, bits_off: int) -> Status:
+        """Set the bits of `bits_on` and clear those of `bits_off` of an output unit; a bit not
+        declared, in both fields, or an input unit: an error event and Status.ERROR, nothing
+        written."""
+
+    @abc.abstractmethod
+    def sensor_map(self) -> tuple[SensorInfo, ...]:
+        """The cell's sensors."""
+
+    @abc.abstractmethod
+    def read_sensor(self, name: str) -> np.ndarray:
+        """The sensor's present reading (shape and units: SensorInfo); KeyError if unknown."""
+
+    @abc.abstractmethod
+    def tare_sensor(self, name: str) -> Status:
+        """Zero the sensor at its present reading (a range sensor has nothing to zero)."""
 
     # -- 5.5: recorder
     @abc.abstractmethod

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from landscape.sim.controller import (Controller, DioStatus, DoutValue, EventFunc, IoctrlCode, IoId,
-                                      JointCmd, JointFbk, State, Status)
+                                      IoUnit, JointCmd, JointFbk, SensorInfo, State, Status)
 from landscape.sim.kinematics import Config, ReversingResult
 
 if TYPE_CHECKING:
@@ -75,6 +75,25 @@ class ControllerProxy(Controller):
 
     def write_dout(self, io: IoId, value: DoutValue) -> Status:
         return self._call("write_dout", io, value)
+
+    # -- cell: I/O by unit, sensors
+    def io_map(self) -> tuple[IoUnit, ...]:
+        return self._call("io_map")
+
+    def read_io_unit(self, unit: int, mask: int = -1) -> int:
+        return self._call("read_io_unit", unit, mask)
+
+    def write_io_unit(self, unit: int, bits_on: int, bits_off: int) -> Status:
+        return self._call("write_io_unit", unit, bits_on, bits_off)
+
+    def sensor_map(self) -> tuple[SensorInfo, ...]:
+        return self._call("sensor_map")
+
+    def read_sensor(self, name: str) -> np.ndarray:
+        return self._call("read_sensor", name)
+
+    def tare_sensor(self, name: str) -> Status:
+        return self._call("tare_sensor", name)
 
     # -- kinematics (the child's model, so both sides agree to the bit)
     def forward_kin(self, joints: np.ndarray) -> tuple[np.ndarray, Config]:

@@ -51,6 +51,7 @@ CALL, MSG, STOP, READY, REPLY, EVENT, FATAL = (
 CONTROLLER_CALLS = frozenset({
     "init", "home", "enable", "disable", "state", "ioctrl",
     "get_din_id", "get_dout_id", "read_dio", "write_dout",
+    "io_map", "read_io_unit", "write_io_unit", "sensor_map", "read_sensor", "tare_sensor",
     "forward_kin", "reverse_kin", "rec_init", "rec_start", "rec_stop", "rec_store",
 })
 # Calls that may take long (they write files): served on the cycle process's asynchronous
@@ -147,21 +148,21 @@ class CycleLoop:
 
     def run(self, between: Callable[[float], bool],
             wait: Callable[[float], None] | None = None) -> None:
-        """wait(until): how to pass the time up to `until` (perf_counter s) before spinning;
-        a plain sleep by default (the cycle process reads its pipe meanwhile)."""
+        """wait(deadline, spin): how to pass the time up to the deadline (perf_counter s), the
+        last `spin` s busy; by default a sleep, then a spin (the cycle process reads its pipe
+        meanwhile)."""
         step, period, spin, stats = self.step, self.cycle_time, self.spin, self.stats
         clock, sleep = time.perf_counter, time.sleep
         deadline = clock() + period
         previous = float("nan")
         while True:
-            remaining = deadline - clock()
-            if remaining > spin:
-                if wait is None:
-                    sleep(remaining - spin)
-                else:
-                    wait(deadline - spin)
-            while clock() < deadline:
-                pass
+            if wait is not None:
+                wait(deadline, spin)
+            else:
+                if deadline - clock() > spin:
+                    sleep(deadline - clock() - spin)
+                while clock() < deadline:
+                    pass
             start = clock()
             late = start - deadline
             if late > period:
@@ -247,13 +248,17 @@ class _Server:
             self.running = False  # reparented: the parent died without closing the pipe
         return self.running
 
-    def wait(self, until: float) -> None:
-        """Until `until` (perf_counter s), take what the parent sends as it arrives, so a
-        message sent during the wait is in the mailbox for the very next cycle."""
-        clock = time.perf_counter
-        while self.running and (remaining := until - clock()) > 0:
-            if select.select((self.fd,), (), (), remaining)[0]:
-                self._read(until + self.guard)
+    def wait(self, deadline: float, spin: float) -> None:
+        """Until the deadline (perf_counter s), take what the parent sends as it arrives, so a
+        message sent any time before the cycle is in the mailbox for it (a stop reaches the arm
+        in the next cycle): asleep in select, then the last `spin` s polling it."""
+        clock, fd, ready = time.perf_counter, self.fd, select.select
+        while self.running and (remaining := deadline - spin - clock()) > 0:
+            if ready((fd,), (), (), remaining)[0]:
+                self._read(deadline - spin + self.guard)
+        while clock() < deadline:
+            if ready((fd,), (), (), 0)[0]:
+                self._read(deadline + self.guard)
 
     def _read(self, deadline: float) -> None:
         # At least one item per cycle, so even an overloaded loop still hears STOP.

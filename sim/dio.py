@@ -74,15 +74,16 @@ class DigitalIO:
 
     # ---- by unit and bit field ----------------------------------------------------------------
 
-    def read_unit(self, unit: int) -> int:
-        """The unit's bits as an int: bit i set when the signal at bit i is 1."""
+    def read_unit(self, unit: int, mask: int = -1) -> int:
+        """The unit's bits as an int: bit i set when the signal at bit i is 1. Only the bits of
+        `mask` are read (the others read 0): some inputs cost a look at the world."""
         if unit not in self.units:
             raise KeyError(f"no I/O unit {unit} (units: {sorted(self.units)})")
         if unit in self._outputs:
-            return self._outputs[unit]
+            return self._outputs[unit] & mask
         bits = 0
         for s in self._by_unit[unit]:
-            if s.wire != "none" and self._read_input(s.wire):
+            if s.mask & mask and s.wire != "none" and self._read_input(s.wire):
                 bits |= s.mask
         return bits
 

@@ -111,10 +111,18 @@ def _allowed(request: Config) -> frozenset[int]:
                      and request.wrist in (PosNeg.FREE, b.wrist))
 
 
-_ALLOWED = {Config(s, e, w): _allowed(Config(s, e, w))
-            for s in (Shoulder.LEFTY, Shoulder.RIGHTY, Shoulder.FREE)
-            for e in (PosNeg.POSITIVE, PosNeg.NEGATIVE, PosNeg.FREE)
-            for w in (PosNeg.POSITIVE, PosNeg.NEGATIVE, PosNeg.FREE)}
+_ANY = Config()                       # reverse()'s default request: any configuration
+_OF_SHOULDER = (frozenset(range(4)), frozenset(range(4, 8)))   # branches of RIGHTY, LEFTY
+_ALL_BRANCHES = frozenset(range(8))
+
+# The branches each request accepts, by the values of its fields (1..3; SAME, 0, is resolved
+# first): index 16 shoulder + 4 elbow + wrist. A list, not a dict of Configs: hashing a Config
+# costs more than the rest of choosing a branch.
+_ALLOWED: list[frozenset[int] | None] = [None] * 64
+for _s in (Shoulder.LEFTY, Shoulder.RIGHTY, Shoulder.FREE):
+    for _e in (PosNeg.POSITIVE, PosNeg.NEGATIVE, PosNeg.FREE):
+        for _w in (PosNeg.POSITIVE, PosNeg.NEGATIVE, PosNeg.FREE):
+            _ALLOWED[16 * _s + 4 * _e + _w] = _allowed(Config(_s, _e, _w))
 
 
 def wrap_angle(a):
@@ -124,13 +132,20 @@ def wrap_angle(a):
     return np.where(w <= -math.pi, w + _TWO_PI, w)
 
 
+def _wrap_array(a: np.ndarray) -> np.ndarray:
+    """wrap_angle for float arrays, in place of a copy: (-pi, pi]."""
+    w = a - _TWO_PI * np.round(a / _TWO_PI)
+    w[w <= -math.pi] += _TWO_PI
+    return w
+
+
 def _wrap(a: float) -> float:
     w = math.remainder(a, _TWO_PI)
     return w + _TWO_PI if w <= -math.pi else w
 
 
 def _vector6(v, name: str) -> list[float]:
-    a = np.asarray(v, dtype=float)
+    a = v if type(v) is np.ndarray and v.dtype == np.float64 else np.asarray(v, dtype=float)
     values = a.tolist() if a.shape == (6,) else None
     if values is None or not all(map(math.isfinite, values)):
         raise ValueError(f"{name} must be 6 finite values (rad), got {v!r}")
@@ -138,7 +153,8 @@ def _vector6(v, name: str) -> list[float]:
 
 
 def _pose_rows(pose) -> list[list[float]]:
-    a = np.asarray(pose, dtype=float)
+    a = pose if type(pose) is np.ndarray and pose.dtype == np.float64 else np.asarray(
+        pose, dtype=float)
     if a.shape != (4, 4):
         raise ValueError(f"a pose is a (4, 4) matrix, got shape {a.shape}")
     return a.tolist()
@@ -146,8 +162,11 @@ def _pose_rows(pose) -> list[list[float]]:
 
 def _is_rigid(pose: list[list[float]]) -> bool:
     """_pose_ok for one pose given as rows: plain floats are ~10x faster here than numpy."""
-    (xx, yx, zx, _), (xy, yy, zy, _), (xz, yz, zz, _), last = pose
-    if not all(map(math.isfinite, pose[0] + pose[1] + pose[2] + last)):
+    (xx, yx, zx, px), (xy, yy, zy, py), (xz, yz, zz, pz), last = pose
+    # One sum is NaN or inf if any rotation or last-row entry is (or if they are too large to
+    # be a rotation); the translation is checked apart, where large is still finite.
+    if not (math.isfinite(xx + yx + zx + xy + yy + zy + xz + yz + zz + sum(last))
+            and math.isfinite(px) and math.isfinite(py) and math.isfinite(pz)):
         return False
     tol = ORTHONORMAL_TOL
     if abs(last[0]) > tol or abs(last[1]) > tol or abs(last[2]) > tol or abs(last[3] - 1.0) > tol:
@@ -268,52 +287,98 @@ class Kinematics:
 
     # ---- inverse, one pose (plain floats: ~10x faster than numpy on 3-vectors) -----------------
 
-    def _branches(self, pose: list[list[float]], near) -> list[tuple[list[float], int]]:
-        """All solutions of a valid pose (rows) as (q: 6 wrapped floats, index into BRANCHES)."""
-        (r00, r01, r02, x0), (r10, r11, r12, y0), (r20, r21, r22, z0), _ = pose
-        f, lat, lu, lf = self._flange, self._lateral, self._lu, self._lf
+    def _shoulders(self, pose: list[list[float]], near) -> list[tuple]:
+        """The first step of the closed form: per shoulder branch of a valid pose (rows),
+        (q1 wrapped to (-pi, pi], si: 0 RIGHTY / 1 LEFTY, wx, cz: the wrist centre in link 1's
+        x and base z); [] inside the cylinder J1 cannot reach."""
+        (_, _, r02, x0), (_, _, r12, y0), (_, _, r22, z0), _ = pose
+        f, lat = self._flange, self._lateral
         bx, by, bz = self._base_xyz
         cx, cy, cz = x0 - f * r02 - bx, y0 - f * r12 - by, z0 - f * r22 - bz   # wrist centre
         r2 = cx * cx + cy * cy
         x2 = r2 - lat * lat
         if x2 < -_REACH_TOL:
-            return []                                   # inside the cylinder J1 cannot reach
+            return []
         x = math.sqrt(max(x2, 0.0))
+        rem, pi, two_pi = math.remainder, math.pi, _TWO_PI
+        toward = math.atan2(cy, cx)
         out = []
         for si, wx in ((0, x), (1, -x)):
-            q1 = near[0] if r2 < SINGULAR_EPS**2 else math.atan2(cy, cx) - math.atan2(lat, wx)
-            px, pz = wx - self._shoulder_x, cz - self._shoulder_z
-            d2 = px * px + pz * pz
-            cos_bend = (d2 - lu * lu - lf * lf) / (2.0 * lu * lf)
-            if abs(cos_bend) > 1.0 + _REACH_TOL:
-                continue                                # too far from (or too near) J2
-            bend = math.acos(min(1.0, max(-1.0, cos_bend)))
-            q1 = _wrap(q1)
-            c1, s1 = math.cos(q1), math.sin(q1)
-            # Rows a0, a1 of Rz(q1)^T R (its row 2 is R's).
-            a00, a01, a02 = c1 * r00 + s1 * r10, c1 * r01 + s1 * r11, c1 * r02 + s1 * r12
-            a10, a11, a12 = c1 * r10 - s1 * r00, c1 * r11 - s1 * r01, c1 * r12 - s1 * r02
-            for ei, delta in ((0, bend), (1, -bend)):
-                if d2 < SINGULAR_EPS**2:
-                    phi2 = near[1] + self._au           # wrist centre on J2: q2 is free
-                else:
-                    phi2 = math.atan2(px, pz) - math.atan2(lf * math.sin(delta),
-                                                           lu + lf * math.cos(delta))
-                q2 = _wrap(phi2 - self._au)
-                q3 = _wrap(delta - self._af + self._au)
-                ct, st = math.cos(q2 + q3), math.sin(q2 + q3)
-                # M = Ry(q2 + q3)^T Rz(q1)^T R = Rz(q4) Ry(q5) Rz(q6): rows m0, a1, m2.
-                m00, m01, m02 = ct * a00 - st * r20, ct * a01 - st * r21, ct * a02 - st * r22
-                m22 = st * a02 + ct * r22
-                sw = math.hypot(m02, a12)               # |sin q5|
-                for wi, w in ((0, 1.0), (1, -1.0)):
-                    q4 = near[3] if sw < SINGULAR_EPS else math.atan2(w * a12, w * m02)
-                    c4, s4 = math.cos(q4), math.sin(q4)
-                    q5 = math.atan2(w * sw, m22)
-                    # Row 1 of Rz(q4)^T M is (sin q6, cos q6, 0) whatever q5.
-                    q6 = math.atan2(c4 * a10 - s4 * m00, c4 * a11 - s4 * m01)
-                    out.append(([q1, q2, q3, _wrap(q4), _wrap(q5), _wrap(q6)],
-                                4 * si + 2 * ei + wi))
+            q1 = near[0] if r2 < SINGULAR_EPS**2 else rem(toward - math.atan2(lat, wx), two_pi)
+            out.append((q1 + two_pi if q1 <= -pi else q1, si, wx, cz))
+        return out
+
+    def _elbows_at(self, shoulder: tuple) -> list[tuple]:
+        """The elbow branches of one shoulder (_shoulders' item), each (q3 wrapped to
+        (-pi, pi], branch index of its wrist-POSITIVE solution, what _arm needs); [] if J2 is
+        too far from (or too near) the wrist centre."""
+        q1, si, wx, cz = shoulder
+        lu, lf = self._lu, self._lf
+        px, pz = wx - self._shoulder_x, cz - self._shoulder_z
+        d2 = px * px + pz * pz
+        cos_bend = (d2 - lu * lu - lf * lf) / (2.0 * lu * lf)
+        if abs(cos_bend) > 1.0 + _REACH_TOL:
+            return []
+        bend = math.acos(min(1.0, max(-1.0, cos_bend)))
+        rem, pi, two_pi, shift = math.remainder, math.pi, _TWO_PI, self._au - self._af
+        arm = (q1, px, pz, d2)
+        out = []
+        for ei, delta in ((0, bend), (1, -bend)):
+            q3 = rem(delta + shift, two_pi)
+            out.append((q3 + two_pi if q3 <= -pi else q3, 4 * si + 2 * ei, delta, arm))
+        return out
+
+    def _arm(self, pose: list[list[float]], near, elbow: tuple) -> tuple:
+        """The rest of one arm solution from _elbows_at's item: (q1, q2, q3, q5 of the POSITIVE
+        wrist, wrist terms for _wrist), q1, q2 wrapped to (-pi, pi]."""
+        (r00, r01, r02, _), (r10, r11, r12, _), (r20, r21, r22, _), _ = pose
+        q3, _, delta, (q1, px, pz, d2) = elbow
+        lu, lf, au = self._lu, self._lf, self._au
+        rem, pi, two_pi = math.remainder, math.pi, _TWO_PI
+        if d2 < SINGULAR_EPS**2:
+            phi2 = near[1] + au                         # wrist centre on J2: q2 is free
+        else:
+            phi2 = math.atan2(px, pz) - math.atan2(lf * math.sin(delta), lu + lf * math.cos(delta))
+        q2 = rem(phi2 - au, two_pi)
+        if q2 <= -pi:
+            q2 += two_pi
+        c1, s1 = math.cos(q1), math.sin(q1)
+        # Rows a0, a1 of Rz(q1)^T R (its row 2 is R's).
+        a00, a01, a02 = c1 * r00 + s1 * r10, c1 * r01 + s1 * r11, c1 * r02 + s1 * r12
+        a10, a11, a12 = c1 * r10 - s1 * r00, c1 * r11 - s1 * r01, c1 * r12 - s1 * r02
+        ct, st = math.cos(q2 + q3), math.sin(q2 + q3)
+        # M = Ry(q2 + q3)^T Rz(q1)^T R = Rz(q4) Ry(q5) Rz(q6): rows m0, a1, m2.
+        m00, m01, m02 = ct * a00 - st * r20, ct * a01 - st * r21, ct * a02 - st * r22
+        sw = math.hypot(m02, a12)                       # |sin q5|
+        q5 = math.atan2(sw, st * a02 + ct * r22)
+        return q1, q2, q3, q5, (a10, a11, a12, m00, m01, m02, sw)
+
+    @staticmethod
+    def _wrist(terms: tuple, q5: float, negative: bool, near) -> tuple[float, float, float]:
+        """(q4, q5, q6) of one wrist solution from _arms' terms and its POSITIVE q5: the
+        NEGATIVE one is the same wrist turned half a turn (q4 and q6 by pi, q5 negated)."""
+        a10, a11, a12, m00, m01, m02, sw = terms
+        singular = sw < SINGULAR_EPS
+        q4 = near[3] if singular else math.atan2(a12, m02)
+        c4, s4 = math.cos(q4), math.sin(q4)
+        # Row 1 of Rz(q4)^T M is (sin q6, cos q6, 0) whatever q5.
+        q6 = math.atan2(c4 * a10 - s4 * m00, c4 * a11 - s4 * m01)
+        if singular:
+            q4 = _wrap(q4)
+        if not negative:
+            return q4, q5, q6
+        if not singular:
+            q4 = q4 + math.pi if q4 <= 0.0 else q4 - math.pi
+            q6 = q6 + math.pi if q6 <= 0.0 else q6 - math.pi
+        return q4, (-q5 if q5 < math.pi else q5), q6
+
+    def _branches(self, pose: list[list[float]], near) -> list[tuple[list[float], int]]:
+        """All solutions of a valid pose (rows) as (q: 6 wrapped floats, index into BRANCHES)."""
+        out = []
+        for elbow in (e for s in self._shoulders(pose, near) for e in self._elbows_at(s)):
+            q1, q2, q3, q5, terms = self._arm(pose, near, elbow)
+            for wi in (0, 1):
+                out.append(([q1, q2, q3, *self._wrist(terms, q5, wi == 1, near)], elbow[1] + wi))
         return out
 
     def solutions(self, pose, q_near=None) -> list[tuple[np.ndarray, Config]]:
@@ -329,7 +394,7 @@ class Kinematics:
         near = [0.0] * 6 if q_near is None else _vector6(q_near, "q_near")
         return [(np.array(q), BRANCHES[b]) for q, b in self._branches(rows, near)]
 
-    def reverse(self, pose, q_near, config: Config = Config(), joint_min=None, joint_max=None
+    def reverse(self, pose, q_near, config: Config = _ANY, joint_min=None, joint_max=None
                 ) -> tuple[np.ndarray | None, ReversingResult]:
         """LLI_reverseKin: the joints (6,) reaching `pose` (4, 4) in `config`, within the range.
 
@@ -344,43 +409,65 @@ class Kinematics:
         near = _vector6(q_near, "q_near")
         lower = self._lower if joint_min is None else _vector6(joint_min, "joint_min")
         upper = self._upper if joint_max is None else _vector6(joint_max, "joint_max")
-        if any(lo > hi for lo, hi in zip(lower, upper)):
+        if (joint_min is not None or joint_max is not None) and any(
+                lo > hi for lo, hi in zip(lower, upper)):
             raise ValueError("every joint_min must be at most its joint_max")
         rows = _pose_rows(pose)
         if not _is_rigid(rows):
             return None, ReversingResult.INVALID_ORIENTATION
+        allowed = self._allowed_for(config, near)
+        # Complete the likeliest branches first and stop once a bound shows the rest are
+        # farther: q1, then q1 and q3, then with q5 (each free to turn) underestimate the
+        # distance to q_near, so the elbows, q2 and the wrist are computed only where they can
+        # still win, and q4, q6 only for the branches fitted.
+        n1, n3, n5 = near[0], near[2], near[4]
+        rem, two_pi = math.remainder, _TWO_PI
+        shoulders = [(rem(s[0] - n1, two_pi) ** 2, s) for s in self._shoulders(rows, near)
+                     if not allowed.isdisjoint(_OF_SHOULDER[s[1]])]
+        best, best_dist = None, math.inf
+        for d1, shoulder in _by_bound(shoulders):
+            if d1 >= best_dist:
+                break
+            elbows = [(d1 + rem(e[0] - n3, two_pi) ** 2, e) for e in self._elbows_at(shoulder)
+                      if e[1] in allowed or e[1] + 1 in allowed]
+            for d13, elbow in _by_bound(elbows):
+                b = elbow[1]
+                if d13 >= best_dist:
+                    break
+                q1, q2, q3, q5, terms = self._arm(rows, near, elbow)
+                positive = d13 + rem(q5 - n5, two_pi) ** 2 if b in allowed else math.inf
+                negative = d13 + rem(q5 + n5, two_pi) ** 2 if b + 1 in allowed else math.inf
+                order = ((positive, 0), (negative, 1)) if positive <= negative else \
+                    ((negative, 1), (positive, 0))
+                for bound, wi in order:
+                    if bound >= best_dist:
+                        break
+                    q = [q1, q2, q3, *self._wrist(terms, q5, wi == 1, near)]
+                    fitted = _fit_range(q, near, lower, upper)
+                    if fitted is not None and fitted[1] < best_dist:
+                        best, best_dist = fitted
+        if best is not None:
+            return np.array(best), ReversingResult.OK
         branches = self._branches(rows, near)
         if not branches:
             return None, ReversingResult.OUT_OF_WORKSPACE
-        allowed = _ALLOWED.get(self._requested(config, near))
-        if allowed is None:
-            raise ValueError(f"not an LLI configuration: {config!r}")
-        # Fit the likeliest branches first and stop once a bound shows the rest are farther:
-        # q3 and q5 (the elbow and wrist signs) alone, free to turn, underestimate the distance.
-        n3, n5 = near[2], near[4]
-        ranked = sorted((_wrap(q[2] - n3) ** 2 + _wrap(q[4] - n5) ** 2, b, q)
-                        for q, b in branches if b in allowed)
-        best, best_dist = None, math.inf
-        for bound, _, q in ranked:
-            if bound >= best_dist:
-                break
-            fitted = _fit_range(q, near, lower, upper)
-            if fitted is not None and fitted[1] < best_dist:
-                best, best_dist = fitted
-        if best is not None:
-            return np.array(best), ReversingResult.OK
         if any(_fit_range(q, near, lower, upper) for q, _ in branches):
             return None, ReversingResult.INVALID_CONFIG
         return None, ReversingResult.OUT_OF_JNT_RANGE
 
-    def _requested(self, config: Config, near) -> Config:
-        """The request with SAME resolved against q_near (FREE stays FREE)."""
-        if config.shoulder != Shoulder.SAME and PosNeg.SAME not in (config.elbow, config.wrist):
-            return config
-        now = self.configuration(near)
-        return Config(now.shoulder if config.shoulder == Shoulder.SAME else config.shoulder,
-                      now.elbow if config.elbow == PosNeg.SAME else config.elbow,
-                      now.wrist if config.wrist == PosNeg.SAME else config.wrist)
+    def _allowed_for(self, config: Config, near) -> frozenset[int]:
+        """The branch indices a request accepts, SAME fields resolved against q_near."""
+        if config is _ANY:
+            return _ALL_BRANCHES
+        s, e, w = config.shoulder, config.elbow, config.wrist
+        if not (s and e and w):   # a SAME field (0): as q_near
+            now = self.configuration(near)
+            s, e, w = s or now.shoulder, e or now.elbow, w or now.wrist
+        code = 16 * s + 4 * e + w if 0 < s < 4 and 0 < e < 4 and 0 < w < 4 else -1
+        allowed = _ALLOWED[code] if code >= 0 else None
+        if allowed is None:
+            raise ValueError(f"not an LLI configuration: {config!r}")
+        return allowed
 
     # ---- inverse, many poses (numpy) ----------------------------------------------------------
 
@@ -423,31 +510,45 @@ class Kinematics:
         phi2 = np.where((d2 < SINGULAR_EPS**2)[..., None], near[:, 1, None, None] + self._au, phi2)
         q2 = phi2 - self._au
         q3 = delta - self._af + self._au
-        q1 = np.broadcast_to(q1[..., None], q2.shape)
 
-        # Wrist: M = Ry(q2 + q3)^T Rz(q1)^T R, rows m0, a1, m2 of shape (N, 2, 2, 3).
-        c1, s1 = np.cos(q1)[..., None], np.sin(q1)[..., None]
-        ct, st = np.cos(q2 + q3)[..., None], np.sin(q2 + q3)[..., None]
-        r0, r1, r2_ = (R[:, None, None, k, :] for k in range(3))
-        a0 = c1 * r0 + s1 * r1
-        a1 = c1 * r1 - s1 * r0
-        m0 = ct * a0 - st * r2_
-        m22 = (st * a0 + ct * r2_)[..., 2]
-        sw = np.hypot(m0[..., 2], a1[..., 2])[..., None]            # (N, 2, 2, 1)
-        w = np.array([1.0, -1.0])                                   # wrist POSITIVE, NEGATIVE
-        q4 = np.arctan2(w * a1[..., 2, None], w * m0[..., 2, None])
-        q4 = np.where(sw < SINGULAR_EPS, near[:, 3, None, None, None], q4)
-        q5 = np.arctan2(w * sw, m22[..., None])
+        # Wrist: M = Ry(q2 + q3)^T Rz(q1)^T R, rows m0, a1, m2 of shape (N, 2, 2, 3), solved
+        # once (wrist POSITIVE); NEGATIVE is the same wrist turned half a turn.
+        c1, s1 = np.cos(q1)[..., None], np.sin(q1)[..., None]               # (N, 2, 1)
+        ct, st = np.cos(q2 + q3)[..., None], np.sin(q2 + q3)[..., None]     # (N, 2, 2, 1)
+        r0, r1, r2_ = R[:, None, 0, :], R[:, None, 1, :], R[:, None, 2, :]   # (N, 1, 3)
+        a0 = (c1 * r0 + s1 * r1)[:, :, None, :]                            # (N, 2, 1, 3)
+        a1 = (c1 * r1 - s1 * r0)[:, :, None, :]
+        m0 = ct * a0 - st * r2_[:, :, None, :]                              # (N, 2, 2, 3)
+        m22 = st[..., 0] * a0[..., 2] + ct[..., 0] * R[:, None, None, 2, 2]
+        a12 = a1[..., 2]
+        sw = np.hypot(m0[..., 2], a12)                                      # (N, 2, 2)
+        singular = sw < SINGULAR_EPS
+        q4 = np.where(singular, near[:, 3, None, None], np.arctan2(a12, m0[..., 2]))
+        q5 = np.arctan2(sw, m22)
         c4, s4 = np.cos(q4), np.sin(q4)
-        q6 = np.arctan2(c4 * a1[..., 0, None] - s4 * m0[..., 0, None],
-                        c4 * a1[..., 1, None] - s4 * m0[..., 1, None])
+        q6 = np.arctan2(c4 * a1[..., 0] - s4 * m0[..., 0], c4 * a1[..., 1] - s4 * m0[..., 1])
 
-        shape = q4.shape                                            # (N, 2, 2, 2)
-        q = np.stack([np.broadcast_to(v, shape) for v in
-                      (q1[..., None], q2[..., None], q3[..., None], q4, q5, q6)], axis=-1)
-        q = wrap_angle(q)
-        q[~np.broadcast_to(reach[:, :, None, None], shape)] = np.nan
+        # (N, shoulder, elbow, wrist, joint); wrapped to (-pi, pi] where not atan2's already.
+        q = np.empty((n, 2, 2, 2, 6))
+        q[..., 0] = _wrap_array(q1)[:, :, None, None]
+        q[..., 1] = _wrap_array(q2)[..., None]
+        q[..., 2] = _wrap_array(q3)[..., None]
+        q[..., 0, 3] = q4 = _wrap_array(q4)
+        q[..., 0, 4] = q5
+        q[..., 0, 5] = q6
+        half = np.where(singular, 0.0, math.pi)
+        q[..., 1, 3] = np.where(q4 <= 0.0, q4 + half, q4 - half)
+        q[..., 1, 4] = np.where(q5 < math.pi, -q5, q5)
+        q[..., 1, 5] = np.where(q6 <= 0.0, q6 + half, q6 - half)
+        q[~reach] = np.nan
         return q.reshape(n, 8, 6)
+
+
+def _by_bound(items: list[tuple]) -> list[tuple]:
+    """Two (bound, ...) items (or fewer), the smaller bound first (the first on a tie)."""
+    if len(items) == 2 and items[1][0] < items[0][0]:
+        return [items[1], items[0]]
+    return items
 
 
 def _fit_range(q, near, lower, upper) -> tuple[list[float], float] | None:
@@ -455,18 +556,22 @@ def _fit_range(q, near, lower, upper) -> tuple[list[float], float] | None:
 
     Returns (joints, squared distance to near), or None if a joint has no value in range.
     """
-    out, dist = [], 0.0
-    for a, n, lo, hi in zip(q, near, lower, upper):
-        if not (lo <= a <= hi and abs(a - n) <= math.pi):   # else: in range and nearest already
+    out, dist, pi = list(q), 0.0, math.pi
+    for j, (a, n, lo, hi) in enumerate(zip(q, near, lower, upper)):
+        if not (lo <= a <= hi and -pi <= a - n <= pi):   # else: in range and nearest already
+            turned = a + _TWO_PI * round((n - a) / _TWO_PI)  # the turn nearest n, if in range
+            if lo <= turned <= hi:
+                out[j] = a = turned
+                dist += (a - n) * (a - n)
+                continue
             k_min = math.ceil((lo - _RANGE_TOL - a) / _TWO_PI)
             k_max = math.floor((hi + _RANGE_TOL - a) / _TWO_PI)
             if k_min > k_max:
                 return None
             # |a + 2 pi k - n| is convex in k: clamp the unconstrained best turn into the range.
             k = min(max(round((n - a) / _TWO_PI), k_min), k_max)
-            a = min(max(a + _TWO_PI * k, lo), hi)
-        out.append(a)
-        dist += (a - n) ** 2
+            a = out[j] = min(max(a + _TWO_PI * k, lo), hi)
+        dist += (a - n) * (a - n)
     return out, dist
 
 

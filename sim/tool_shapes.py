@@ -25,11 +25,11 @@ def _box(size, xyz, rgba) -> str:
             f'<collision>{org}{geo}</collision>')
 
 
-def _cyl(radius, length, z, rgba) -> str:
+def _cyl(radius, length, z, rgba, collide: bool = True) -> str:
     geo = f'<geometry><cylinder radius="{radius}" length="{length}"/></geometry>'
     org = f'<origin xyz="0 0 {z}"/>'
     return (f'<visual>{org}{geo}<material name="m"><color rgba="{rgba}"/></material></visual>'
-            f'<collision>{org}{geo}</collision>')
+            + (f'<collision>{org}{geo}</collision>' if collide else ''))
 
 
 def _inertial(mass, xyz, r) -> str:
@@ -78,9 +78,14 @@ def _cup_urdf(s: ToolSpec) -> str:
     stem = s.length - PLATE_T - cup_h
     if stem <= 0:
         raise ValueError(f"tool {s.name!r}: a vacuum cup needs length > {PLATE_T + cup_h} m")
+    # The rubber lip touches as a dome (a sphere of the cup's radius, its lowest point the tip):
+    # one contact point, so the force depends on how deep it is pressed, not on how many
+    # points a flat face happens to touch with as it slides.
+    lip = (f'<collision><origin xyz="0 0 {s.length - s.cup_radius}"/><geometry>'
+           f'<sphere radius="{s.cup_radius}"/></geometry></collision>')
     plate = (_cyl(0.04, PLATE_T, PLATE_T / 2, _GREY)
              + _cyl(0.012, stem, PLATE_T + stem / 2, _DARK)
-             + _cyl(s.cup_radius, cup_h, s.length - cup_h / 2, _BLACK)
+             + _cyl(s.cup_radius, cup_h, s.length - cup_h / 2, _BLACK, collide=False) + lip
              + _inertial(s.mass, (0, 0, s.length / 3), 0.04))
     return (f'<?xml version="1.0"?>\n<robot name="{s.name}">\n<link name="plate">{plate}</link>\n'
             '</robot>\n')

@@ -162,16 +162,19 @@ class ParallelGripper(Tool):
                                           force=FINGER_FORCE, maxVelocity=self.spec.finger_speed)
 
     def _between_fingers(self) -> tuple[int | None, float]:
-        """The part between the fingers, and its width across them (m)."""
+        """The part between the fingers (its centre between them across and along them, and
+        some of its height within their length), and its width across them (m)."""
         gap = 2 * self.bc.getJointState(self.body, 0)[0]
         top = PLATE_T + GRIPPER_BODY
         _, torn = self.plate_pose()
+        tool = rotation(torn)
         for part in self.parts.values():
             ppos, porn = self.bc.getBasePositionAndOrientation(part.body)
             c = self.to_tool(ppos)
-            if abs(c[0]) < gap / 2 and abs(c[1]) < FINGER[1] and top < c[2] < self.spec.length:
-                across = rotation(torn)[:, 0] @ rotation(porn)
-                width = float(np.abs(across) @ np.asarray(part.size))
+            extent = np.abs(tool.T @ rotation(porn)) @ np.asarray(part.size) / 2
+            if (abs(c[0]) < gap / 2 and abs(c[1]) < FINGER[1]
+                    and top < c[2] + extent[2] and c[2] - extent[2] < self.spec.length):
+                width = 2 * float(extent[0])
                 if width < gap:
                     return part.body, width
         return None, 0.0

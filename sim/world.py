@@ -173,9 +173,12 @@ class World:
             self.mounted.actuate(wire, value)
 
     def read_input(self, wire: str) -> bool:
-        """The present value of a world-wired input (cell.WORLD_INPUT_WIRES or zone:<name>)."""
+        """The present value of a world-wired input (cell.WORLD_INPUT_WIRES, zone:<name> or
+        tool_id:<bit>)."""
         if wire.startswith("zone:"):
             return self.part_in_zone(wire[5:])
+        if wire.startswith("tool_id:"):
+            return self.mounted is not None and bool(self.mounted.spec.id >> int(wire[8:]) & 1)
         if wire == "tool_present":
             return self.mounted is not None or self._tool_at_flange() is not None
         return self.mounted is not None and self.mounted.input(wire)

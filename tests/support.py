@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import queue
 import subprocess
 import sys
@@ -20,7 +21,8 @@ from landscape.sim.recorder import read_recording
 from landscape.server.app import RunningServer, serve
 from landscape.server.config import ServerConfig
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
-                          event_service_pb2, event_service_pb2_grpc)
+                          end_effector_pb2, event_service_pb2, event_service_pb2_grpc, motion_pb2,
+                          sensing_pb2, types_pb2)
 
 
 def start_server(**config) -> RunningServer:
@@ -131,6 +133,17 @@ class Arm:
             pass
         self._received.put(None)
 
+    def next_event(self, timeout: float = 60.0):
+        """The next event of the subscription (landscape.v1 Event); AssertionError after
+        `timeout` or if the stream ended."""
+        try:
+            event = self._received.get(timeout=timeout)
+        except queue.Empty:
+            raise AssertionError(f"no event within {timeout} s") from None
+        if event is None:
+            raise AssertionError("event stream ended")
+        return event
+
     def wait_command(self, command_id, phases=("command_done", "command_failed"),
                      timeout: float = 120.0) -> list:
         """The events of `command_id` up to one of `phases`; AssertionError after `timeout`."""
@@ -161,3 +174,33 @@ class Arm:
 
     def tip(self) -> np.ndarray:
         return self.kin.forward(self.joints())
+
+    def tool_tip(self) -> np.ndarray:
+        """The tool tip (4x4, m) in the base frame, through the present tool offset."""
+        return self.tip() @ self.server.device.settings.tool_offset
+
+    def move_down_to(self, x: float, y: float, z: float) -> list:
+        """A joint move putting the tool tip at (x, y, z) (m, world), pointing down; its
+        events."""
+        reply = self.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
+            values=[x, y, z, math.pi, 0, 0]), timeout=30)
+        events = self.wait_command(reply.ret_val.command_id)
+        assert events[-1].event_id == "command_done", events[-1]
+        return events
+
+    def reading(self, sensor: str = "force_sensor") -> np.ndarray:
+        return np.array(self.device.GetSensorReading(
+            sensing_pb2.GetSensorReadingRequest(sensor_type=sensor), timeout=10).current_data)
+
+    def get_tool(self, name: str) -> None:
+        self.device.GetTool(end_effector_pb2.GetToolRequest(tool_id=name), timeout=120)
+
+    def history(self) -> list:
+        """Every event the bus still keeps, oldest first."""
+        subscription = self.server.bus.subscribe(after_sequence=0)
+        events = []
+        while (event := subscription.get(timeout=0.1)) is not None:
+            events.append(event)
+        subscription.close()
+        return events

@@ -50,7 +50,7 @@ def status(state: CliState) -> None:
         f"tool tip    x {pose['x']:.4f}  y {pose['y']:.4f}  z {pose['z']:.4f}  "
         f"roll {pose['roll']:.4f}  pitch {pose['pitch']:.4f}  yaw {pose['yaw']:.4f}  "
         f"(world frame; {units['linear']}, {units['angular']})",
-        f"tool        " + (f"{tool['current_ee'] or 'none'} {tool['ee_state']}".strip()
+        "tool        " + (f"{tool['current_ee'] or 'none'} {tool['ee_state']}".strip()
                            if tool else "(not reported by this server)"),
     ]
     state.out.result(data, "\n".join(lines))

@@ -60,7 +60,8 @@ class Trajectory:
 @dataclass(frozen=True, eq=False)
 class Limits:
     """Joint limits already scaled by the set percent speed/accel (rad/s, rad/s^2, shape (6,)), and
-    optional tool-tip Cartesian limits for straight/arc motions (m/s, rad/s; None = none).
+    optional tool-tip Cartesian limits for straight/arc motions (m/s, rad/s, m/s^2, rad/s^2;
+    None = none): they bound the tool tip's speed and acceleration along its path.
 
     position_min / position_max (6,) rad, when given, bound every sample of the timed path (a
     spline through waypoints in range may still swing out of range between them).
@@ -70,8 +71,14 @@ class Limits:
     acceleration: np.ndarray
     linear_velocity: float | None = None
     angular_velocity: float | None = None
+    linear_acceleration: float | None = None     # m/s^2 of the tool tip
+    angular_acceleration: float | None = None    # rad/s^2 of the tool
     position_min: np.ndarray | None = field(default=None)
     position_max: np.ndarray | None = field(default=None)
+    # The arm's own maxima (rad/s (6,), m/s), unscaled: what a waypoint's pass speed (see
+    # timing.time_path) is a fraction of. None: the limits above.
+    max_velocity: np.ndarray | None = field(default=None)
+    max_linear_velocity: float | None = None
 
     def __post_init__(self):
         for name in ("velocity", "acceleration"):
@@ -79,11 +86,12 @@ class Limits:
             if v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
                 raise ValueError(f"{name} limits must be 6 positive finite values, got {v!r}")
             object.__setattr__(self, name, v)
-        for name in ("linear_velocity", "angular_velocity"):
+        for name in ("linear_velocity", "angular_velocity", "linear_acceleration",
+                     "angular_acceleration"):
             v = getattr(self, name)
             if v is not None and not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive and finite, or None; got {v!r}")
-        for name in ("position_min", "position_max"):
+        for name in ("position_min", "position_max", "max_velocity"):
             v = getattr(self, name)
             if v is not None:
                 v = np.asarray(v, dtype=float)
@@ -93,27 +101,34 @@ class Limits:
 
     @classmethod
     def scaled(cls, arm, speed_percent: float, accel_percent: float,
-               linear_velocity: float | None = None,
-               angular_velocity: float | None = None) -> "Limits":
+               linear_velocity: float | None = None, angular_velocity: float | None = None,
+               linear_acceleration: float | None = None,
+               angular_acceleration: float | None = None) -> "Limits":
         """The arm's (sim.arm.ArmModel) joint limits times speed_percent / 100 (velocity) and
         accel_percent / 100 (acceleration), percents in (0, 100].
 
-        Cartesian limits (used when a motion passes its tool path): an explicit value (the
-        seed's LINEAR_SPEED / ANGULAR_SPEED, m/s and rad/s) is taken as is, capped at the arm's
-        maximum; None takes the arm's maximum times speed_percent / 100 (PERCENT_SPEED applies
-        "globally to both joint and Cartesian moves"). Joint ranges come from the arm.
+        Cartesian limits (used when a motion passes its tool path), seed 3.2.1: the percents
+        apply "globally to both joint and Cartesian moves", so the tool is held to the arm's
+        Cartesian maximum times the percent; an explicit absolute value (LINEAR_SPEED,
+        ANGULAR_SPEED, LINEAR_ACCEL, ANGULAR_ACCEL: m/s, rad/s, m/s^2, rad/s^2) is a cap of its
+        own, NOT multiplied by the percent. The lower of the two holds. Joint ranges come from
+        the arm.
         """
         for name, p in (("speed_percent", speed_percent), ("accel_percent", accel_percent)):
             if not 0.0 < p <= 100.0:
                 raise ValueError(f"{name} must be in (0, 100], got {p!r}")
         k_v, k_a = speed_percent / 100.0, accel_percent / 100.0
-        lin = (arm.max_linear_velocity * k_v if linear_velocity is None
-               else min(float(linear_velocity), arm.max_linear_velocity))
-        ang = (arm.max_angular_velocity * k_v if angular_velocity is None
-               else min(float(angular_velocity), arm.max_angular_velocity))
+
+        def cap(maximum: float, k: float, absolute: float | None) -> float:
+            return maximum * k if absolute is None else min(float(absolute), maximum * k)
+
         return cls(np.asarray(arm.max_velocity) * k_v, np.asarray(arm.max_acceleration) * k_a,
-                   lin, ang, np.asarray(arm.joint_min, dtype=float),
-                   np.asarray(arm.joint_max, dtype=float))
+                   cap(arm.max_linear_velocity, k_v, linear_velocity),
+                   cap(arm.max_angular_velocity, k_v, angular_velocity),
+                   cap(arm.max_linear_acceleration, k_a, linear_acceleration),
+                   cap(arm.max_angular_acceleration, k_a, angular_acceleration),
+                   np.asarray(arm.joint_min, dtype=float), np.asarray(arm.joint_max, dtype=float),
+                   np.asarray(arm.max_velocity, dtype=float), float(arm.max_linear_velocity))
 
 
 class Reason(enum.StrEnum):
@@ -125,12 +140,14 @@ class Reason(enum.StrEnum):
     CONFIGURATION_CHANGE = "CONFIGURATION_CHANGE"  # reachable only in another configuration
     LIMITS = "LIMITS"                              # the timing cannot meet the limits
     DEGENERATE = "DEGENERATE"                      # the geometry is undefined (collinear arc, ...)
+    TOO_LONG = "TOO_LONG"                          # the timed motion lasts longer than allowed
 
 
 class PlanningError(ValueError):
     """Why a motion cannot be planned, with where: `index` (waypoint index) or `fraction` (0..1
     along a Cartesian segment) when known, and a `reason` code: "OUT_OF_WORKSPACE",
-    "OUT_OF_JNT_RANGE", "SINGULARITY", "CONFIGURATION_CHANGE", "LIMITS", "DEGENERATE"."""
+    "OUT_OF_JNT_RANGE", "SINGULARITY", "CONFIGURATION_CHANGE", "LIMITS", "DEGENERATE",
+    "TOO_LONG"."""
 
     def __init__(self, reason: str, message: str = "", *, index: int | None = None,
                  fraction: float | None = None):

@@ -5,18 +5,27 @@ event loop, a command thread); the ones not defined here answer UNIMPLEMENTED af
 """
 from __future__ import annotations
 
-from landscape.server import convert, path_planning, services
+import asyncio
+
+from landscape.server import cell_view, convert, path_planning, services
 from landscape.server.device import Device
+from landscape.server.errors import ControllerFailure, Stopped
 from landscape.server.servicers.guard import blocking, guarded, lease_of
 from landscape.server.targets import Frame
+from landscape.server.units import Units, pose_matrix
+from landscape.server.workcell import Workcell
 from landscape.sim.arm import urdf
-from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
+from landscape.v1 import (control_pb2, end_effector_pb2, motion_pb2, sensing_pb2, settings_pb2,
+                          types_pb2)
+
+JOG_END_TIMEOUT = 5.0   # s for a jogging arm to come to rest once its stream ends
 
 
 @guarded(services.DEVICE)
 class DeviceServicer(services.DEVICE.servicer_base):
-    def __init__(self, device: Device, hub, dispatch, limits):
-        self.device, self.hub, self.dispatch, self.limits = device, hub, dispatch, limits
+    def __init__(self, device: Device, workcell: Workcell, hub, dispatch, limits):
+        self.device, self.workcell, self.hub = device, workcell, hub
+        self.dispatch, self.limits = dispatch, limits
 
     # ---- 3.1 ----
     def Lock(self, request, context):
@@ -113,13 +122,17 @@ class DeviceServicer(services.DEVICE.servicer_base):
             units=convert.units_to_pb(s.units))
 
     def GetRobotPosition(self, request, context):
+        joints, world, units = self._position()
+        return settings_pb2.GetRobotPositionResponse(
+            ret_val=convert.ok(), joint_position=joints, world_position=world, units=units)
+
+    def _position(self):
+        """The arm now: joints, the tool tip in the world frame, their units (as sent)."""
         sample = self.device.feedback()
         units = self.device.settings.units
         world = self.hub.tool_pose(sample.sequence, sample.position, Frame.WORLD)
-        return settings_pb2.GetRobotPositionResponse(
-            ret_val=convert.ok(), joint_position=units.angle_from_si(sample.position).tolist(),
-            world_position=convert.matrix_to_pose(world, units),
-            units=convert.units_to_pb(units))
+        return (units.angle_from_si(sample.position).tolist(),
+                convert.matrix_to_pose(world, units), convert.units_to_pb(units))
 
     def GetMotionControlState(self, request, context):
         motion, mode = self.device.motion_control_state()
@@ -182,21 +195,129 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.started(self.device.motions.path_move(request.path_name, cycles)))
 
     # ---- 3.6 interruptions ----
-    def StopMotion(self, request, context):
-        self.device.motions.stop_motion()
+    # Stops are sent to the cycle from the event loop, at once; only the wait for the arm to
+    # come to rest takes a thread (DESIGN.md 5: a stop never waits behind anything).
+    async def StopMotion(self, request, context):
+        motions = self.device.motions
+        motion = motions.request_stop()
+        await self.dispatch.run(self.dispatch.immediate, motions.wait_at_rest, motion)
         return motion_pb2.StopMotionResponse(ret_val=convert.ok())
 
     def ResumeMotion(self, request, context):
         self.device.motions.resume_motion()
         return motion_pb2.ResumeMotionResponse(ret_val=convert.ok())
 
-    def AbortMotion(self, request, context):
-        self.device.motions.abort_motion()
+    async def AbortMotion(self, request, context):
+        motions = self.device.motions
+        motion = motions.request_abort()
+        await self.dispatch.run(self.dispatch.immediate, motions.wait_ended, motion)
         return motion_pb2.AbortMotionResponse(ret_val=convert.ok())
 
     def GetTagId(self, request, context):
         path_name, tag = self.device.motions.last_tag
         return settings_pb2.GetTagIdResponse(ret_val=convert.ok(), path_name=path_name, tag_id=tag)
+
+    # ---- 3.7 sensors ----
+    @blocking
+    def GetSensorReading(self, request, context):
+        sensors = self.workcell.sensors
+        kind = sensors.info(request.sensor_type).kind
+        values = sensors.reading(request.sensor_type)
+        units = self.device.settings.units
+        return sensing_pb2.GetSensorReadingResponse(
+            ret_val=convert.ok(), current_data=convert.sensor_to_pb(kind, values, units),
+            units=convert.units_to_pb(units))
+
+    def MoveReact(self, request, context):
+        units = self.device.settings.units
+        kind = self.workcell.sensors.info(request.sensor_type).kind
+        command_id = self.workcell.guarded.move_react(
+            request.sensor_type, convert.lengths3(request.motion, units),
+            convert.lengths3(request.compliance, units), request.speed, request.compliance_speed,
+            convert.sensor_to_si(kind, convert.vector3(request.thresholds), units),
+            convert.vector3(request.gains),
+            convert.sensor_to_si(kind, convert.vector3(request.envelope_max), units))
+        return sensing_pb2.MoveReactResponse(ret_val=convert.started(command_id))
+
+    def Comply(self, request, context):
+        arrays = convert.comply_arrays(request, self.device.settings.units)
+        command_id = self.workcell.guarded.comply(
+            request.sensor_type, max_timeout=request.max_timeout,
+            panic_code=request.panic_stop_code, speed=request.speed,
+            compliance_speed=request.compliance_speed,
+            envelope_max=convert.vector3(request.envelope_max), **arrays)
+        return sensing_pb2.ComplyResponse(ret_val=convert.started(command_id))
+
+    def ManualControl(self, request, context):
+        mode = convert.enum_value(convert.MANUAL_CONTROL, request.type, "type")
+        self.workcell.manual.set_mode(mode)
+        return sensing_pb2.ManualControlResponse(ret_val=convert.ok(f"manual control {mode}"))
+
+    async def Jog(self, request_iterator, context):
+        requests = aiter(request_iterator)
+        first = await anext(requests, None)
+        if first is None:
+            return
+        lease = lease_of(context)
+        deadman = first.deadman_timeout_ms / 1000.0
+
+        def start():
+            with self.device.command("Jog", lease):
+                return self.workcell.manual.start(deadman)
+        session = await self.dispatch.run(self.dispatch.commands, start)
+        request, pending = first, None
+        try:
+            while request is not None and not session.ended:
+                frame = convert.enum_value(convert.FRAMES, request.frame, "frame")
+                session.request(frame, request.velocity, request.deadman)
+                joints, world, units = self._position()
+                yield sensing_pb2.JogResponse(ret_val=convert.ok("jogging"), joint_position=joints,
+                                              world_position=world, units=units)
+                pending = asyncio.ensure_future(anext(requests, None))
+                while not pending.done() and not session.ended:
+                    await asyncio.wait({pending}, timeout=0.01)
+                request = pending.result() if pending.done() else None
+        finally:
+            if pending is not None:
+                pending.cancel()
+            session.end()
+        for _ in range(round(JOG_END_TIMEOUT / 0.01)):
+            if session.ended:
+                break
+            await asyncio.sleep(0.01)
+        motion = session.motion
+        why = motion.report.get("message", "")
+        if motion.phase == "failed" or not session.ended:
+            raise ControllerFailure(f"jogging failed: {why or 'the arm did not come to rest'}")
+        if motion.phase != "done":
+            raise Stopped(f"the jog session ended: {why or motion.phase}")
+
+    # ---- 3.8 end effector ----
+    def GetEndEffectorState(self, request, context):
+        tool, state = self.workcell.tools.state()
+        return end_effector_pb2.GetEndEffectorStateResponse(ret_val=convert.ok(), current_ee=tool,
+                                                            ee_state=state)
+
+    def GetTool(self, request, context):
+        return end_effector_pb2.GetToolResponse(
+            ret_val=convert.ok(self.workcell.tools.get_tool(request.tool_id)))
+
+    def PutTool(self, request, context):
+        return end_effector_pb2.PutToolResponse(
+            ret_val=convert.ok(self.workcell.tools.put_tool(request.tool_id)))
+
+    def ActivateTool(self, request, context):
+        return end_effector_pb2.ActivateToolResponse(
+            ret_val=convert.ok(self.workcell.tools.activate(request.tool_id, request.bit_field)))
+
+    def DeactivateTool(self, request, context):
+        return end_effector_pb2.DeactivateToolResponse(ret_val=convert.ok(
+            self.workcell.tools.deactivate(request.tool_id, request.bit_field)))
+
+    @blocking
+    def SendCommand(self, request, context):
+        result = self.workcell.vendor.run(request.input, lease_of(context))
+        return end_effector_pb2.SendCommandResponse(ret_val=convert.ok(), result=result)
 
     # ---- extensions ----
     def Reset(self, request, context):
@@ -216,6 +337,15 @@ class DeviceServicer(services.DEVICE.servicer_base):
         estop, door_open = self.device.operate_panel(action)
         return control_pb2.OperatePanelResponse(ret_val=convert.ok(action), estop_pressed=estop,
                                                 door_open=door_open)
+
+    def GetCellDescription(self, request, context):
+        scene = self.device.collisions
+        base = scene.cell.base
+        return control_pb2.GetCellDescriptionResponse(
+            ret_val=convert.ok(), cell_name=scene.cell.name,
+            base=convert.matrix_to_pose(pose_matrix(base.xyz, base.rpy), Units()),
+            floor=scene.cell.world.floor,
+            bodies=[convert.cell_body_to_pb(body) for body in cell_view.bodies(scene)])
 
     def GetRobotDescription(self, request, context):
         arm = self.device.arm

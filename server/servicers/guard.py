@@ -67,22 +67,26 @@ class Dispatch:
             pool.shutdown(wait=False, cancel_futures=True)
 
 
-async def abort(context, rpc: str, error: CommandError) -> None:
-    status = to_status(error)
-    log.info("refused %s from %s: %s %s: %s", rpc, context.peer(), error.status.name,
-             error.reason, error.message)
+# Raised through the guard untouched: the call was cancelled, or it ends already.
+PASSING = (asyncio.CancelledError, grpc.aio.AbortError, GeneratorExit)
+
+
+async def end_call(context, rpc: str, exc: Exception) -> None:
+    """End the call with the status of `exc`: a CommandError's own, else INTERNAL (logged with
+    its traceback); either way one line in the log says who was refused and why."""
+    if not isinstance(exc, CommandError):
+        log.error("%s failed unexpectedly", rpc, exc_info=exc)
+        exc = Internal(f"{rpc} failed inside the server: {type(exc).__name__}: {exc}")
+    status = to_status(exc)
+    log.info("refused %s from %s: %s %s: %s", rpc, context.peer(), exc.status.name,
+             exc.reason, exc.message)
     await context.abort(status.code, status.details, status.trailing_metadata)
-
-
-async def fail(context, rpc: str, exc: BaseException) -> None:
-    log.error("%s failed unexpectedly", rpc, exc_info=exc)
-    await abort(context, rpc, Internal(f"{rpc} failed inside the server: "
-                                       f"{type(exc).__name__}: {exc}"))
 
 
 def _missing(full_name: str):
     def body(self, request, context):
         raise Unimplemented(f"{full_name} is not implemented yet by this device server")
+    body.unimplemented = True   # kept by functools.wraps: tests can list what is missing
     return body
 
 
@@ -105,16 +109,14 @@ def _unary(name: str, body):
             pool = (self.dispatch.reads if read_only else
                     self.dispatch.immediate if rule.immediate else self.dispatch.commands)
             return await self.dispatch.run(pool, run_command, self, request, context, lease)
-        except CommandError as error:
-            await abort(context, name, error)
-        except (asyncio.CancelledError, grpc.aio.AbortError):
+        except PASSING:
             raise
         except Exception as exc:
-            await fail(context, name, exc)
+            await end_call(context, name, exc)
     return unary
 
 
-def _stream(name: str, body, streaming_response: bool, spec_name: str):
+def _stream(name: str, body, streaming_response: bool):
     """An async body (generator for server streams, coroutine for client streams)."""
 
     async def admitted(self, request, context):
@@ -131,12 +133,10 @@ def _stream(name: str, body, streaming_response: bool, spec_name: str):
                 slot = await admitted(self, request, context)
                 async for item in body(self, request, context):
                     yield item
-            except CommandError as error:
-                await abort(context, name, error)
-            except (asyncio.CancelledError, grpc.aio.AbortError, GeneratorExit):
+            except PASSING:
                 raise
             except Exception as exc:
-                await fail(context, name, exc)
+                await end_call(context, name, exc)
             finally:
                 if slot is not None:
                     slot.release()
@@ -147,12 +147,10 @@ def _stream(name: str, body, streaming_response: bool, spec_name: str):
         try:
             await admitted(self, request, context)
             return await body(self, request, context)
-        except CommandError as error:
-            await abort(context, name, error)
-        except (asyncio.CancelledError, grpc.aio.AbortError):
+        except PASSING:
             raise
         except Exception as exc:
-            await fail(context, name, exc)
+            await end_call(context, name, exc)
     return call
 
 
@@ -162,10 +160,10 @@ def guarded(spec):
         for method in spec.descriptor.methods:
             body = cls.__dict__.get(method.name) or _missing(f"{spec.full_name}.{method.name}")
             if inspect.isasyncgenfunction(body) or inspect.iscoroutinefunction(body):
-                wrapped = _stream(method.name, body, method.server_streaming, spec.full_name)
+                wrapped = _stream(method.name, body, method.server_streaming)
             elif method.client_streaming or method.server_streaming:
                 wrapped = _stream(method.name, _as_async(body, method.server_streaming),
-                                  method.server_streaming, spec.full_name)
+                                  method.server_streaming)
             else:
                 wrapped = _unary(method.name, body)
             setattr(cls, method.name, wrapped)

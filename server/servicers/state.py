@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from landscape.server import convert, services
-from landscape.server.errors import Unimplemented
 from landscape.server.servicers.guard import guarded
 from landscape.server.state_stream import StateHub
 from landscape.v1 import state_service_pb2 as pb
@@ -15,14 +14,11 @@ class StateServicer(services.STATE.servicer_base):
         self.device, self.hub, self.dispatch, self.limits = device, hub, dispatch, limits
 
     async def StreamState(self, request, context):
-        if request.sensors:
-            raise Unimplemented("sensor readings in the state stream come with the sensor "
-                                "commands (GetSensorReading), which this server lacks yet")
         units = (convert.units_from_pb(request.units.linear, request.units.angular)
                  if request.HasField("units") else self.device.settings.units)
         frame = (None if request.frame == types_pb2.REFERENCE_FRAME_UNSPECIFIED else
                  convert.enum_value(convert.FRAMES, request.frame, "frame"))
-        view, note = self.hub.view(request.rate_hz, frame, units)
+        view, note = self.hub.view(request.rate_hz, frame, units, tuple(request.sensors))
         yield pb.StreamStateResponse(started=pb.StreamStarted(
             granted_rate_hz=1.0 / (view.period * self.device.link.cycle_time),
             cycle_time=self.device.link.cycle_time, note=note,

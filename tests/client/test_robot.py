@@ -4,8 +4,8 @@ from __future__ import annotations
 import grpc
 import pytest
 
-from landscape.client import (CommandAborted, DeviceState, Frame, NotImplementedByServer,
-                              NotLockHolder, Robot, TagPoint, WrongState)
+from landscape.client import (CommandAborted, DeviceState, Frame, NotLockHolder, Robot,
+                              TagPoint, WrongState)
 from landscape.client import errors
 from landscape.server.states import State
 from landscape.v1 import control_pb2
@@ -96,8 +96,9 @@ def test_refusals_map_to_the_vocabulary_with_the_seeds_return_code(server):
         with pytest.raises(errors.InvalidArgument) as bad:
             robot.move_absolute([0.1, 0.2], Frame.JOINT)   # 2 values for 6 joints
         assert bad.value.ret_code == -2
-        with pytest.raises(NotImplementedByServer):
-            robot.send_command("help")
+        with pytest.raises(errors.InvalidArgument) as unknown:   # the vendor hook's list
+            robot.send_command("reboot")
+        assert unknown.value.ret_code == -2 and "recorder start" in unknown.value.message
         assert isinstance(out.value, errors.CommandRefused)
         assert not isinstance(out.value, errors.TransportError)
 

@@ -5,9 +5,14 @@ import pytest
 
 from landscape.gateway.wire import Document, DocumentSplitter, Refused, WireError
 
-from crcl_support import EXAMPLES
+from crcl_support import EXAMPLES, command, pose
 
-COMMANDS = [p.read_bytes().strip() for p in sorted(EXAMPLES.glob("command*.xml"))]
+# NIST's example commands when they are beside the checkout; our own otherwise.
+COMMANDS = [p.read_bytes().strip() for p in sorted(EXAMPLES.glob("command*.xml"))] or [
+    command("InitCanon", 1), command("SetLengthUnits", 2, "<UnitName>meter</UnitName>"),
+    command("MoveTo", 3, "<MoveStraight>true</MoveStraight>" + pose(0.5, 0.1, 0.6)),
+    command("Dwell", 4, "<DwellTime>0.5</DwellTime>"), command("GetStatus", 5),
+    command("EndCanon", 6)]
 
 
 def documents(items):
@@ -66,7 +71,7 @@ def test_a_single_endless_token_ends_the_stream():
 
 
 def test_a_truncated_document_is_refused_where_the_next_declaration_starts():
-    cut = COMMANDS[0][:len(COMMANDS[0]) // 2]
+    cut = COMMANDS[0][:COMMANDS[0].index(b"<CommandID>") + 5]   # inside the body
     out = DocumentSplitter().feed(cut + b"\n" + COMMANDS[1])
     assert isinstance(out[0], Refused) and "truncated" in out[0].reason
     assert documents(out) == [COMMANDS[1]]

@@ -21,6 +21,7 @@ EXPECTED = {
         "GetEndEffectorState", "GetTool", "PutTool", "ActivateTool", "DeactivateTool",
         "SendCommand",
         "Jog", "Reset", "GetDeviceState", "GetRobotDescription", "OperatePanel",
+        "GetCellDescription",
     ],
     services.DIGITAL_IO: ["SetDigitalIO", "GetDigitalIO", "SignalDigitalIO", "ListDigitalIO"],
     services.EVENTS: ["Subscribe", "PostMessage"],

@@ -33,8 +33,8 @@ ACTIVE = {State.RESTING, State.MOVING, State.PAUSED}
 READS = ["GetUnits", "GetVelocities", "GetAccelerations", "GetMaxVelocities",
          "GetMaxAccelerations", "GetToolOffsets", "GetRobotPosition", "GetMotionControlState",
          "GetTagId", "GetSensorReading", "GetEndEffectorState", "SendCommand", "GetDeviceState",
-         "GetRobotDescription", "OperatePanel", "GetDigitalIO", "SignalDigitalIO",
-         "ListDigitalIO", "Subscribe", "Connect", "StreamState"]
+         "GetRobotDescription", "GetCellDescription", "OperatePanel", "GetDigitalIO",
+         "SignalDigitalIO", "ListDigitalIO", "Subscribe", "Connect", "StreamState"]
 EXPECTED = {
     **{rpc: ALL for rpc in READS},
     "Lock": {State.UNLOCKED},                                   # 3.1.1

@@ -315,8 +315,8 @@ def _scenario():
             ctrl.follower.inject = JointCmd(ctrl.get().pos + 1.0, np.zeros(6))
         ctrl.step()
         f = ctrl.get()
-        out.append(np.concatenate([f.pos, f.vel, f.pos_err, f.torque, ctrl.sensor("force_sensor"),
-                                   ctrl.sensor("laser_standoff_sensor"),
+        out.append(np.concatenate([f.pos, f.vel, f.pos_err, f.torque, ctrl.read_sensor("force_sensor"),
+                                   ctrl.read_sensor("laser_standoff_sensor"),
                                    ctrl.world.part_pose("block_1")[0]]))
     return np.array(out), ctrl.events
 

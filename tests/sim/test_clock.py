@@ -245,7 +245,7 @@ def test_real_time_clock_drives_the_arm(tmp_path):
         pose, _config = arm.forward_kin(np.zeros(6))
         assert pose.shape == (4, 4)
         # what the LLI has no call for: a picklable function run between cycles
-        wrench = clock.between_cycles(operator.methodcaller("sensor", "force_sensor"))
+        wrench = clock.between_cycles(operator.methodcaller("read_sensor", "force_sensor"))
         assert np.asarray(wrench).shape == (6,)
 
         # messages both ways: a move down, feedback up; recorder through the proxy

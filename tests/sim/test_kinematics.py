@@ -15,8 +15,8 @@ from landscape.sim.kinematics import (BRANCHES, Config, Kinematics, PinocchioMod
                                       ReversingResult, Shoulder, wrap_angle)
 
 TX90 = arm_model()
-TOL_POS = 1e-9   # m
-TOL_ROT = 1e-9   # rad
+TOL_POS = 1e-12  # m: the closed form is exact to rounding
+TOL_ROT = 1e-12  # rad
 OK = ReversingResult.OK
 
 

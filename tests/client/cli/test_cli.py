@@ -104,8 +104,8 @@ def test_lock_alone_is_a_usage_error_that_points_to_session(server):
 def test_exit_codes_for_no_server_and_commands_not_built(server):
     unreachable = landscape("127.0.0.1:1", "--connect-timeout", "0.5", "status")
     assert unreachable.returncode == 3 and "no device server" in unreachable.stderr
-    unbuilt = landscape(server.target, "io", "get", "1")
-    assert unbuilt.returncode == 5 and "not implemented" in unbuilt.stderr
+    refused = landscape(server.target, "io", "get", "9")     # no unit 9: the device refuses
+    assert refused.returncode == 1 and "no I/O unit 9" in refused.stderr
 
 
 def test_crcl_run_without_a_gateway_says_so(tmp_path):

@@ -248,3 +248,63 @@ def test_timed_reorientation_keeps_the_angular_speed_limit(kin):
     rate = rotation_angle(R[:-1], R[1:]) / DT
     assert rate.max() <= 0.5 * (1 + LIMIT_SLACK) and rate.max() >= 0.99 * 0.5
     assert np.linalg.norm(tip(tr.positions)[:, :3, 3] - start[:3, 3], axis=1).max() < 1e-5
+
+
+def tip_accelerations(tip, positions) -> tuple[np.ndarray, np.ndarray]:
+    """Per-cycle linear (m/s^2) and angular (rad/s^2) tip accelerations of sampled joints, held
+    at rest before and after: second differences of positions, differences of rotation steps."""
+    poses = tip(np.concatenate([positions[:1], positions, positions[-1:]]))
+    p = poses[:, :3, 3]
+    linear = np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=1) / DT**2
+    R = poses[:, :3, :3]
+    steps = []
+    for Ra, Rb in zip(R[:-1], R[1:]):
+        M = Rb @ Ra.T
+        angle = rotation_angle(Ra, Rb)
+        axis = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
+        n = np.linalg.norm(axis)
+        steps.append(axis * (angle / n) if n > 0 else np.zeros(3))
+    angular = np.linalg.norm(np.diff(steps, axis=0), axis=1) / DT**2
+    return linear, angular
+
+
+@pytest.mark.parametrize("tcp", [None, TCP], ids=["flange", "tool-tip"])
+def test_timed_line_keeps_the_linear_acceleration_limit_and_reaches_it(kin, tcp):
+    q0 = joints_at(kin, [0.5, -0.25, 0.6], tcp=tcp)
+    tip = tool_pose(kin, tcp)
+    goal = tip(q0)
+    goal[:3, 3] += [0.0, 0.5, 0.0]
+    limits = Limits.scaled(ARM, 100, 100, linear_velocity=1.0, linear_acceleration=0.8)
+    tr = time_path(straight_line(kin, q0, goal, tcp=tcp), limits, DT, tool_path=tip)
+    linear, _ = tip_accelerations(tip, tr.positions)
+    assert linear.max() <= 0.8 * (1 + 1e-6)
+    assert linear.max() >= 0.98 * 0.8
+    # Triangle profile on 0.5 m at 0.8 m/s^2 (never reaches 1 m/s): 2 sqrt(d / a).
+    assert tr.duration == pytest.approx(2 * math.sqrt(0.5 / 0.8), rel=0.01)
+
+
+def test_timed_reorientation_keeps_the_angular_acceleration_limit(kin):
+    q0 = joints_at(kin, [0.5, 0.0, 0.5], tcp=TCP)
+    tip = tool_pose(kin, TCP)
+    goal = tip(q0) @ pose_matrix([0, 0, 0], [0.0, 0.0, 1.2])
+    limits = Limits.scaled(ARM, 100, 100, angular_acceleration=2.0)
+    tr = time_path(straight_line(kin, q0, goal, tcp=TCP), limits, DT, tool_path=tip)
+    _, angular = tip_accelerations(tip, tr.positions)
+    assert 0.98 * 2.0 <= angular.max() <= 2.0 * (1 + 1e-6)
+    assert tr.duration == pytest.approx(2 * math.sqrt(1.2 / 2.0), rel=0.01)
+
+
+def test_timed_arc_keeps_the_linear_acceleration_limit_with_its_centripetal_part(kin):
+    q0 = joints_at(kin, [0.55, -0.15, 0.6])
+    tip = tool_pose(kin)
+    p0 = tip(q0)[:3, 3]
+    via, goal = tip(q0), tip(q0)
+    via[:3, 3] = p0 + [0.15, 0.15, 0.0]
+    goal[:3, 3] = p0 + [0.30, 0.0, 0.0]
+    limits = Limits.scaled(ARM, 100, 100, linear_acceleration=1.5)
+    tr = time_path(arc(kin, q0, via, goal), limits, DT, tool_path=tip)
+    linear, _ = tip_accelerations(tip, tr.positions)
+    assert 0.97 * 1.5 <= linear.max() <= 1.5 * (1 + 1e-6)
+    # On the half circle of radius 0.15 m the centripetal part alone caps the speed at
+    # sqrt(a r) = 0.47 m/s: the duration is at least the length over that speed.
+    assert tr.duration >= math.pi * 0.15 / math.sqrt(1.5 * 0.15)

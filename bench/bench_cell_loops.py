@@ -1,0 +1,162 @@
+"""What issue 10's per-cycle work costs the cycle: the Executor's time per cycle in each mode.
+
+    python bench/bench_cell_loops.py [--cycles 2000]
+
+The real BulletController (default cell, vacuum cup on the flange) stepped in a plain loop;
+the time of the cyclic function alone (the Executor: messages, sensors, I/O, setpoint, ring
+row) is measured with perf_counter, and the whole step (physics included) beside it:
+
+  bare executor       the Executor with sensor and I/O reading taken out: the cost before
+                      issue 10 (same-run baseline)
+  holding             what every cycle pays now: the force/torque sensor, the range sensor
+                      every 5th cycle, the I/O image of the end effector's signals
+  + guarded move      a moveReact's threshold monitor on a straight move
+  + comply            the admittance loop (pinocchio Jacobian and pose, a damped solve)
+  + Cartesian jog     jog integration with its reference pose (pinocchio, a damped solve)
+  + I/O watch         a signalDigitalIO watch polling unit 1 (zones: a look at the world)
+
+Prints figures (microseconds, p50 / p99 / max), decides nothing; the 4 ms cycle is the budget.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+from landscape.server.cycle_inputs import CycleSensors, IoMonitor
+from landscape.server.executor import Executor
+from landscape.server.run_arrays import pack_run
+from landscape.server.feedback import FeedbackRing
+from landscape.server.force_control import ComplySpec, GuardSpec
+from landscape.server.jog_control import MANUAL_TIP_SPEED, JogLimits
+from landscape.server.moves import Planner
+from landscape.server.settings import MotionSettings
+from landscape.server.targets import Frame
+from landscape.sim.bullet_controller import BulletController
+from landscape.sim.cell import load_cell
+from landscape.sim.controller import EnableState
+from landscape.sim.cycle_process import Mailbox
+from landscape.sim.kinematics import Kinematics
+from landscape.sim.shared_array import SharedArrays
+
+CUP = np.eye(4)
+CUP[2, 3] = 0.12
+
+
+class _Nothing:
+    """Stands in for the sensor and I/O readers: the executor before issue 10."""
+
+    values = np.full(7, math.nan)
+    image = np.full(4, math.nan)
+    watch_range = False
+
+    def read(self, *args):
+        return self.values
+
+    def poll(self, *args):
+        pass
+
+    def handle(self, msg):
+        pass
+
+
+def _controller(bare: bool):
+    cell = load_cell()
+    mailbox = Mailbox()
+    executor = Executor(mailbox, cell.controller.cycle_time, FeedbackRing(), cell.arm)
+    if bare:
+        executor._sensors, executor._io = _Nothing(), _Nothing()
+    timed = []
+
+    def cyclic(ctrl):
+        start = time.perf_counter()
+        ok = executor(ctrl)
+        timed.append(time.perf_counter() - start)
+        return ok
+    ctrl = BulletController(cell, cyclic)
+    ctrl.init()
+    ctrl.enable()
+    while ctrl.state().enable is not EnableState.ENABLED:
+        ctrl.step()
+    ctrl.dio.write("toolchanger_lock", True)   # nothing at the flange: the lock closes on air
+    mailbox.outbox.clear()
+    return ctrl, mailbox, timed
+
+
+def _run(ctrl, timed, cycles: int, each=None) -> tuple[np.ndarray, np.ndarray]:
+    timed.clear()
+    steps = []
+    for k in range(cycles):
+        if each is not None:
+            each(k)
+        start = time.perf_counter()
+        ctrl.step()
+        steps.append(time.perf_counter() - start)
+    return np.array(timed) * 1e6, np.array(steps) * 1e6
+
+
+def _move(ctrl, mailbox, loops: dict) -> None:
+    cell = ctrl.cell
+    planner = Planner(Kinematics(cell.arm), cell.controller.cycle_time)
+    q = ctrl.get().pos
+    trajectory = planner.move(q, MotionSettings(cell.arm).with_tool_offset(CUP), Frame.TOOL,
+                              np.array([0.2, 0.0, 0.0, 0, 0, 0]), True, True, 0.5)
+    arrays = SharedArrays.create(pack_run([trajectory], planner.dt), shared=False)
+    mailbox.inbox.append({"op": "run", "id": "m", "arrays": arrays,
+                          "acceleration": np.array(cell.arm.max_acceleration) * 0.5,
+                          "stop_acceleration": np.array(cell.arm.max_acceleration), **loops})
+
+
+def _figures(label: str, executor_us: np.ndarray, step_us: np.ndarray) -> None:
+    p = lambda a: f"{np.percentile(a, 50):7.1f} {np.percentile(a, 99):7.1f} {a.max():8.1f}"  # noqa
+    print(f"{label:20s} executor p50/p99/max {p(executor_us)} us   whole step {p(step_us)} us")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cycles", type=int, default=2000)
+    n = parser.parse_args().cycles
+    print(f"{n} cycles per mode; the cycle is 4000 us")
+
+    ctrl, mailbox, timed = _controller(bare=True)
+    _figures("bare executor", *_run(ctrl, timed, n))
+
+    ctrl, mailbox, timed = _controller(bare=False)
+    mailbox.inbox.append({"op": "io_image", "units": [(1, 0b1100111), (2, 0b111)]})
+    _figures("holding", *_run(ctrl, timed, n))
+
+    _move(ctrl, mailbox, {"guard": GuardSpec("force_torque", (0.0, 0.0, -1e6), (0, 0, 0),
+                                             1.0, CUP)})
+    _figures("+ guarded move", *_run(ctrl, timed, n))
+
+    ctrl, mailbox, timed = _controller(bare=False)
+    mailbox.inbox.append({"op": "io_image", "units": [(1, 0b1100111), (2, 0b111)]})
+    _move(ctrl, mailbox, {"comply": ComplySpec(
+        axes=(False, True, False), setpoint=(0, -1e-3, 0), kp=(0, 1e-6, 0), kd=(0, 0, 0),
+        reach=(0, 0.5, 0), envelope=(0, 0, 0), travel=(0, 0, 0), speed=0.01, acceleration=1.0,
+        timeout=0, hold_only=False, panic=0, tool_offset=CUP)})
+    _figures("+ comply", *_run(ctrl, timed, n))
+
+    ctrl, mailbox, timed = _controller(bare=False)
+    arm = ctrl.cell.arm
+    a = np.array(arm.max_acceleration)
+    cartesian = np.array([arm.max_linear_acceleration, arm.max_angular_acceleration])
+    limits = JogLimits(np.array(arm.max_velocity) * 0.25, a * 0.5, a, arm.lower, arm.upper,
+                       cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, 10 ** 9)
+    mailbox.inbox.append({"op": "jog", "id": "j", "limits": limits, "tool_offset": CUP})
+    velocity = {"op": "jog_velocity", "frame": "tool", "deadman": True,
+                "velocity": np.array([0.02, 0.0, 0.0, 0.0, 0.0, 0.05])}
+    _figures("+ Cartesian jog", *_run(ctrl, timed, n,
+                                      lambda k: k % 20 or mailbox.inbox.append(velocity)))
+
+    ctrl, mailbox, timed = _controller(bare=False)
+    mailbox.inbox.append({"op": "io_image", "units": [(1, 0b1100111), (2, 0b111)]})
+    mailbox.inbox.append({"op": "watch", "id": "w", "unit": 1, "bits": 1 << 4, "period": 1,
+                          "timeout": 0})
+    _figures("+ I/O watch", *_run(ctrl, timed, n))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,116 @@
+"""RPC overhead (issues 17 and 18): unary calls of the device server beside a bare gRPC echo of
+the same response size, measured in the same run. Prints, no pass/fail.
+
+For GetRobotPosition, GetDeviceState, GetVelocities (reads, every client) and SetSpeed (the lock
+holder's lease): latency p50/p99 and throughput with 1, 8 and 32 concurrent clients, and the
+same for a bare grpc.aio echo server in this process answering a message of the same size.
+Goals: p50 within 1.2 times the echo for reads (1.5 for commands), throughput with 32 clients
+at least 0.8 times the echo's.
+
+The device server runs here on the real-time clock; clients run in child processes (4 at
+most, each with an asyncio loop of concurrent callers). Run: .venv/bin/python bench/bench_rpc.py
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import time
+
+import grpc
+from common import BareServer, in_child, pct
+
+from landscape.client import Session
+from landscape.server.app import serve
+from landscape.server.config import ServerConfig
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, settings_pb2, types_pb2)
+
+LEASE = "landscape-lease"
+CALLS = {
+    "GetRobotPosition": (settings_pb2.GetRobotPositionRequest, False),
+    "GetDeviceState": (control_pb2.GetDeviceStateRequest, False),
+    "GetVelocities": (settings_pb2.GetVelocitiesRequest, False),
+    "SetSpeed": (lambda: settings_pb2.SetSpeedRequest(
+        speed=30, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), True),
+}
+
+
+async def _echo(request: bytes, context) -> bytes:
+    return request   # the client sends the size it wants back
+
+
+def echo_server() -> BareServer:
+    """A bare grpc.aio server answering each call with what it was sent."""
+    return BareServer("bench.Echo", {"Echo": grpc.unary_unary_rpc_method_handler(_echo)})
+
+
+async def callers(target: str, rpc: str, n: int, calls: int, lease: str, echo_size: int):
+    """n concurrent callers of `rpc` (or the echo, when echo_size > 0), `calls` each:
+    (latencies ms, wall seconds)."""
+    async with grpc.aio.insecure_channel(target) as channel:
+        if echo_size:
+            stub = channel.unary_unary("/bench.Echo/Echo")
+            request, metadata = b"x" * echo_size, ()
+        else:
+            make, needs_lease = CALLS[rpc]
+            stub = getattr(device_service_pb2_grpc.DeviceServiceStub(channel), rpc)
+            request, metadata = make(), (((LEASE, lease),) if needs_lease else ())
+        latencies = []
+
+        async def one():
+            for _ in range(calls):
+                began = time.perf_counter()
+                await stub(request, metadata=metadata)
+                latencies.append((time.perf_counter() - began) * 1000)
+
+        began = time.perf_counter()
+        await asyncio.gather(*(one() for _ in range(n)))
+        return latencies, time.perf_counter() - began
+
+
+def measure(target: str, rpc: str, clients: int, calls: int, lease: str, echo_size: int = 0):
+    """(p50, p99 ms, calls/s) with `clients` concurrent callers over up to 4 processes."""
+    processes = min(4, clients)
+    children = [in_child(callers, target, rpc, clients // processes, calls, lease, echo_size)
+                for _ in range(processes)]
+    results = [queue.get(timeout=600) for _, queue in children]
+    latencies = [x for lat, _ in results for x in lat]
+    wall = max(w for _, w in results)
+    return pct(latencies, 50), pct(latencies, 99), len(latencies) / wall
+
+
+def response_size(server, rpc: str, lease: str) -> int:
+    with grpc.insecure_channel(server.target) as channel:
+        make, needs_lease = CALLS[rpc]
+        stub = getattr(device_service_pb2_grpc.DeviceServiceStub(channel), rpc)
+        return stub(make(), metadata=((LEASE, lease),) if needs_lease else ()).ByteSize()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer calls, for CI")
+    args = parser.parse_args()
+    calls = 200 if args.quick else 1000
+    server = serve(ServerConfig(port=0, clock="realtime"))
+    echo = echo_server()
+    holder = Session(grpc.insecure_channel(server.target), "bench").open()
+    lease = holder.lock()
+    try:
+        print(f"{calls} calls per client; ms p50 / p99, calls/s; ratio = device / echo "
+              f"(p50, and throughput)")
+        for rpc in CALLS:
+            size = response_size(server, rpc, lease)
+            for clients in (1, 8, 32):
+                per = max(20, calls // clients) if clients > 1 else calls
+                d50, d99, drate = measure(server.target, rpc, clients, per, lease)
+                e50, e99, erate = measure(echo.target, rpc, clients, per, lease, echo_size=size)
+                print(f"  {rpc:17s} {clients:2d} clients: device {d50:6.3f} / {d99:6.3f} ms "
+                      f"{drate:7.0f}/s   echo ({size} B) {e50:6.3f} / {e99:6.3f} ms "
+                      f"{erate:7.0f}/s   ratio {d50 / e50:4.2f}, {drate / erate:4.2f}")
+    finally:
+        holder.close()
+        echo.stop()
+        server.stop(grace=None)
+
+
+if __name__ == "__main__":
+    main()

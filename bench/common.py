@@ -1,0 +1,55 @@
+"""What the benchmarks share: a bare grpc.aio server to measure against, children to run
+clients in (so they do not share the server's interpreter), and percentiles."""
+from __future__ import annotations
+
+import asyncio
+import inspect
+import math
+import multiprocessing as mp
+import threading
+
+import grpc
+import numpy as np
+
+
+def pct(values, q: float) -> float:
+    return float(np.percentile(values, q)) if len(values) else math.nan
+
+
+class BareServer:
+    """A bare grpc.aio server on a loop thread of this process, like the device server's:
+    `handlers` maps method names of service `service` to grpc method handlers."""
+
+    def __init__(self, service: str, handlers: dict):
+        self.loop = asyncio.new_event_loop()
+        threading.Thread(target=self.loop.run_forever, daemon=True).start()
+        self.server, port = asyncio.run_coroutine_threadsafe(
+            self._start(service, handlers), self.loop).result()
+        self.target = f"127.0.0.1:{port}"
+
+    async def _start(self, service: str, handlers: dict):
+        server = grpc.aio.server()
+        server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler(service,
+                                                                             handlers),))
+        port = server.add_insecure_port("127.0.0.1:0")
+        await server.start()
+        return server, port
+
+    def stop(self) -> None:
+        asyncio.run_coroutine_threadsafe(self.server.stop(None), self.loop).result()
+        self.loop.call_soon_threadsafe(self.loop.stop)
+
+
+def in_child(func, *args):
+    """Run func(*args) (a coroutine function, or a plain one) in a spawned child; returns
+    (process, queue) — the queue gets the result. Keep both until the child has started."""
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_child_main, args=(queue, func, args), daemon=True)
+    proc.start()
+    return proc, queue
+
+
+def _child_main(queue, func, args):
+    result = func(*args)
+    queue.put(asyncio.run(result) if inspect.iscoroutine(result) else result)

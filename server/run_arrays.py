@@ -1,0 +1,43 @@
+"""The arrays of a run: back-to-back trajectory segments, as the server packs them and the
+cycle reads them (through SharedArrays: shared memory for a cycle process)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def pack_run(trajectories, dt: float) -> dict[str, np.ndarray]:
+    """The arrays of a run of back-to-back trajectories, for `Segments` (the cycle)."""
+    rows = [0]
+    marks, segments = [], []
+    for t in trajectories:
+        m0 = len(marks)
+        marks.extend(t.marks)
+        segments.append((rows[-1], rows[-1] + len(t), m0, len(marks)))
+        rows.append(rows[-1] + len(t))
+    positions = np.concatenate([t.positions for t in trajectories])
+    velocities = np.concatenate([t.velocities for t in trajectories])
+    accelerations = np.concatenate([
+        np.diff(t.velocities, axis=0, append=t.velocities[-1:]) / dt for t in trajectories])
+    return {"positions": positions, "velocities": velocities, "accelerations": accelerations,
+            "marks": np.array(marks, dtype=np.int64).reshape(-1, 2),
+            "segments": np.array(segments, dtype=np.int64).reshape(-1, 4)}
+
+
+class Segments:
+    """The segments of a run, read from its shared arrays when played (not all at once: a run
+    may have many): "positions", "velocities", "accelerations" (N, 6), "marks" (M, 2) as
+    (sample in its segment, label), and "segments" (S, 4): row start, row end, first mark,
+    end of marks."""
+
+    def __init__(self, arrays: dict):
+        self._a = arrays
+
+    def __len__(self) -> int:
+        return len(self._a["segments"])
+
+    def __getitem__(self, index: int) -> dict:
+        start, end, m0, m1 = (int(v) for v in self._a["segments"][index])
+        return {"positions": self._a["positions"][start:end],
+                "velocities": self._a["velocities"][start:end],
+                "accelerations": self._a["accelerations"][start:end],
+                "marks": self._a["marks"][m0:m1]}

@@ -1,0 +1,233 @@
+"""One browser's commands: its sessions (one per device), its calls and its jog streams.
+
+The backend decides nothing for the device: each call goes to the device server as the browser
+asked, with the lease of the browser's own session when it holds the lock, and the server's
+answer (reply, or google.rpc.Status with its ErrorInfo) goes back as it came. The session's
+secret and the lease stay here; the page never sees them.
+
+Every call runs in its own task, so a StopMotion never waits behind an Activate in progress.
+Closing the console (the page closed or lost its connection) ends its sessions: the device's
+disconnect handler then stops, deactivates and releases, as for any client.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass, field
+
+import grpc
+from google.protobuf import json_format
+
+from landscape.supervisor import wire
+from landscape.supervisor.device_link import DeviceLink
+from landscape.supervisor.outbox import Outbox
+from landscape.supervisor.rpc_table import CONNECT, JOG, LOCK, RPCS, Rpc
+from landscape.client import AsyncSession
+from landscape.v1 import control_pb2, session_service_pb2, types_pb2
+
+log = logging.getLogger(__name__)
+
+# Fed to every browser by the device link; a browser does not open them itself.
+FED = {"landscape.v1.StateService/StreamState", "landscape.v1.EventService/Subscribe"}
+
+
+class Refused(Exception):
+    """The browser's frame is not a call the backend can make; nothing was sent."""
+
+    def __init__(self, code: grpc.StatusCode, message: str):
+        super().__init__(message)
+        self.status = wire.status(code, message)
+
+
+@dataclass
+class _DeviceSide:
+    """What this browser has open on one device."""
+    session: AsyncSession | None = None
+    session_call_id: int | None = None
+    rsvp_answers: dict[str, asyncio.Future] = field(default_factory=dict)
+    jog: "_Stream | None" = None
+
+
+class _Stream:
+    """A bidirectional call fed from a queue (the browser's messages)."""
+
+    def __init__(self, call_id: int):
+        self.call_id = call_id
+        self.queue: asyncio.Queue = asyncio.Queue()
+        self.task: asyncio.Task | None = None
+
+    async def requests(self):
+        while (item := await self.queue.get()) is not None:
+            yield item
+
+
+class Console:
+    def __init__(self, links: dict[str, DeviceLink], outbox: Outbox, client_name: str = "dashboard"):
+        self.links = links
+        self.outbox = outbox
+        self.client_name = client_name
+        self._sides = {name: _DeviceSide() for name in links}
+        self._tasks: set[asyncio.Task] = set()
+
+    # ---- frames from the browser
+    def receive(self, body: dict) -> None:
+        """Start handling one browser frame; its answer arrives later in the outbox."""
+        device, rpc_name, call_id = body.get("device"), body.get("rpc"), body.get("id")
+        task = asyncio.create_task(self._handle(device, rpc_name, call_id, body))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _handle(self, device, rpc_name, call_id, body) -> None:
+        try:
+            link = self.links.get(device)
+            if link is None:
+                raise Refused(grpc.StatusCode.NOT_FOUND, f"no device named {device!r} here")
+            rpc = RPCS.get(rpc_name)
+            if rpc is None or rpc_name in FED:
+                raise Refused(grpc.StatusCode.UNIMPLEMENTED,
+                              f"{rpc_name!r} is not a landscape.v1 call the page can make")
+            if rpc_name == CONNECT:
+                await self._session(link, call_id, body)
+            elif rpc_name == JOG:
+                await self._jog(link, rpc, call_id, body)
+            else:
+                await self._call(link, rpc, call_id, body)
+        except Refused as refused:
+            self._send(device, rpc_name, call_id, status=refused.status)
+        except json_format.ParseError as error:
+            self._send(device, rpc_name, call_id,
+                       status=wire.status(grpc.StatusCode.INVALID_ARGUMENT, f"bad request: {error}"))
+        except grpc.aio.AioRpcError as error:
+            self._send(device, rpc_name, call_id, status=wire.status_of(error))
+
+    def _send(self, device, rpc, call_id, reply=None, status=None) -> None:
+        self.outbox.put(wire.frame(str(device), str(rpc), reply=reply, status=status, call_id=call_id))
+
+    # ---- plain calls
+    async def _call(self, link: DeviceLink, rpc: Rpc, call_id, body) -> None:
+        side = self._sides[link.name]
+        metadata = side.session.metadata() if side.session else ()
+        invoke = rpc.callable(link.channel)
+        if rpc.kind == "unary":
+            request = wire.parse_request(rpc.request_class, body.get("request"))
+            if rpc.name == LOCK:
+                await self._lock(link, side, call_id)
+                return
+            reply = await invoke(request, metadata=metadata)
+        elif rpc.kind == "client_stream":
+            requests = [wire.parse_request(rpc.request_class, r) for r in body.get("requests", ())]
+            reply = await invoke(iter(requests), metadata=metadata)
+        else:
+            raise Refused(grpc.StatusCode.UNIMPLEMENTED, f"{rpc.name} is a stream the page cannot open")
+        self._send(link.name, rpc.name, call_id, reply=reply)
+
+    async def _lock(self, link: DeviceLink, side: _DeviceSide, call_id) -> None:
+        if side.session is None:
+            raise Refused(grpc.StatusCode.FAILED_PRECONDITION,
+                          "open a session first: the lock belongs to a session")
+        await side.session.lock()
+        # The lease stays in the backend with the session: the page learns only that the lock
+        # is its own (AsyncSession.lock returns the lease, not the server's whole reply).
+        self._send(link.name, LOCK, call_id, reply=control_pb2.LockResponse(ret_val=types_pb2.RetVal()))
+
+    # ---- the session: hello opens it, rsvp_answer answers, cancel closes it
+    async def _session(self, link: DeviceLink, call_id, body) -> None:
+        side = self._sides[link.name]
+        if body.get("cancel"):
+            if side.session is not None:
+                await side.session.close()
+            return
+        message = wire.parse_request(session_service_pb2.ConnectRequest, body.get("request"))
+        kind = message.WhichOneof("message")
+        if kind == "rsvp_answer":
+            answer = message.rsvp_answer
+            future = side.rsvp_answers.get(answer.rsvp_id)
+            if future is None or future.done():
+                raise Refused(grpc.StatusCode.NOT_FOUND,
+                              f"no question {answer.rsvp_id!r} waits for this page's answer")
+            future.set_result((answer.choice, list(answer.data)))
+        elif kind == "hello":
+            if side.session is not None and not side.session.ended.is_set():
+                raise Refused(grpc.StatusCode.ALREADY_EXISTS,
+                              f"this page already has session {side.session.session_id}")
+            name = message.hello.client_name or self.client_name
+            session = AsyncSession(link.channel, name,
+                                   on_rsvp=lambda request: self._ask_page(link, side, request))
+            await session.open()
+            side.session, side.session_call_id = session, call_id
+            # The secret proves ownership to Lock: it stays here.
+            self._send(link.name, CONNECT, call_id, reply=session_service_pb2.ConnectResponse(
+                opened=session_service_pb2.SessionOpened(
+                    session_id=session.session_id, keepalive_interval_ms=0)))
+            self._watch_session_end(link, session, call_id)
+        else:
+            raise Refused(grpc.StatusCode.INVALID_ARGUMENT,
+                          "the page sends hello or rsvp_answer; the backend keeps the session alive")
+
+    def _watch_session_end(self, link: DeviceLink, session: AsyncSession, call_id) -> None:
+        async def wait_end():
+            await session.ended.wait()
+            code = session.end_status or grpc.StatusCode.OK
+            self._send(link.name, CONNECT, call_id, status=wire.status(
+                code, "session ended" + ("" if code is grpc.StatusCode.OK else f" by the device: {code.name}")))
+        task = asyncio.create_task(wait_end())
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _ask_page(self, link: DeviceLink, side: _DeviceSide, request):
+        """An RSVP for this page's session: the page shows it and answers in time, or the device
+        takes its default (the answer sent after that is ignored by the device)."""
+        future = asyncio.get_running_loop().create_future()
+        side.rsvp_answers[request.rsvp_id] = future
+        self._send(link.name, CONNECT, side.session_call_id,
+                   reply=session_service_pb2.ConnectResponse(rsvp_request=request))
+        try:
+            async with asyncio.timeout(request.timeout_ms / 1000.0):
+                return await future
+        except TimeoutError:
+            return request.default_choice, list(request.data)
+        finally:
+            side.rsvp_answers.pop(request.rsvp_id, None)
+
+    # ---- jogging: the page's messages go straight to the device's deadman
+    async def _jog(self, link: DeviceLink, rpc: Rpc, call_id, body) -> None:
+        side = self._sides[link.name]
+        stream = side.jog
+        if body.get("cancel"):
+            if stream is not None and stream.call_id == call_id:
+                stream.queue.put_nowait(None)   # half-close: the device stops the arm
+            return
+        request = wire.parse_request(rpc.request_class, body.get("request"))
+        if stream is None or stream.call_id != call_id:
+            if stream is not None:
+                stream.queue.put_nowait(None)
+            stream = side.jog = _Stream(call_id)
+            stream.task = asyncio.create_task(self._run_jog(link, rpc, side, stream))
+            self._tasks.add(stream.task)
+            stream.task.add_done_callback(self._tasks.discard)
+        stream.queue.put_nowait(request)
+
+    async def _run_jog(self, link: DeviceLink, rpc: Rpc, side: _DeviceSide, stream: _Stream) -> None:
+        metadata = side.session.metadata() if side.session else ()
+        try:
+            call = rpc.callable(link.channel)(stream.requests(), metadata=metadata)
+            async for reply in call:
+                self._send(link.name, rpc.name, stream.call_id, reply=reply)
+            self._send(link.name, rpc.name, stream.call_id,
+                       status=wire.status(grpc.StatusCode.OK, "jog ended"))
+        except grpc.aio.AioRpcError as error:
+            self._send(link.name, rpc.name, stream.call_id, status=wire.status_of(error))
+        finally:
+            if side.jog is stream:
+                side.jog = None
+
+    # ---- the page went away
+    async def close(self) -> None:
+        for side in self._sides.values():
+            if side.jog is not None:
+                side.jog.queue.put_nowait(None)
+            if side.session is not None:
+                await side.session.close()
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)

@@ -1,0 +1,58 @@
+// What the panels of one device share: the link, the device's latest messages (the model), the
+// page's own session and lock, and `command`, which calls an RPC and shows a refusal as the
+// server gave it.
+import { Refused, describeStatus } from './link.js';
+import { SI } from './units.js';
+
+export const DEVICE = 'landscape.v1.DeviceService/';
+
+export class DeviceContext {
+  constructor(link, device, log) {
+    this.link = link;
+    this.device = device;
+    this.log = log;
+    this.model = {
+      started: null,        // StreamStarted: the stream's rate, frame, units, note
+      sample: null,         // the newest StateSample
+      status: {},           // "GetDeviceState" -> its newest reply (or {refused: Status})
+      units: SI,            // the device's units (GetUnits), for display and for commands
+    };
+    this.session = null;    // {id, sessionId} of the page's open session
+    this.holdsLock = false;
+    this.listeners = [];
+    this.refusal = document.getElementById('refusal');
+  }
+
+  onChange(listener) { this.listeners.push(listener); }
+
+  changed(what) { for (const listener of this.listeners) listener(what); }
+
+  // A unary (or client-streaming: streamed) call of `rpc` ("Activate" or a full name). Resolves
+  // with the reply, or with null after showing the refusal.
+  async command(rpc, request = {}, options = {}) {
+    const name = rpc.includes('/') ? rpc : DEVICE + rpc;
+    try {
+      return await this.link.call(this.device, name, request, options);
+    } catch (error) {
+      if (!(error instanceof Refused)) throw error;
+      this.refused(name.split('/').pop(), error.status);
+      return null;
+    }
+  }
+
+  refused(what, status) {
+    const text = `${what} — ${describeStatus(status)}`;
+    this.refusal.textContent = `Refused: ${text}`;
+    this.refusal.hidden = false;
+    clearTimeout(this.refusalTimer);
+    this.refusalTimer = setTimeout(() => { this.refusal.hidden = true; }, 15000);
+    this.log.addRefused(text);
+  }
+
+  // The device's state as the newest sample or GetDeviceState says.
+  get deviceState() {
+    return this.model.sample?.deviceState || this.model.status.GetDeviceState?.state || '';
+  }
+
+  get locked() { return Boolean(this.model.status.GetDeviceState?.locked); }
+}

@@ -1,0 +1,88 @@
+// The control panel: the page's session and lock, power, reset, the operator panel's e-stop,
+// speed and units; and the read-only view: buttons that need the lock are disabled, with the
+// reason, while this page does not hold it. What is allowed in which state is the server's call:
+// a button enabled here may still be refused, and the refusal is shown as the server gave it.
+const $ = (id) => document.getElementById(id);
+const CONNECT = 'landscape.v1.SessionService/Connect';
+
+export class Controls {
+  constructor(ctx, { onRsvp }) {
+    this.ctx = ctx;
+    this.onRsvp = onRsvp;
+    const name = $('client-name');
+    name.value = name.value || `dashboard-${Math.random().toString(36).slice(2, 6)}`;
+    const on = (id, handler) => $(id).addEventListener('click', handler);
+    on('btn-session', () => this.openSession());
+    on('btn-session-close', () => this.ctx.session && this.ctx.session.stream.cancel());
+    on('btn-lock', () => this.lock());
+    on('btn-release', async () => { if (await ctx.command('Release')) this.setLock(false); });
+    on('btn-activate', () => ctx.command('Activate'));
+    on('btn-deactivate', () => ctx.command('Deactivate'));
+    on('btn-reset', () => ctx.command('Reset'));
+    on('btn-estop-press', () => ctx.command('OperatePanel', { action: 'PANEL_ACTION_PRESS_ESTOP' }));
+    on('btn-estop-release', () => ctx.command('OperatePanel', { action: 'PANEL_ACTION_RELEASE_ESTOP' }));
+    on('btn-speed', () => ctx.command('SetSpeed', { speed: Number($('speed').value), attribute: 'SPEED_TYPE_PERCENT_SPEED' }));
+    on('btn-accel', () => ctx.command('SetAcceleration', { accel: Number($('accel').value), attribute: 'ACCEL_TYPE_PERCENT_ACCEL' }));
+    on('btn-units', () => ctx.command('SetUnits', { linearUnits: $('units-linear').value, angularUnits: $('units-angular').value }));
+    ctx.onChange(() => this.updateRole());
+    this.updateRole();
+  }
+
+  openSession() {
+    const ctx = this.ctx;
+    if (ctx.session) return;
+    const stream = ctx.link.open(ctx.device, CONNECT, (frame) => {
+      if (frame.reply?.opened) {
+        ctx.session = { stream, sessionId: frame.reply.opened.sessionId };
+        ctx.changed('session');
+      } else if (frame.reply?.rsvpRequest) {
+        this.onRsvp(frame.reply.rsvpRequest, (choice, data) => stream.send({ rsvpAnswer: { rsvpId: frame.reply.rsvpRequest.rsvpId, choice, data } }));
+      }
+      if (frame.status) {
+        if (frame.status.code) ctx.refused('session', frame.status);
+        ctx.session = null;
+        this.setLock(false);
+      }
+    });
+    ctx.session = { stream, sessionId: '' };
+    stream.send({ hello: { clientName: $('client-name').value } });
+    ctx.changed('session');
+  }
+
+  async lock() {
+    if (await this.ctx.command('Lock')) this.setLock(true);
+  }
+
+  setLock(holds) {
+    this.ctx.holdsLock = holds;
+    this.lockSeen = false;
+    this.ctx.changed('lock');
+  }
+
+  updateRole() {
+    const ctx = this.ctx;
+    const status = ctx.model.status.GetDeviceState;
+    // The lock is ours from Lock's reply until GetDeviceState, having shown it locked, shows
+    // it unlocked (released, or the device's disconnect handler); a read older than the lock
+    // may still arrive after its reply, and is not taken as losing it.
+    if (ctx.holdsLock && status?.locked) this.lockSeen = true;
+    if (ctx.holdsLock && this.lockSeen && status && !status.locked) ctx.holdsLock = false;
+    const holder = status?.locked ? status.lockHolder : '';
+    const hasSession = Boolean(ctx.session?.sessionId);
+    let reason = '';
+    if (!ctx.holdsLock) {
+      reason = holder ? `watching: the lock is held by ${holder}` :
+        hasSession ? 'take the lock to command' : 'open a session and take the lock to command';
+    }
+    for (const element of document.querySelectorAll('[data-needs]')) {
+      const needs = element.dataset.needs;
+      const blocked = needs === 'lock' ? !ctx.holdsLock : !hasSession;
+      element.disabled = blocked;
+      element.title = blocked ? (needs === 'lock' ? reason : 'open a session first') : '';
+    }
+    $('btn-session').disabled = Boolean(ctx.session);
+    const role = $('role');
+    role.textContent = ctx.holdsLock ? `commanding (${ctx.session?.sessionId})` : reason;
+    role.className = `pill ${ctx.holdsLock ? 'owner' : 'watcher'}`;
+  }
+}

@@ -1,0 +1,77 @@
+// The live log of events and alarms (EventService.Subscribe), and the page's refused commands,
+// with filters by kind, severity and text.
+
+const MAX_ENTRIES = 1000;
+const SEVERITY = { ALARM_SEVERITY_INFO: 1, ALARM_SEVERITY_WARNING: 2, ALARM_SEVERITY_ERROR: 3, ALARM_SEVERITY_CRITICAL: 4 };
+const KIND_OF_DETAIL = {
+  command: 'command', alarm: 'alarm', stateChange: 'state', digitalIo: 'io',
+  rsvpRequest: 'rsvp', rsvpAnswer: 'rsvp', eventsLost: 'alarm', operatorMessage: 'message',
+};
+
+function summary(event) {
+  if (event.command) {
+    const c = event.command;
+    const tag = c.phase === 'PHASE_TAG_REACHED' ? ` tag ${c.tagName} (#${c.tagIndex})` : '';
+    return `${c.command} ${c.pointName} ${c.phase.replace('PHASE_', '').toLowerCase()}${tag} [${c.commandId}]${c.message ? ': ' + c.message : ''}`;
+  }
+  if (event.alarm) return `${event.alarm.severity.replace('ALARM_SEVERITY_', '')} ${event.alarm.code}: ${event.alarm.message}`;
+  if (event.stateChange) return `${event.stateChange.fromState} → ${event.stateChange.toState} (${event.stateChange.reason})`;
+  if (event.rsvpRequest) return `asks: ${event.rsvpRequest.data.join(' ')} [${event.rsvpRequest.choices.join(' / ')}]`;
+  if (event.rsvpAnswer) return `answered ${event.rsvpAnswer.choice}${event.rsvpAnswer.timedOut ? ' (timed out: default)' : ''}`;
+  if (event.operatorMessage) return `${event.operatorMessage.source}: ${event.operatorMessage.text}`;
+  if (event.eventsLost) return `events ${event.eventsLost.firstSequence}–${event.eventsLost.lastSequence} lost`;
+  return event.data.join(' ');
+}
+
+export class EventLog {
+  constructor() {
+    this.list = document.getElementById('log');
+    this.kinds = [...document.querySelectorAll('.log-filters input[data-kind]')];
+    this.severity = document.getElementById('log-severity');
+    this.text = document.getElementById('log-text');
+    for (const input of [...this.kinds, this.severity, this.text]) input.addEventListener('input', () => this.refilter());
+    // Events shown, by device, sequence and time: a replay after a reconnect is not shown
+    // twice, and a restarted device's events (sequences from 1 again) are still shown.
+    this.seen = new Set();
+  }
+
+  // A landscape.v1.Event (JSON) of `device`.
+  addEvent(device, event) {
+    const sequence = Number(event.sequence);
+    const key = `${device} ${sequence} ${event.time}`;
+    if (this.seen.has(key)) return;
+    this.seen.add(key);
+    if (this.seen.size > 2 * MAX_ENTRIES) this.seen.delete(this.seen.values().next().value);
+    const time = Date.parse(event.time);
+    const detail = Object.keys(KIND_OF_DETAIL).find((key) => event[key]);
+    const kind = detail ? KIND_OF_DETAIL[detail] : 'command';
+    const severity = event.alarm ? SEVERITY[event.alarm.severity] || 0 : 0;
+    this.add(kind, severity, `${new Date(time).toLocaleTimeString()} #${sequence} ${device} ${event.eventId}: ${summary(event)}`);
+  }
+
+  addRefused(text) {
+    this.add('refused', 3, `${new Date().toLocaleTimeString()} refused: ${text}`);
+  }
+
+  add(kind, severity, text) {
+    const item = document.createElement('li');
+    item.dataset.kind = kind;
+    item.dataset.severity = severity;
+    item.className = `log-${kind} sev-${severity}`;
+    item.textContent = text;
+    item.hidden = !this.shows(item);
+    this.list.prepend(item);
+    while (this.list.childElementCount > MAX_ENTRIES) this.list.lastElementChild.remove();
+  }
+
+  shows(item) {
+    const kinds = new Set(this.kinds.filter((k) => k.checked).map((k) => k.dataset.kind));
+    const text = this.text.value.trim().toLowerCase();
+    return kinds.has(item.dataset.kind) && Number(item.dataset.severity) >= Number(this.severity.value)
+      && (!text || item.textContent.toLowerCase().includes(text));
+  }
+
+  refilter() {
+    for (const item of this.list.children) item.hidden = !this.shows(item);
+  }
+}

@@ -1,0 +1,106 @@
+// The page's WebSocket to the dashboard backend. Every frame is one message of one landscape.v1
+// RPC of one device, in protobuf's canonical JSON (see supervisor_gui_web/wire.py):
+//   in:  {device, rpc, id?, reply?: Any, status?: google.rpc.Status}
+//   out: {device, rpc, id, request? | requests? | cancel?}
+
+export class Refused extends Error {
+  // A call the device server (or the backend on its behalf) refused: status is google.rpc.Status.
+  constructor(rpc, status) {
+    super(status.message);
+    this.rpc = rpc;
+    this.status = status;
+  }
+}
+
+export class Link {
+  constructor(url) {
+    this.url = url;
+    this.nextId = 1;
+    this.pending = new Map();      // id -> {resolve, reject} of a unary call
+    this.streams = new Map();      // id -> handler(frame) of a stream the page opened
+    this.feedHandlers = [];        // handler(frame) for frames that answer no call of ours
+    this.onConnection = () => {};
+    this.connect();
+  }
+
+  connect() {
+    this.ws = new WebSocket(this.url);
+    this.ws.onopen = () => this.onConnection(true);
+    this.ws.onclose = () => {
+      this.onConnection(false);
+      for (const [, call] of this.pending) call.reject(new Refused('', { code: 14, message: 'connection to the dashboard lost', details: [] }));
+      this.pending.clear();
+      for (const [id, handler] of this.streams) handler({ id, status: { code: 14, message: 'connection to the dashboard lost', details: [] } });
+      this.streams.clear();
+      setTimeout(() => this.connect(), 1000);
+    };
+    this.ws.onmessage = (event) => this.dispatch(JSON.parse(event.data));
+  }
+
+  dispatch(frame) {
+    if (frame.id !== undefined && this.pending.has(frame.id)) {
+      const call = this.pending.get(frame.id);
+      this.pending.delete(frame.id);
+      if (frame.status && frame.status.code) call.reject(new Refused(frame.rpc, frame.status));
+      else call.resolve(frame.reply);
+    } else if (frame.id !== undefined && this.streams.has(frame.id)) {
+      this.streams.get(frame.id)(frame);
+      if (frame.status) this.streams.delete(frame.id);
+    } else {
+      for (const handler of this.feedHandlers) handler(frame);
+    }
+  }
+
+  onFeed(handler) { this.feedHandlers.push(handler); }
+
+  send(body) {
+    if (this.ws.readyState !== WebSocket.OPEN) return false;
+    this.ws.send(JSON.stringify(body));
+    return true;
+  }
+
+  // A unary or client-streaming call: resolves with the reply (an Any's JSON), rejects with Refused.
+  call(device, rpc, request = {}, { streamed = false } = {}) {
+    const id = this.nextId++;
+    return new Promise((resolve, reject) => {
+      this.pending.set(id, { resolve, reject });
+      const body = streamed ? { device, rpc, id, requests: request } : { device, rpc, id, request };
+      if (!this.send(body)) {
+        this.pending.delete(id);
+        reject(new Refused(rpc, { code: 14, message: 'not connected to the dashboard', details: [] }));
+      }
+    });
+  }
+
+  // A stream the page opens (the session, a jog): returns {id, send(request), cancel()}; every
+  // frame of it, replies and the final status, goes to handler.
+  open(device, rpc, handler) {
+    const id = this.nextId++;
+    this.streams.set(id, handler);
+    return {
+      id,
+      send: (request) => this.send({ device, rpc, id, request }),
+      cancel: () => this.send({ device, rpc, id, cancel: true }),
+    };
+  }
+}
+
+// The message type of an Any's JSON, e.g. "landscape.v1.StateSample".
+export function typeOf(any) {
+  return any && any['@type'] ? any['@type'].split('/').pop() : '';
+}
+
+const CODES = ['OK', 'CANCELLED', 'UNKNOWN', 'INVALID_ARGUMENT', 'DEADLINE_EXCEEDED', 'NOT_FOUND',
+  'ALREADY_EXISTS', 'PERMISSION_DENIED', 'RESOURCE_EXHAUSTED', 'FAILED_PRECONDITION', 'ABORTED',
+  'OUT_OF_RANGE', 'UNIMPLEMENTED', 'INTERNAL', 'UNAVAILABLE', 'DATA_LOSS', 'UNAUTHENTICATED'];
+
+// "FAILED_PRECONDITION WRONG_STATE ret_code -1: <message>", from the server's google.rpc.Status.
+export function describeStatus(status) {
+  const info = (status.details || []).find((d) => typeOf(d) === 'google.rpc.ErrorInfo');
+  const parts = [CODES[status.code] || `code ${status.code}`];
+  if (info) {
+    parts.push(info.reason);
+    if (info.metadata && info.metadata.ret_code !== undefined) parts.push(`ret_code ${info.metadata.ret_code}`);
+  }
+  return `${parts.join(' ')}: ${status.message}`;
+}

@@ -1,0 +1,74 @@
+"""The browser's wire: landscape.v1 messages in their canonical protobuf JSON, one RPC per frame.
+
+Every WebSocket frame is a JSON object about one message of one RPC of one device:
+
+    backend -> browser  {"device": "arm1", "rpc": "landscape.v1.DeviceService/Activate",
+                         "id": 7,                       (a browser call's id; absent on feeds)
+                         "reply": {"@type": "type.googleapis.com/landscape.v1.ActivateResponse",
+                                   ...},                (a response message, as google.protobuf.Any)
+                         "status": {"code": 9, "message": "...", "details": [ErrorInfo ...]}}
+                                                        (google.rpc.Status: the call failed, or a
+                                                         stream ended; code 0 = ended cleanly)
+    browser -> backend  {"device": "arm1", "rpc": "landscape.v1.DeviceService/SetSpeed", "id": 8,
+                         "request": {"speed": 50, "attribute": "SPEED_TYPE_PERCENT_SPEED"}}
+                        ("requests": [...] for a client-streaming RPC; "cancel": true ends a stream
+                         the browser opened: the session, a jog)
+
+The feeds the backend keeps for every browser arrive under their own RPC names
+(StateService/StreamState, EventService/Subscribe, and the read-only gets of `status_poll`).
+Nothing here is a second schema: "reply" and "status" are protobuf's own JSON mapping.
+"""
+from __future__ import annotations
+
+import json
+
+import grpc
+from google.protobuf import any_pb2, json_format
+from google.protobuf.message import Message
+from google.rpc import code_pb2, error_details_pb2, status_pb2  # noqa: F401 (ErrorInfo for JSON)
+
+STATUS_DETAILS_KEY = "grpc-status-details-bin"
+
+
+def message_dict(message: Message) -> dict:
+    """Canonical JSON of a message; fields at their default value are written out too (still
+    canonical), so the page never guesses what an absent field means."""
+    return json_format.MessageToDict(message, always_print_fields_with_no_presence=True)
+
+
+def any_dict(message: Message) -> dict:
+    """The message packed in a google.protobuf.Any, as JSON: its fields plus "@type"."""
+    packed = any_pb2.Any()
+    packed.Pack(message)
+    return message_dict(packed)
+
+
+def status_of(error: grpc.RpcError) -> status_pb2.Status:
+    """The google.rpc.Status the server sent (with its ErrorInfo), or one made of the call's
+    code and text when it sent none (a transport failure, a cancelled call)."""
+    for key, value in (error.trailing_metadata() or ()):
+        if key == STATUS_DETAILS_KEY:
+            return status_pb2.Status.FromString(value)
+    return status_pb2.Status(code=error.code().value[0], message=error.details() or "")
+
+
+def status(code: grpc.StatusCode, message: str) -> status_pb2.Status:
+    return status_pb2.Status(code=code.value[0], message=message)
+
+
+def frame(device: str, rpc: str, *, reply: Message | None = None,
+          status: status_pb2.Status | None = None, call_id: int | None = None) -> str:
+    """One backend-to-browser frame as text (see the module docstring)."""
+    body: dict = {"device": device, "rpc": rpc}
+    if call_id is not None:
+        body["id"] = call_id
+    if reply is not None:
+        body["reply"] = any_dict(reply)
+    if status is not None:
+        body["status"] = message_dict(status)
+    return json.dumps(body, separators=(",", ":"))
+
+
+def parse_request(message_class: type[Message], body: dict | None) -> Message:
+    """A request message from its JSON; json_format.ParseError names what is wrong."""
+    return json_format.ParseDict(body or {}, message_class())

@@ -1,0 +1,14 @@
+"""Fixtures of the server tests."""
+from __future__ import annotations
+
+import pytest
+
+from support import Arm
+
+
+@pytest.fixture
+def arm(tmp_path):
+    """An active arm on the lock-step clock (support.Arm), closed after the test."""
+    a = Arm(tmp_path)
+    yield a
+    a.close()

@@ -1,0 +1,74 @@
+"""Jog integration on its own (jog_control.py): the line a Cartesian jog keeps, the limits,
+the deadman and the joint ranges, cycle by cycle without a controller."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from landscape.server.jog_control import MANUAL_TIP_SPEED, JogIntegrator, JogLimits
+from landscape.server.tip_model import TipModel
+from landscape.sim.arm import arm_model
+
+DT = 0.004
+ARM = arm_model()
+START = np.array([0.0, 0.0, math.pi / 2, 0.0, math.pi / 2, 0.0])
+
+
+def _jog(deadman_cycles: int = 50) -> JogIntegrator:
+    a = np.array(ARM.max_acceleration)
+    cartesian = np.array([ARM.max_linear_acceleration, ARM.max_angular_acceleration])
+    limits = JogLimits(np.array(ARM.max_velocity) * 0.25, a * 0.5, a, ARM.lower, ARM.upper,
+                       cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, deadman_cycles)
+    return JogIntegrator("j", START, limits, TipModel(ARM), np.eye(4), DT)
+
+
+def _request(frame: str, velocity, deadman: bool = True) -> dict:
+    return {"frame": frame, "velocity": np.asarray(velocity, dtype=float), "deadman": deadman}
+
+
+def test_a_cartesian_jog_keeps_its_line_and_orientation_at_the_manual_speed():
+    jog, tip = _jog(), TipModel(ARM)
+    start = tip.forward(START).copy()
+    previous = start[:3, 3].copy()
+    speeds = []
+    for _ in range(300):
+        jog.command(_request("base", [0.3, 0.2, 0.0, 0, 0, 0]))   # asks 0.36 m/s
+        q, _ = jog.step()
+        now = tip.forward(q)
+        speeds.append(np.linalg.norm(now[:3, 3] - previous) / DT)
+        previous = now[:3, 3].copy()
+    moved = now[:3, 3] - start[:3, 3]
+    direction = np.array([0.3, 0.2, 0.0]) / np.linalg.norm([0.3, 0.2, 0.0])
+    off_line = moved - (moved @ direction) * direction
+    assert np.linalg.norm(off_line) < 5e-5 * np.linalg.norm(moved) / 0.05   # 50 um per 5 cm
+    assert np.allclose(now[:3, :3], start[:3, :3], atol=1e-6)
+    assert max(speeds) <= MANUAL_TIP_SPEED * (1 + 1e-3)   # a chord of the step, not J qd
+    assert speeds[-1] == pytest.approx(0.98 * MANUAL_TIP_SPEED, rel=1e-3)   # the headroom
+
+
+def test_silence_brakes_to_rest_and_ends_the_session_saying_why():
+    jog = _jog(deadman_cycles=50)
+    for _ in range(100):
+        jog.command(_request("joint", [0, 0, 0, 0, 0, 2.0]))
+        jog.step()
+    cycles = 0
+    while not jog.finished:
+        jog.step()
+        cycles += 1
+    braking = 2.0 / ARM.max_acceleration[5] / DT
+    assert 50 < cycles <= 50 + math.ceil(braking) + 2
+    assert jog.ending[0] == "aborted" and "deadman" in jog.ending[1]
+
+
+def test_a_released_deadman_holds_and_a_joint_stops_inside_its_range():
+    jog = _jog(deadman_cycles=10 ** 6)
+    for _ in range(50):
+        jog.command(_request("joint", [0, 0, 0, 0, 0, 2.0], deadman=False))
+        q, qd = jog.step()
+    assert not np.any(qd) and np.allclose(q, START)
+    for _ in range(1000):
+        jog.command(_request("joint", [0, 0, 0, 0, 10.0, 0]))   # joint 5 as fast as it goes
+        q, qd = jog.step()
+    assert ARM.upper[4] - 2e-3 < q[4] <= ARM.upper[4] and qd[4] == 0.0

@@ -1,0 +1,299 @@
+"""Issue 10, seed 3.7.1 and 3.7.2: sensor readings, guarded moves (moveReact) and compliant
+moves (comply) on the real server, the simulated arm on the lock-step clock, the vacuum cup
+pressing on the real (simulated) table."""
+from __future__ import annotations
+
+import threading
+import time
+
+import grpc
+import numpy as np
+import pytest
+
+from landscape.server import alarms
+from landscape.server.feedback import SENSORS, SEQ, WALL
+from landscape.server.states import State
+from landscape.v1 import (control_pb2, motion_pb2, sensing_pb2, settings_pb2, state_service_pb2,
+                          state_service_pb2_grpc, types_pb2)
+
+from support import Arm, error_info, wait_until
+
+TABLE_TOP = 0.2
+FREE_SPOT = (0.65, 0.3)          # on the table, away from the parts and zones
+CUP_MASS = 0.6
+Z = types_pb2.Vector3
+
+
+@pytest.fixture
+def arm(tmp_path):
+    a = Arm(tmp_path)
+    yield a
+    a.close()
+
+
+@pytest.fixture
+def cup(arm):
+    """The arm with the vacuum cup, its tip 3 cm over a free spot of the table."""
+    arm.get_tool("vacuum")
+    arm.move_down_to(*FREE_SPOT, TABLE_TOP + 0.03)
+    return arm
+
+
+def _react(arm, **fields) -> list:
+    reply = arm.device.MoveReact(sensing_pb2.MoveReactRequest(**fields), timeout=30)
+    assert reply.ret_val.ret_code == types_pb2.RETURN_CODE_CMD_STARTED_OK
+    return arm.wait_command(reply.ret_val.command_id)
+
+
+def _touch(arm, threshold: float = -20.0) -> list:
+    """Down onto the table at 2 mm/s (0.1 % of the arm's 2 m/s) until fz reaches `threshold`."""
+    return _react(arm, sensor_type="force_sensor", motion=Z(z=0.1), speed=0.1,
+                  thresholds=Z(z=threshold))
+
+
+def _refused(call) -> grpc.RpcError:
+    with pytest.raises(grpc.RpcError) as refused:
+        call()
+    return refused.value
+
+
+# ---- 3.7.1 getSensorReading -----------------------------------------------------------------
+
+def test_readings_come_in_the_current_units_and_an_unknown_sensor_lists_the_known_ones(arm):
+    flange_height = arm.tip()[2, 3]
+    assert arm.reading("laser_standoff_sensor") == pytest.approx([flange_height - TABLE_TOP],
+                                                                 abs=1e-3)
+    assert np.abs(arm.reading("force_sensor")).max() < 1e-3   # nothing on the flange
+    arm.device.SetUnits(settings_pb2.SetUnitsRequest(
+        linear_units=types_pb2.LINEAR_UNIT_MILLIMETERS, angular_units=types_pb2.ANGULAR_UNIT_DEGREES))
+    reply = arm.device.GetSensorReading(
+        sensing_pb2.GetSensorReadingRequest(sensor_type="laser_standoff_sensor"))
+    assert reply.current_data[0] == pytest.approx((flange_height - TABLE_TOP) * 1000, abs=1.0)
+    assert reply.units.linear == types_pb2.LINEAR_UNIT_MILLIMETERS
+
+    error = _refused(lambda: arm.device.GetSensorReading(
+        sensing_pb2.GetSensorReadingRequest(sensor_type="sonar")))
+    assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
+    assert error_info(error).metadata["ret_code"] == "-2"
+    assert "force_sensor" in error.details() and "laser_standoff_sensor" in error.details()
+
+
+def test_the_force_sensor_reads_at_the_tool_tip_in_the_tool_frame(cup):
+    # The cup hangs down: its weight pulls the flange along the tool's z; at the tip, whose
+    # frame is the flange's moved along z, the torques stay zero.
+    reading = cup.reading()
+    assert reading[:3] == pytest.approx([0, 0, CUP_MASS * 9.81], abs=0.02)
+    assert np.abs(reading[3:]).max() < 1e-3
+
+
+# ---- 3.7.2 moveReact ------------------------------------------------------------------------
+
+def test_move_react_stops_on_the_table_at_the_threshold(cup):
+    events = _touch(cup)
+    done = events[-1]
+    assert done.event_id == "command_done" and done.command.command == "MoveReact"
+    assert done.command.message.startswith("triggered")
+    force = cup.reading()
+    tip_height = cup.tool_tip()[2, 3]
+    print(f"\nmoveReact onto the table: at rest fz = {force[2]:.2f} N (threshold -20 N), tip "
+          f"{(tip_height - TABLE_TOP) * 1000:.2f} mm from the table; {done.command.message}")
+    assert force[2] == pytest.approx(-20.0, rel=0.2)
+    assert abs(tip_height - TABLE_TOP) < 0.002
+    assert cup.server.device.state is State.RESTING
+
+
+def test_move_react_in_free_air_runs_its_full_distance_and_says_so(cup):
+    before = cup.tool_tip()[:3, 3]
+    events = _react(cup, sensor_type="force_sensor", motion=Z(z=-0.05), speed=2,
+                    thresholds=Z(z=-20))
+    assert events[-1].event_id == "command_done"
+    assert events[-1].command.message == "not triggered: moved the full distance"
+    moved = cup.tool_tip()[:3, 3] - before
+    assert moved == pytest.approx([0, 0, 0.05], abs=1e-4)   # up: the tool's -z
+
+
+def test_move_react_on_the_laser_stops_at_its_standoff(cup):
+    cup.move_down_to(*FREE_SPOT, TABLE_TOP + 0.15)
+    events = _react(cup, sensor_type="laser_standoff_sensor", motion=Z(z=0.2), speed=1,
+                    thresholds=Z(x=0.05))
+    assert events[-1].command.message.startswith("triggered")
+    standoff = cup.reading("laser_standoff_sensor")[0]
+    assert standoff == pytest.approx(0.05, abs=0.002)   # 20 mm/s: well under a mm to brake
+    assert cup.tool_tip()[2, 3] == pytest.approx(TABLE_TOP + 0.05, abs=0.002)
+
+
+def test_a_reading_beyond_the_envelope_ends_move_react_as_failed(cup):
+    events = _react(cup, sensor_type="force_sensor", motion=Z(z=0.1), speed=0.1,
+                    thresholds=Z(z=-50), envelope_max=Z(z=10))
+    assert events[-1].event_id == "command_failed"
+    assert "envelope" in events[-1].command.message
+    assert abs(cup.reading()[2]) < 20     # stopped soon after 10 N
+    alarm = [e for e in cup.history() if e.event_id == "alarm"][-1].detail
+    assert alarm.code == alarms.MOTION and alarm.command_id == events[-1].command.command_id
+
+
+@pytest.mark.parametrize("fields, code", [
+    ({"motion": Z(z=0.1), "speed": 1, "thresholds": Z(z=-20), "compliance": Z(x=0.01)},
+     grpc.StatusCode.INVALID_ARGUMENT),
+    ({"motion": Z(z=0.1), "speed": 1}, grpc.StatusCode.INVALID_ARGUMENT),          # no threshold
+    ({"motion": Z(), "speed": 1, "thresholds": Z(z=-20)}, grpc.StatusCode.INVALID_ARGUMENT),
+    ({"motion": Z(z=0.1), "speed": 0, "thresholds": Z(z=-20)}, grpc.StatusCode.OUT_OF_RANGE),
+    ({"motion": Z(z=0.1), "speed": 1, "thresholds": Z(z=-20), "gains": Z(x=2)},
+     grpc.StatusCode.OUT_OF_RANGE),
+    ({"sensor_type": "sonar", "motion": Z(z=0.1), "speed": 1, "thresholds": Z(z=-20)},
+     grpc.StatusCode.INVALID_ARGUMENT),
+])
+def test_bad_move_react_parameters_are_refused_and_nothing_moves(arm, fields, code):
+    before = arm.joints().copy()
+    fields = {"sensor_type": "force_sensor", **fields}
+    error = _refused(lambda: arm.device.MoveReact(sensing_pb2.MoveReactRequest(**fields)))
+    assert error.code() is code
+    assert np.allclose(arm.joints(), before, atol=1e-6)
+    assert arm.server.device.state is State.RESTING
+
+
+# ---- 3.7.2 comply ---------------------------------------------------------------------------
+
+def _comply(arm, **fields):
+    request = dict(sensor_type="force_sensor", thresholds=[0, 0, -20, 0, 0, 0],
+                   max_timeout=30, proportional_gains=[0, 0, 0.001, 0, 0, 0],
+                   compliance=Z(z=0.01), compliance_speed=1)
+    request.update(fields)
+    return arm.device.Comply(sensing_pb2.ComplyRequest(**request), timeout=30)
+
+
+def test_comply_slides_along_the_table_holding_the_force(cup):
+    _touch(cup)
+    start = cup.tool_tip()[:3, 3]
+    rows = _RingReader(cup)
+    reply = _comply(cup, motion=Z(x=0.1), speed=1)
+    events = cup.wait_command(reply.ret_val.command_id)
+    slide = rows.stop()
+    assert events[-1].event_id == "command_done", events[-1]
+    moved = cup.tool_tip()[:3, 3] - start
+    assert moved[0] == pytest.approx(0.1, abs=1e-3)   # pointing down: the tool's x is the world's
+    sensors = cup.server.workcell.sensors
+    began, ended = (e.time.ToNanoseconds() / 1e9 for e in (events[0], events[-1]))
+    during = slide[(slide[:, WALL] >= began) & (slide[:, WALL] <= ended)]
+    fz = np.array([sensors.from_row("force_sensor", row[SENSORS])[2] for row in during])
+    print(f"\ncomply: {len(fz)} cycles over 0.1 m, fz {fz.min():.2f} to {fz.max():.2f} N "
+          f"(set-point -20 N)")
+    assert len(fz) > 1000 and np.all(np.diff(during[:, SEQ]) == 1)   # every cycle
+    assert np.all(np.abs(fz + 20.0) <= 5.0)
+
+
+class _RingReader:
+    """Every cycle's feedback row from now on, read from the ring as it fills."""
+
+    def __init__(self, arm):
+        self.ring, self.rows = arm.server.link.feedback, {}
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self):
+        seen = self.ring.head
+        while not self._done.is_set():
+            head = self.ring.head
+            for sequence in range(seen + 1, head + 1):
+                row = self.ring.row(sequence)
+                assert row is not None, "the ring overtook the reader"
+                self.rows[sequence] = row
+            seen = head
+            time.sleep(0.005)
+
+    def stop(self) -> np.ndarray:
+        self._done.set()
+        self._thread.join(5)
+        return np.array([self.rows[s] for s in sorted(self.rows)])
+
+
+def test_a_state_stream_carries_the_sensors_asked_for(cup):
+    stream = state_service_pb2_grpc.StateServiceStub(cup.session.channel).StreamState(
+        state_service_pb2.StreamStateRequest(sensors=["force_sensor", "laser_standoff_sensor"]))
+    assert next(stream).HasField("started")
+    sample = next(stream).sample
+    stream.cancel()
+    assert [s.name for s in sample.sensors] == ["force_sensor", "laser_standoff_sensor"]
+    assert sample.sensors[0].values[2] == pytest.approx(CUP_MASS * 9.81, abs=0.05)
+    assert sample.sensors[1].values[0] == pytest.approx(0.03, abs=0.002)
+    assert (sample.end_effector, sample.end_effector_state) == ("vacuum", "off")
+
+
+def test_comply_in_place_holds_the_force_for_its_timeout(cup):
+    _touch(cup, threshold=-5.0)
+    reply = _comply(cup, max_timeout=1.0)
+    events = cup.wait_command(reply.ret_val.command_id)
+    assert events[-1].event_id == "command_done"
+    assert cup.reading()[2] == pytest.approx(-20.0, abs=1.0)
+    started, done = events[0], events[-1]
+    assert done.time.ToMicroseconds() >= started.time.ToMicroseconds()
+
+
+@pytest.mark.parametrize("panic, state", [(0, State.RESTING), (1, State.ERROR)])
+def test_a_comply_panic_stops_and_its_code_says_what_follows(cup, panic, state):
+    _touch(cup, threshold=-5.0)
+    reply = _comply(cup, max_timeout=2.0, panic_stop_code=panic, envelope_max=Z(z=12))
+    events = cup.wait_command(reply.ret_val.command_id)
+    assert events[-1].event_id == "command_failed" and "panic" in events[-1].command.message
+    wait_until(lambda: cup.server.device.state is state)
+    if state is State.ERROR:
+        assert any(e.event_id == "alarm" and e.detail.code == alarms.PANIC
+                   for e in cup.history())
+        cup.device.Reset(control_pb2.ResetRequest(), timeout=10)
+        assert cup.server.device.state is State.INACTIVE
+
+
+def test_comply_joins_a_running_motion(cup):
+    _touch(cup)
+    reply = cup.device.MoveRelative(motion_pb2.MoveRelativeRequest(
+        frame=types_pb2.REFERENCE_FRAME_TOOL_FRAME, values=[0.03, 0, 0, 0, 0, 0], speed=0.5,
+        motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION), timeout=30)
+    joined = _comply(cup)
+    assert joined.ret_val.command_id == reply.ret_val.command_id
+    events = cup.wait_command(reply.ret_val.command_id)
+    assert events[-1].event_id == "command_done"
+    assert "force" in events[-1].command.message
+    assert cup.reading()[2] == pytest.approx(-20.0, abs=2.0)
+
+
+@pytest.mark.parametrize("fields", [
+    {"compliance": Z()},                                                  # no compliant axis
+    {"motion": Z(z=0.01), "speed": 1},                                    # along the compliance
+    {"proportional_gains": [0, 0, 0, 0, 0, 0]},
+    {"thresholds": [0, 0, -20, 0, 0, 1]},                                 # a torque set-point
+    {"panic_stop_code": 7},
+    {"max_timeout": 0},                                                   # in place, forever
+    {"compliance_speed": 0},
+])
+def test_bad_comply_parameters_are_refused_and_nothing_moves(arm, fields):
+    before = arm.joints().copy()
+    error = _refused(lambda: _comply(arm, **fields))
+    assert error.code() in (grpc.StatusCode.INVALID_ARGUMENT, grpc.StatusCode.OUT_OF_RANGE)
+    assert np.allclose(arm.joints(), before, atol=1e-6)
+    assert arm.server.device.state is State.RESTING
+
+
+def test_a_state_stream_refuses_an_unknown_sensor(arm):
+    stream = state_service_pb2_grpc.StateServiceStub(arm.session.channel).StreamState(
+        state_service_pb2.StreamStateRequest(sensors=["sonar"]))
+    error = _refused(lambda: next(stream))
+    assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
+
+
+def test_the_joint_torques_reported_at_rest_are_the_arm_models_with_the_tools_weight(cup):
+    """The drives' torques the state carries, against pinocchio's dynamics of the arm model
+    with the cup (its mass at its centre, from the cell file) on the flange."""
+    import pinocchio as pin
+    from landscape.sim.arm import urdf
+
+    model = pin.buildModelFromXML(urdf(cup.server.device.arm))
+    flange = model.frames[model.getFrameId("tool0")]
+    spec = next(t for t in cup.server.workcell.tools.tools.values() if t.name == "vacuum")
+    centre = flange.placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, spec.length / 3]))
+    model.inertias[flange.parentJoint] += centre.act(
+        pin.Inertia(spec.mass, np.zeros(3), np.eye(3) * 1e-6))
+    sample = cup.server.device.feedback()
+    gravity = pin.computeGeneralizedGravity(model, model.createData(), sample.position)
+    print(f"\nreported {np.round(sample.torque, 3)} N*m\nmodel    {np.round(gravity, 3)} N*m")
+    assert sample.torque == pytest.approx(gravity, abs=0.05)

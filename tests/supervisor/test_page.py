@@ -1,0 +1,143 @@
+"""The dashboard end to end: headless Chromium (Debian's) on the real backend, on a real device
+server with the simulated arm. Everything is done through the page's buttons and read from what
+the page shows, then checked against the server."""
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import pytest
+
+from dashboard_support import Page
+from landscape.server.states import State
+from support import wait_until
+
+SCREENSHOT = Path(__file__).resolve().parents[2] / "docs" / "dashboard.png"
+# Joint values (rad) of a path over the table, the tool tip 0.75 m or more above the floor.
+PATH = {"p1": (0.6, 0.2, 1.4, 0.0, 1.4, 0.0), "p2": (1.2, 0.4, 1.2, 0.0, 1.3, 0.0),
+        "p3": (-0.6, 0.3, 1.3, 0.5, 1.2, 0.0), "p4": (-1.2, 0.1, 1.5, 0.0, 1.4, 0.8)}
+
+
+def path_lines() -> str:
+    return "\n".join(f"{tag} {' '.join(map(str, q))}" for tag, q in PATH.items())
+
+
+def test_lock_and_activate_through_the_buttons(chromium, dashboard, cell_server):
+    page = Page(chromium, dashboard.url, name="operator-1")
+    assert page.page.locator("#btn-activate").is_disabled()   # no lock yet: watching
+    page.take_control()
+    assert cell_server.device.state is State.RESTING
+    page.shows("st-lock", "operator-1")
+    page.shows("role", "commanding")
+    page.log_has("activated")
+    page.close()
+
+
+def test_path_run_reaches_every_tag_in_the_log(chromium, dashboard, cell_server):
+    page = Page(chromium, dashboard.url + "?render=full")   # a sharp picture for the README
+    page.take_control()
+    page.page.fill("#speed", "30")
+    page.click("btn-speed")
+    page.shows("st-speed", "30 %")
+    page.page.fill("#path-name", "tour")
+    page.page.fill("#path-points", path_lines())
+    page.click("btn-path-load")
+    page.expect(page.page.locator("#path-progress .tag")).to_have_count(len(PATH), timeout=30_000)
+    page.click("btn-path-run")
+    page.shows("st-state", "moving")
+    page.expect(page.page.locator("#path-progress .tag.reached")).to_have_count(1, timeout=40_000)
+    # During the run, the arm in its cell, the path drawn, the first tag reached: for the README.
+    SCREENSHOT.parent.mkdir(exist_ok=True)
+    page.page.screenshot(path=str(SCREENSHOT))
+    page.shows("path-progress", "done", timeout_ms=60_000)
+    for index, tag in enumerate(PATH):
+        page.log_has(f"tag {tag} (#{index})")
+    page.expect(page.page.locator("#path-progress .tag.reached")).to_have_count(len(PATH))
+    assert cell_server.device.state is State.RESTING
+    page.close()
+
+
+def test_estop_release_asks_the_lock_holder_and_the_dialog_answers(chromium, dashboard, cell_server):
+    page = Page(chromium, dashboard.url)
+    page.take_control()
+    page.click("btn-estop-press")
+    page.shows("st-state", "error")
+    page.shows("st-estop", "PRESSED")
+    page.click("btn-estop-release")
+    dialog = page.page.locator("#rsvp")
+    page.expect(dialog).to_be_visible(timeout=30_000)
+    page.shows("rsvp-text", "reset now?")
+    countdown = int(page.text("rsvp-countdown"))
+    assert 0 < countdown <= 30
+    page.page.click("#rsvp-choices button[data-choice='reset']")
+    page.expect(dialog).to_be_hidden(timeout=30_000)
+    page.shows("st-state", "inactive")   # reset, still holding the lock
+    page.log_has("answered reset")
+    wait_until(lambda: cell_server.device.state is State.INACTIVE, timeout=15)
+    page.close()
+
+
+def test_a_refused_command_shows_the_servers_code_and_message(chromium, dashboard, cell_server):
+    page = Page(chromium, dashboard.url)
+    page.take_control()
+    page.page.fill("#speed", "250")   # out of range: the server judges, not the page
+    page.click("btn-speed")
+    page.shows("refusal", "SetSpeed")
+    refusal = page.text("refusal")
+    assert "OUT_OF_RANGE PARAM_OUT_OF_RANGE ret_code -3" in refusal
+    page.log_has("refused: SetSpeed")
+    page.click("btn-release")   # Resting: Release is valid in Inactive only
+    page.shows("refusal", "Release — FAILED_PRECONDITION WRONG_STATE ret_code -1")
+    assert cell_server.device.state is State.RESTING   # nothing changed
+    page.close()
+
+
+def test_a_second_browser_watches_live_and_cannot_command(chromium, dashboard, cell_server):
+    owner = Page(chromium, dashboard.url, name="owner-page")
+    watcher = Page(chromium, dashboard.url, name="watcher-page")
+    owner.take_control()
+    watcher.shows("st-lock", "owner-page")
+    watcher.shows("role", "held by owner-page")
+    for button in ("btn-activate", "btn-path-run", "btn-speed", "btn-release"):
+        locator = watcher.page.locator(f"#{button}")
+        assert locator.is_disabled(), button
+        assert "held by owner-page" in locator.get_attribute("title")
+    before = watcher.joint(0)
+    owner.page.fill("#path-points", "p1 " + " ".join(map(str, PATH["p1"])))
+    owner.click("btn-path-load")
+    owner.click("btn-path-run")
+    watcher.expect(watcher.page.locator("#joints .joint:nth-child(1) .jvalue")).not_to_have_text(
+        before, timeout=30_000)
+    watcher.shows("st-state", "moving")
+    # What the watcher may press is refused by the server, with its reason.
+    watcher.click("btn-session")
+    watcher.expect(watcher.page.locator("#btn-lock")).to_be_enabled(timeout=30_000)
+    watcher.click("btn-lock")
+    watcher.shows("refusal", "Lock — FAILED_PRECONDITION")
+    owner.shows("path-progress", "done", timeout_ms=60_000)
+    watcher.close()
+    owner.close()
+
+
+def test_jog_a_joint_from_the_pendant(chromium, dashboard, cell_server):
+    page = Page(chromium, dashboard.url)
+    page.take_control()
+    page.click("manual-control")
+    page.expect(page.page.locator("#manual-control")).to_be_checked(timeout=30_000)
+    before = cell_server.device.feedback().position[0]
+    shown = page.joint(0)
+    button = page.page.locator("[data-testid='jog-J1+']")
+    button.hover()
+    page.page.mouse.down()
+    page.page.wait_for_timeout(600)
+    page.page.mouse.up()
+    page.expect(page.page.locator("#joints .joint:nth-child(1) .jvalue")).not_to_have_text(shown, timeout=5_000)
+    after = cell_server.device.feedback().position[0]
+    assert after > before + 0.005
+    # The page catches up with the arm's final value (it shows state a few times a second).
+    deadline = time.monotonic() + 10
+    while abs((value := float(re.match(r"-?[\d.]+", page.joint(0)).group())) - after) > 0.01:
+        assert time.monotonic() < deadline, (value, after)
+        page.page.wait_for_timeout(100)
+    page.close()
