@@ -30,7 +30,7 @@ from landscape.server.auth import Identity, Role, RoleTooLow, TokenStore, requir
 from landscape.server.errors import CommandError, ResourceExhausted
 from landscape.server.limits import StreamLimits
 from landscape.server.rate_limit import RateLimiter
-from landscape.server.servicers.guard import abort
+from landscape.server.servicers.guard import end_call
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +109,7 @@ class _Call:
                 await asyncio.wait_for(anext(aiter(request), None), FIRST_MESSAGE_WAIT)
             except Exception:   # gone, slow or broken: it gets the status all the same
                 pass
-        await abort(self.context, self.name, error)
+        await end_call(self.context, self.name, error)
 
 
 class SecurityInterceptor(grpc.aio.ServerInterceptor):
