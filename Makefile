@@ -5,12 +5,18 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 GRPCURL_VERSION := v1.9.3
 GRPCURL := .tools/bin/grpcurl
-PORT ?= 50051
+# make run CONFIG=cell.toml runs another cell; make certs HOSTS="cell1.lan 192.168.10.20"
+CONFIG ?=
+HOSTS ?=
 
-.PHONY: help install run test lint proto bench clean tools clients clients-go clients-ts
+.PHONY: help install run certs test lint proto bench clean tools clients clients-go clients-ts
 
 help:
-	@echo "make run      install, then start the device server on 127.0.0.1:$(PORT)"
+	@echo "make run      install, then start the cell: a device server on 127.0.0.1:50051 with"
+	@echo "              its simulated arm, the CRCL gateway on 64444, the web supervisor on"
+	@echo "              8080 (when installed); CONFIG=file for another cell (landscape-cell)"
+	@echo "make certs    a development CA, certificates (var/certs) and role tokens (var/tokens);"
+	@echo "              HOSTS=\"names or addresses\" of the device servers' machines"
 	@echo "make test     install, then run every test"
 	@echo "make lint     buf lint of proto/"
 	@echo "make proto    regenerate the Python stubs from proto/"
@@ -44,7 +50,11 @@ proto: install
 	$(PY) -c 'import setup; setup.generate_stubs()'
 
 run: install
-	@$(PY) -m landscape.server --port $(PORT)
+	@$(PY) -m landscape.cell $(if $(CONFIG),--config $(CONFIG))
+
+certs: install
+	@$(PY) -m landscape.cell certs $(foreach host,$(HOSTS),--host $(host))
+	@$(PY) -m landscape.cell tokens
 
 test: install tools
 	@$(PY) -m pytest

@@ -7,11 +7,14 @@
 
 `Robot` (blocking) and `AsyncRobot` (asyncio) have a method per command of the contract;
 errors are the exceptions below (module errors). `Session` and `AsyncSession` are the
-session alone, for programs that use the generated stubs directly.
+session alone, for programs that use the generated stubs directly. A device server that
+wants TLS or a role token is reached through `open_channel` / `open_aio_channel` (module
+credentials): `Robot(open_channel(target, ClientTLS(ca="ca.pem"), read_token(path)))`.
 """
 from landscape.client.aio import AsyncCommand, AsyncRobot
 from landscape.client.aio_session import AsyncSession
 from landscape.client.command import Command
+from landscape.client.credentials import ClientTLS, open_aio_channel, open_channel, read_token
 from landscape.client.errors import (CommandAborted, CommandFailed, CommandRefused,
                                      CommandTimeout, LandscapeError, NotImplementedByServer,
                                      NotLockHolder, TransportError, WrongState)
@@ -26,4 +29,5 @@ __all__ = [
     "DeviceState", "Pose", "TagPoint",
     "LandscapeError", "CommandRefused", "WrongState", "NotLockHolder", "NotImplementedByServer",
     "TransportError", "CommandFailed", "CommandAborted", "CommandTimeout",
+    "ClientTLS", "open_channel", "open_aio_channel", "read_token",
 ]

@@ -9,6 +9,7 @@ import asyncio
 import logging
 import signal
 
+from landscape.client import credentials
 from landscape.gateway.device import DeviceLink
 from landscape.gateway.schemas import SchemaSet, default_directory
 from landscape.gateway.server import DEFAULT_PORT, Gateway
@@ -35,6 +36,7 @@ def arguments(argv=None) -> argparse.Namespace:
                         help="the gripper's opening in m, for GripperStatus")
     parser.add_argument("--state-rate", type=float, default=100.0,
                         help="samples per second asked of the device's state stream")
+    credentials.add_arguments(parser)
     return parser.parse_args(argv)
 
 
@@ -46,7 +48,7 @@ def schema_set(option: str | None) -> SchemaSet | None:
 
 
 async def serve(args: argparse.Namespace, ready=None) -> None:
-    link = DeviceLink(args.device, args.state_rate)
+    link = DeviceLink(args.device, args.state_rate, *credentials.from_arguments(args))
     await link.start()
     options = GatewayOptions(schema_set(args.schemas), args.max_document, args.gripper_stroke)
     gateway = await Gateway(link, options).serve(args.host, args.port)

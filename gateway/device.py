@@ -15,7 +15,7 @@ import grpc
 from google.rpc import error_details_pb2
 from grpc_status import rpc_status
 
-from landscape.client import AsyncSession
+from landscape.client import AsyncSession, ClientTLS, open_aio_channel
 from landscape.gateway.events import EventRouter
 from landscape.gateway.state_feed import StateFeed
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
@@ -51,9 +51,12 @@ def refused(rpc: str, error: grpc.aio.AioRpcError) -> DeviceRefused:
 class DeviceLink:
     """The gateway's channel to one device server, shared by all its CRCL connections."""
 
-    def __init__(self, target: str, state_rate_hz: float = 100.0):
+    def __init__(self, target: str, state_rate_hz: float = 100.0, tls: ClientTLS | None = None,
+                 token: str | None = None):
+        """tls and token: how to reach a device server that wants them (an operator's token
+        at least, to lock and command)."""
         self.target = target
-        self.channel = grpc.aio.insecure_channel(target)
+        self.channel = open_aio_channel(target, tls, token)
         self.device = device_service_pb2_grpc.DeviceServiceStub(self.channel)
         self.digital_io = digital_io_service_pb2_grpc.DigitalIOServiceStub(self.channel)
         self.event_service = event_service_pb2_grpc.EventServiceStub(self.channel)

@@ -28,7 +28,8 @@ resource_tracker.ensure_running()
 signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 
 from landscape.server.app import StartupError, listen_address, serve  # noqa: E402
-from landscape.server.config import DEFAULT_ADDRESS, DEFAULT_PORT, ServerConfig  # noqa: E402
+from landscape.server.config import (DEFAULT_ADDRESS, DEFAULT_PORT, SecurityConfig,  # noqa: E402
+                                     ServerConfig)
 from landscape.server.controller_link import CLOCKS  # noqa: E402
 
 log = logging.getLogger("landscape.server")
@@ -52,14 +53,56 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
                              "(default %(default)s)")
     parser.add_argument("--reset-settings", action="store_true",
                         help="start from the default settings instead of the stored ones")
+    _security_arguments(parser.add_argument_group(
+        "security", "plaintext is for loopback: any other --address needs TLS and tokens, or "
+                    "--insecure"))
     parser.add_argument("--log-level", default="INFO",
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"],
                         help="what to log (default %(default)s); refused commands are INFO")
     args = parser.parse_args(argv)
+    if bool(args.tls_cert) != bool(args.tls_key):
+        parser.error("--tls-cert and --tls-key go together")
+    if args.mtls and not args.tls_ca:
+        parser.error("--mtls needs --tls-ca (the CA that signs the clients' certificates)")
+    security = SecurityConfig(
+        tls_cert=args.tls_cert, tls_key=args.tls_key, tls_ca=args.tls_ca, mtls=args.mtls,
+        tokens=args.tokens, audit_log=args.audit_log or None,
+        audit_max_bytes=args.audit_max_bytes, audit_backups=args.audit_backups,
+        rate_limit=args.rate_limit or None, rate_burst=args.rate_burst, insecure=args.insecure)
     config = ServerConfig(address=args.address, port=args.port, cell=args.cell,
                           clock=args.clock, paths_file=args.paths,
-                          reset_settings=args.reset_settings)
+                          reset_settings=args.reset_settings, security=security,
+                          max_message_bytes=args.max_message_bytes)
     return config, args.log_level
+
+
+def _security_arguments(group) -> None:
+    group.add_argument("--tls-cert", help="PEM certificate of this server (with --tls-key)")
+    group.add_argument("--tls-key", help="PEM private key of --tls-cert")
+    group.add_argument("--tls-ca", help="PEM CA that signs the clients' certificates (--mtls)")
+    group.add_argument("--mtls", action="store_true",
+                       help="mutual TLS: clients must show a certificate signed by --tls-ca")
+    group.add_argument("--tokens", help="folder of viewer.tokens, operator.tokens and "
+                                        "admin.tokens: callers must send one "
+                                        "('authorization: Bearer <token>')")
+    group.add_argument("--audit-log", default="var/audit.log",
+                       help="JSON-lines log of every mutating call, refused ones included "
+                            "(default %(default)s; '' for none)")
+    group.add_argument("--audit-max-bytes", type=int, default=10 * 1024 * 1024,
+                       help="rotate the audit log at this size (default %(default)s)")
+    group.add_argument("--audit-backups", type=int, default=5,
+                       help="rotated audit logs kept (default %(default)s)")
+    group.add_argument("--rate-limit", type=float, default=1000.0,
+                       help="calls per second one client may make on average; stops are never "
+                            "limited (default %(default)s; 0 for none)")
+    group.add_argument("--rate-burst", type=int, default=2000,
+                       help="calls one client may make at once (default %(default)s)")
+    group.add_argument("--max-message-bytes", type=int, default=4 * 1024 * 1024,
+                       help="largest request accepted, bytes (default %(default)s); paths "
+                            "stream in chunks, so no message needs to be big")
+    group.add_argument("--insecure", action="store_true",
+                       help="listen on a non-loopback address without TLS or tokens all the "
+                            "same (a network of your own only)")
 
 
 def main(argv=None) -> None:
@@ -85,12 +128,22 @@ def _say_what_runs(running, config: ServerConfig) -> None:
     lines = [f"cell: {config.cell or 'built-in default'} ({running.device.arm.name})",
              f"controller: {config.clock} clock, {link.cycle_time * 1000:g} ms cycle",
              f"paths and settings: {config.paths_file or 'in memory'}",
-             f"listening: {listen_address(config.address, running.port)} (plaintext gRPC)"]
+             f"listening: {listen_address(config.address, running.port)} "
+             f"({_transport(config.security)})",
+             f"audit log: {config.security.audit_log or 'none'}"]
     log.info("LandScape device server\n  " + "\n  ".join(lines))
     for problem in link.tuning_problems:
         log.warning("the cycle process runs without real-time guarantees (%s): expect late "
                     "cycles under load; run as root or grant CAP_SYS_NICE for SCHED_FIFO",
                     problem)
+
+
+def _transport(security: SecurityConfig) -> str:
+    words = ["mutual TLS" if security.mtls else "TLS" if security.tls_enabled else "plaintext",
+             "role tokens" if security.tokens else "no tokens"]
+    if security.insecure:
+        words.append("--insecure")
+    return ", ".join(words)
 
 
 if __name__ == "__main__":

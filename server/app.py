@@ -16,15 +16,19 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from landscape.server import services
+from landscape.server import services, tls
+from landscape.server.audit import AuditLog
+from landscape.server.auth import TokenFileError, TokenStore
 from landscape.server.collision import CollisionScene
-from landscape.server.config import ServerConfig
+from landscape.server.config import IDENTITY_CAPS, SecurityConfig, ServerConfig
 from landscape.server.controller_link import ControllerLink
 from landscape.server.device import Device
 from landscape.server.events import EventBus
 from landscape.server.limits import StreamLimits
 from landscape.server.paths import PathStore
+from landscape.server.rate_limit import RateLimiter
 from landscape.server.reflection_pool import MethodResolvingPool
+from landscape.server.security import SecurityInterceptor
 from landscape.server.servicers.device import DeviceServicer
 from landscape.server.servicers.digital_io import DigitalIOServicer
 from landscape.server.servicers.events import EventServicer
@@ -79,6 +83,7 @@ class RunningServer:
     dispatch: Dispatch
     limits: StreamLimits
     runner: _LoopThread
+    security: SecurityInterceptor
 
     @property
     def target(self) -> str:
@@ -105,6 +110,8 @@ class RunningServer:
         self.dispatch.shutdown()
         self.link.stop()
         self.runner.close()
+        if self.security.audit is not None:
+            self.security.audit.close()
 
     def wait(self) -> None:
         self.runner.run(self.server.wait_for_termination(), timeout=None)
@@ -120,15 +127,22 @@ def listen_address(address: str, port: int) -> str:
 def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     """Start a device server with its controller; returns once it listens (config.port 0 picks
     a free port) and, if config.start_device, once the controller is initialised. Raises
-    StartupError (one line: cause and fix) if the address cannot be had."""
+    StartupError (one line: cause and fix) if the address cannot be had, or the security
+    settings cannot be used or do not allow that address (tls.exposure_problem)."""
+    problem = tls.exposure_problem(config.address, config.security)
+    if problem:
+        raise StartupError(problem)
     # A thread that computes (planning a long path) keeps the interpreter for up to the switch
     # interval before the event loop or a stop gets it back: 1 ms instead of Python's 5.
     sys.setswitchinterval(0.001)
+    security = _security_layer(config.security)
     runner = _LoopThread()
     try:
-        server, port = runner.run(_bind(config))
+        server, port = runner.run(_bind(config, security))
     except BaseException:
         runner.close()
+        if security.audit is not None:
+            security.audit.close()
         raise
     bus = EventBus()
     cell = load_cell(config.cell)
@@ -154,20 +168,49 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         link.stop()
         runner.run(server.stop(None))
         runner.close()
+        if security.audit is not None:
+            security.audit.close()
         raise
     running = RunningServer(server, health_servicer, port, config.address, bus, device, workcell,
-                            link, hub, dispatch, limits, runner)
+                            link, hub, dispatch, limits, runner, security)
     device.on_health = running.set_serving
     log.debug("device server listening on %s", listen_address(config.address, port))
     return running
 
 
-async def _bind(config: ServerConfig) -> tuple[grpc.aio.Server, int]:
-    server = grpc.aio.server(options=[("grpc.max_receive_message_length", config.max_message_bytes),
+def _security_layer(security: SecurityConfig) -> SecurityInterceptor:
+    """Tokens, audit log and rate limit as configured; StartupError naming what is wrong."""
+    try:
+        tokens = TokenStore.load(security.tokens) if security.tokens else None
+    except TokenFileError as error:
+        raise StartupError(f"tokens: {error}") from None
+    try:
+        audit = (AuditLog(security.audit_log, security.audit_max_bytes, security.audit_backups)
+                 if security.audit_log else None)
+    except OSError as error:
+        raise StartupError(f"cannot write the audit log {security.audit_log}: "
+                           f"{error.strerror}; choose another with --audit-log") from None
+    rate = (RateLimiter(security.rate_limit, security.rate_burst)
+            if security.rate_limit else None)
+    return SecurityInterceptor(tokens, audit, rate,
+                               StreamLimits(security.identity_caps or IDENTITY_CAPS))
+
+
+async def _bind(config: ServerConfig,
+                security: SecurityInterceptor) -> tuple[grpc.aio.Server, int]:
+    server = grpc.aio.server(interceptors=[] if security.idle else [security],
+                             options=[("grpc.max_receive_message_length", config.max_message_bytes),
                                       ("grpc.so_reuseport", 0)])
     where = listen_address(config.address, config.port)
     try:
-        port = server.add_insecure_port(where)
+        credentials = (tls.server_credentials(config.security)
+                       if config.security.tls_enabled else None)
+    except tls.TlsError as error:
+        raise StartupError(f"TLS: {error}; make development certificates with "
+                           f"`landscape-cell certs`") from None
+    try:
+        port = (server.add_secure_port(where, credentials) if credentials
+                else server.add_insecure_port(where))
     except RuntimeError:
         port = 0
     if port == 0:

@@ -10,6 +10,42 @@ DEFAULT_PORT = 50051
 
 
 @dataclass(frozen=True)
+class SecurityConfig:
+    """Who may connect and what they may do (auth.py, tls.py, security.py)."""
+
+    # PEM files: the server's certificate and key (both, or neither: plaintext), and the CA
+    # that signs clients' certificates, required when mtls is on.
+    tls_cert: str | None = None
+    tls_key: str | None = None
+    tls_ca: str | None = None
+    mtls: bool = False
+    # Folder of <role>.tokens files (auth.py); None: no tokens, every caller may do anything.
+    tokens: str | None = None
+    # The audit log (audit.py); None: none. Rotated at audit_max_bytes, audit_backups kept.
+    audit_log: str | None = None
+    audit_max_bytes: int = 10 * 1024 * 1024
+    audit_backups: int = 5
+    # Calls per second one client (an identity with tokens, else a connection) may make on
+    # average, and at once; stops are never limited. None: no limit.
+    rate_limit: float | None = None
+    rate_burst: int = 200
+    # Open streams one identity may hold, per kind, when tokens are on (limits.py); None:
+    # IDENTITY_CAPS. Each connection also keeps its own caps (ServerConfig.stream_caps).
+    identity_caps: dict[str, Cap] | None = None
+    # Listen on a non-loopback address without TLS and tokens all the same.
+    insecure: bool = False
+
+    @property
+    def tls_enabled(self) -> bool:
+        return self.tls_cert is not None
+
+
+# One identity (a token) may be several programs: room for a few connections' worth.
+IDENTITY_CAPS = {"session": Cap(per_client=32, total=1_000_000),
+                 "watch": Cap(per_client=256, total=1_000_000)}
+
+
+@dataclass(frozen=True)
 class ServerConfig:
     address: str = DEFAULT_ADDRESS
     port: int = DEFAULT_PORT          # 0 picks a free port
@@ -33,3 +69,4 @@ class ServerConfig:
     collision_margin: float = 0.005
     # Initialise the controller at start-up (False leaves the device Idle, for tests).
     start_device: bool = True
+    security: SecurityConfig = SecurityConfig()

@@ -1,0 +1,128 @@
+"""The command line of each service of a cell, from its configuration.
+
+A `ServiceSpec` is what the launcher starts: the argv (this Python, `-m` the service's
+module), the working directory, the line that says it listens, and what it is. Clients'
+commands (gateway, supervisor) are built once the device servers listen, from the targets
+they really have (a port 0 becomes a real one).
+"""
+from __future__ import annotations
+
+import importlib.util
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from landscape.cell.config import CellConfig, DeviceSpec, SecuritySpec
+
+# The line each program prints once it listens; group 1 is where.
+READY = {
+    "device server": re.compile(r"landscape device server listening on (\S+)"),
+    "CRCL gateway": re.compile(r"CRCL gateway listening on (\S+)"),
+    "web supervisor": re.compile(r"web supervisor on (\S+)"),
+}
+SUPERVISOR_MODULE = "landscape.supervisor"
+
+
+@dataclass
+class ServiceSpec:
+    name: str                 # "arm1", "gateway", "supervisor"
+    kind: str                 # a key of READY
+    argv: list[str]
+    cwd: Path
+    note: str = ""            # said beside where it listens
+
+    @property
+    def ready(self) -> re.Pattern:
+        return READY[self.kind]
+
+
+def _python(module: str) -> list[str]:
+    return [sys.executable, "-m", module]
+
+
+def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None = None) -> ServiceSpec:
+    """The device server; `port` overrides the configured one (a restart keeps the port it
+    had)."""
+    argv = [*_python("landscape.server"), "--address", device.address,
+            "--port", str(device.port if port is None else port),
+            "--paths", str(device.data / "paths.sqlite3"), "--clock", device.clock,
+            "--audit-log", str(security.audit_log(device)),
+            "--audit-max-bytes", str(security.audit_max_bytes),
+            "--audit-backups", str(security.audit_backups),
+            "--rate-limit", f"{security.rate_limit:g}", "--rate-burst", str(security.rate_burst)]
+    if device.world is not None:
+        argv += ["--cell", str(device.world)]
+    if device.reset_settings:
+        argv.append("--reset-settings")
+    if security.tls:
+        argv += ["--tls-cert", str(security.cert), "--tls-key", str(security.key)]
+        if security.mtls:
+            argv += ["--mtls", "--tls-ca", str(security.ca)]
+    if security.tokens is not None:
+        argv += ["--tokens", str(security.tokens)]
+    if security.insecure:
+        argv.append("--insecure")
+    return ServiceSpec(device.name, "device server", argv, device.data,
+                       note=f"{_transport(security)}; data {device.data}")
+
+
+def _transport(security: SecuritySpec) -> str:
+    if not security.tls:
+        return "plaintext" + (", tokens" if security.tokens else "")
+    return ("mutual TLS" if security.mtls else "TLS") + (", tokens" if security.tokens else "")
+
+
+def client_arguments(security: SecuritySpec, token: Path | None) -> list[str]:
+    """The flags of landscape.client.credentials for the cell's own clients."""
+    argv = []
+    if security.tls:
+        argv += ["--tls-ca", str(security.ca)]
+        if security.mtls:
+            argv += ["--tls-cert", str(security.client_cert), "--tls-key",
+                     str(security.client_key)]
+    if token is not None:
+        argv += ["--token-file", str(token)]
+    return argv
+
+
+def gateway_service(config: CellConfig, targets: dict[str, str], workdir: Path) -> ServiceSpec:
+    gateway = config.gateway
+    argv = [*_python("landscape.gateway"), "--device", targets[gateway.device],
+            "--host", gateway.address, "--port", str(gateway.port)]
+    if gateway.grpc_port is not None:
+        argv += ["--grpc-port", str(gateway.grpc_port)]
+    argv += client_arguments(config.security, gateway.token)
+    return ServiceSpec("gateway", "CRCL gateway", argv, workdir, note=f"-> {gateway.device}")
+
+
+def supervisor_service(config: CellConfig, targets: dict[str, str],
+                       workdir: Path) -> ServiceSpec:
+    supervisor = config.supervisor
+    argv = [*_python(SUPERVISOR_MODULE)]
+    for name in supervisor.devices:
+        argv += ["--device", f"{name}={targets[name]}"]
+    argv += ["--host", supervisor.address, "--port", str(supervisor.port)]
+    world = config.device(supervisor.devices[0]).world
+    if world is not None:
+        argv += ["--cell", str(world)]
+    argv += client_arguments(config.security, supervisor.token)
+    return ServiceSpec("supervisor", "web supervisor", argv, workdir,
+                       note=f"shows {', '.join(supervisor.devices)}")
+
+
+def supervisor_missing(tls: bool, tokens: bool) -> str | None:
+    """Why the web supervisor cannot be started here, or None. With TLS or tokens on, it must
+    take the client flags (landscape.client.credentials.add_arguments) that say them."""
+    if importlib.util.find_spec(SUPERVISOR_MODULE) is None:
+        return f"{SUPERVISOR_MODULE} is not installed; the rest of the cell runs without it"
+    wanted = ["--tls-ca"] * tls + ["--token-file"] * tokens
+    if wanted:
+        help_text = subprocess.run([*_python(SUPERVISOR_MODULE), "--help"], capture_output=True,
+                                   text=True, timeout=60).stdout
+        wanted = [flag for flag in wanted if flag not in help_text]
+        if wanted:
+            return (f"this {SUPERVISOR_MODULE} takes no {' or '.join(wanted)} yet, and the "
+                    f"device servers want them")
+    return None

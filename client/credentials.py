@@ -1,0 +1,155 @@
+"""Channels to a device server that may want TLS and a role token.
+
+    tls = ClientTLS(ca="var/certs/ca.pem")
+    with open_channel("arm1.lan:50051", tls, read_token("var/tokens/operator.tokens")) as ch:
+        with Session(ch, "cell-supervisor") as session: ...
+
+With TLS the token rides on gRPC's call credentials; on a plaintext channel (loopback) an
+interceptor adds the same `authorization: Bearer <token>` header. `add_arguments` and
+`from_arguments` give every client program (the CRCL gateway, the web supervisor, probes) the
+same flags.
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+import grpc
+
+from landscape.client.session import _CallDetails
+
+AUTHORIZATION = "authorization"
+
+
+@dataclass(frozen=True)
+class ClientTLS:
+    """PEM files: the CA that signs the server's certificate (None: the system's roots), and
+    this client's certificate and key for mutual TLS. server_name: the name to check in the
+    server's certificate when the target's host is not in it (an IP address, say)."""
+
+    ca: str | None = None
+    cert: str | None = None
+    key: str | None = None
+    server_name: str | None = None
+
+    def credentials(self) -> grpc.ChannelCredentials:
+        def read(path):
+            return Path(path).read_bytes() if path else None
+        return grpc.ssl_channel_credentials(read(self.ca), read(self.key), read(self.cert))
+
+    def options(self) -> list[tuple[str, str]]:
+        return [("grpc.ssl_target_name_override", self.server_name)] if self.server_name else []
+
+
+def read_token(path: str | Path) -> str:
+    """The first token in a token file (one a line, `<token> [name]`, `#` comments): the
+    format of the server's role files, so a development file serves both sides."""
+    for line in Path(path).read_text(encoding="utf-8").splitlines():
+        words = line.split("#", 1)[0].split()
+        if words:
+            return words[0]
+    raise ValueError(f"{path}: holds no token")
+
+
+def open_channel(target: str, tls: ClientTLS | None = None, token: str | None = None,
+                 options=()) -> grpc.Channel:
+    """A synchronous channel: plaintext without `tls`, the token on every call if given."""
+    options = [*options, *(tls.options() if tls else ())]
+    if tls is not None:
+        credentials = tls.credentials()
+        if token:
+            credentials = grpc.composite_channel_credentials(
+                credentials, grpc.access_token_call_credentials(token))
+        return grpc.secure_channel(target, credentials, options)
+    channel = grpc.insecure_channel(target, options)
+    return grpc.intercept_channel(channel, _Bearer(token)) if token else channel
+
+
+def open_aio_channel(target: str, tls: ClientTLS | None = None, token: str | None = None,
+                     options=()) -> grpc.aio.Channel:
+    """The grpc.aio twin of `open_channel`."""
+    options = [*options, *(tls.options() if tls else ())]
+    if tls is not None:
+        credentials = tls.credentials()
+        if token:
+            credentials = grpc.composite_channel_credentials(
+                credentials, grpc.access_token_call_credentials(token))
+        return grpc.aio.secure_channel(target, credentials, options)
+    interceptors = _AioBearer.every_kind(token) if token else None
+    return grpc.aio.insecure_channel(target, options, interceptors=interceptors)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """--tls-ca, --tls-cert, --tls-key, --tls-server-name, --token-file."""
+    group = parser.add_argument_group("connecting to the device server")
+    group.add_argument("--tls-ca", help="TLS: PEM CA that signs the device server's certificate")
+    group.add_argument("--tls-cert", help="mutual TLS: this client's PEM certificate")
+    group.add_argument("--tls-key", help="mutual TLS: the PEM key of --tls-cert")
+    group.add_argument("--tls-server-name",
+                       help="TLS: the name to expect in the server's certificate")
+    group.add_argument("--token-file", help="file holding the role token to present")
+
+
+def from_arguments(args: argparse.Namespace) -> tuple[ClientTLS | None, str | None]:
+    """(tls, token) from the flags of `add_arguments`; TLS is on when any TLS flag is given."""
+    tls = None
+    if args.tls_ca or args.tls_cert or args.tls_server_name:
+        tls = ClientTLS(args.tls_ca, args.tls_cert, args.tls_key, args.tls_server_name)
+    return tls, read_token(args.token_file) if args.token_file else None
+
+
+class _Bearer(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClientInterceptor,
+              grpc.StreamUnaryClientInterceptor, grpc.StreamStreamClientInterceptor):
+    """Adds the token to every call of a plaintext synchronous channel."""
+
+    def __init__(self, token: str):
+        self._header = (AUTHORIZATION, f"Bearer {token}")
+
+    def _details(self, d):
+        return _CallDetails(d.method, d.timeout, [*(d.metadata or ()), self._header],
+                            d.credentials, d.wait_for_ready, d.compression)
+
+    def intercept_unary_unary(self, continuation, details, request):
+        return continuation(self._details(details), request)
+
+    intercept_unary_stream = intercept_unary_unary
+
+    def intercept_stream_unary(self, continuation, details, request_iterator):
+        return continuation(self._details(details), request_iterator)
+
+    intercept_stream_stream = intercept_stream_unary
+
+
+class _AioBearer:
+    """Adds the token to every call of a plaintext grpc.aio channel."""
+
+    def __init__(self, token: str):
+        self._header = (AUTHORIZATION, f"Bearer {token}")
+
+    async def _intercept(self, continuation, details, request):
+        metadata = grpc.aio.Metadata(*(details.metadata or ()), self._header)
+        return await continuation(details._replace(metadata=metadata), request)
+
+    @staticmethod
+    def every_kind(token: str) -> list:
+        """One interceptor per kind of call: grpc.aio files an interceptor under the first
+        kind it is only."""
+        return [_AioBearerUnaryUnary(token), _AioBearerUnaryStream(token),
+                _AioBearerStreamUnary(token), _AioBearerStreamStream(token)]
+
+
+class _AioBearerUnaryUnary(_AioBearer, grpc.aio.UnaryUnaryClientInterceptor):
+    intercept_unary_unary = _AioBearer._intercept
+
+
+class _AioBearerUnaryStream(_AioBearer, grpc.aio.UnaryStreamClientInterceptor):
+    intercept_unary_stream = _AioBearer._intercept
+
+
+class _AioBearerStreamUnary(_AioBearer, grpc.aio.StreamUnaryClientInterceptor):
+    intercept_stream_unary = _AioBearer._intercept
+
+
+class _AioBearerStreamStream(_AioBearer, grpc.aio.StreamStreamClientInterceptor):
+    intercept_stream_stream = _AioBearer._intercept

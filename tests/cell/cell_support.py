@@ -1,0 +1,72 @@
+"""What the cell tests share: development keys, and a move made the way a remote supervisor
+makes it (its own channel, TLS and a token, a session, the lock)."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from landscape.cell.certs import CertFiles, make_certificates
+from landscape.cell.tokens import make_tokens
+from landscape.client import ClientTLS, Session, open_channel, read_token
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, settings_pb2,
+                          types_pb2)
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+RESTING = types_pb2.DEVICE_STATE_RESTING
+
+
+@dataclass
+class Keys:
+    certs: CertFiles
+    tokens: Path                  # the folder of <role>.tokens
+
+    def token(self, role: str) -> str:
+        return read_token(self.tokens / f"{role}.tokens")
+
+    def tls(self) -> ClientTLS:
+        return ClientTLS(ca=str(self.certs.ca))
+
+
+def make_keys(folder: Path, hosts=()) -> Keys:
+    certs = make_certificates(folder / "certs", hosts=hosts)
+    make_tokens(folder / "tokens")
+    return Keys(certs, folder / "tokens")
+
+
+def joints(device) -> np.ndarray:
+    reply = device.GetRobotPosition(settings_pb2.GetRobotPositionRequest(), timeout=10)
+    return np.array(reply.joint_position)
+
+
+def wait_at_rest(device, goal, timeout: float = 60.0) -> np.ndarray:
+    """Polls until the device rests at `goal` (rad, (6,)); the joints."""
+    deadline = time.monotonic() + timeout
+    while True:
+        state = device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=10).state
+        position = joints(device)
+        if state == RESTING and np.max(np.abs(position - goal)) < 1e-3:
+            return position
+        if time.monotonic() > deadline:
+            raise AssertionError(f"not at rest at {goal} within {timeout} s: state {state}, "
+                                 f"joints {position}")
+        time.sleep(0.05)
+
+
+def move_as_operator(target: str, keys: Keys, goal, name: str = "cell-test") -> np.ndarray:
+    """Lock, activate, move to `goal` (joint angles, rad), deactivate, release; the joints
+    where it came to rest."""
+    with open_channel(target, keys.tls(), keys.token("operator")) as channel, \
+            Session(channel, name) as session:
+        session.lock()
+        device = device_service_pb2_grpc.DeviceServiceStub(session.channel)
+        device.Activate(control_pb2.ActivateRequest(), timeout=30)
+        reply = device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            point_name="cell-test", frame=JOINT, values=list(goal)), timeout=30)
+        assert reply.ret_val.ret_code == types_pb2.RETURN_CODE_CMD_STARTED_OK
+        reached = wait_at_rest(device, goal)
+        device.Deactivate(control_pb2.DeactivateRequest(), timeout=30)
+        device.Release(control_pb2.ReleaseRequest(), timeout=30)
+        return reached

@@ -1,0 +1,83 @@
+"""The cell configuration: the built-in default, the LAN example, and errors that name the
+file and the key."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from landscape.cell.config import CellConfigError, load_config, parse_config
+from landscape.cell.services import device_service, gateway_service
+
+from cell_support import make_keys
+
+LAN = Path(__file__).resolve().parents[2] / "cell" / "cells" / "lan.toml"
+
+
+def test_the_built_in_default_is_one_arm_the_gateway_and_the_supervisor_on_loopback(
+        tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    config = load_config()
+    (arm,) = config.devices
+    assert (arm.name, arm.address, arm.port, arm.world) == ("arm1", "127.0.0.1", 50051, None)
+    assert arm.data == tmp_path / "var" / "arm1"      # relative to where it runs
+    assert (config.gateway.device, config.gateway.port) == ("arm1", 64444)
+    assert (config.supervisor.port, config.supervisor.devices) == (8080, ("arm1",))
+    assert not config.security.tls and config.security.tokens is None
+    argv = device_service(arm, config.security).argv
+    assert argv[argv.index("--port") + 1] == "50051" and "--insecure" not in argv
+    assert argv[argv.index("--audit-log") + 1] == str(tmp_path / "var" / "arm1" / "audit.log")
+
+
+def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
+    make_keys(tmp_path / "var")
+    shutil.copy(LAN, tmp_path / "cell.toml")
+    config = load_config(tmp_path / "cell.toml")
+    assert [d.name for d in config.devices] == ["arm1", "arm2"]
+    assert config.devices[1].world.name == "press_tending.toml"
+    assert config.gateway.token == tmp_path / "var" / "tokens" / "operator.tokens"
+    gateway = gateway_service(config, {"arm1": "127.0.0.1:50051"}, tmp_path).argv
+    assert gateway[gateway.index("--tls-ca") + 1] == str(tmp_path / "var" / "certs" / "ca.pem")
+    assert "--token-file" in gateway
+    server = device_service(config.devices[1], config.security).argv
+    assert "--tokens" in server and "--tls-cert" in server
+
+
+@pytest.mark.parametrize("text, message", [
+    ("colour = 1", r"<t>: colour: unknown key"),
+    ("[[devices]]\nname = 'a'\nport = 'x'", r"devices\[0\]\.port: must be an integer"),
+    ("[[devices]]\nname = 'a'\nport = 70000", r"devices\[0\]\.port: must be within"),
+    ("[[devices]]\nname = '1a'", r"devices\[0\]\.name: a name is a letter"),
+    ("[[devices]]\nname = 'a'\n[[devices]]\nname = 'a'\nport = 1", r"two devices are named 'a'"),
+    ("[[devices]]\nname = 'a'\nworld = 'nowhere'", r"world: no built-in world is named"),
+    ("[[devices]]\nname = 'a'\nworld = 'no/such.toml'", r"world: .*no/such.toml does not exist"),
+    ("[[devices]]\nname = 'a'\nclock = 'slow'", r"clock: must be one of realtime, lockstep"),
+    ("[gateway]\ndevice = 'arm9'", r"gateway\.device: no device is named 'arm9'"),
+    ("[supervisor]\ndevices = []", r"supervisor\.devices: must be a non-empty list"),
+    ("[gateway]\nport = 50051", r"gateway\.port: port 50051 on 127.0.0.1 is taken by devices"),
+    ("[[devices]]\nname = 'a'\naddress = '0.0.0.0'",
+     r"devices\[0\]\.address: a would listen on 0\.0\.0\.0 without TLS and tokens"),
+    ("[security]\ntls = true", r"security\.cert: is required with tls = true"),
+    ("[security]\nmtls = true", r"security\.mtls: mutual TLS needs tls = true"),
+    ("[security]\ntokens = '.'", r"security\.tokens: .*none of viewer\.tokens"),
+    ("[launcher]\nrestart = 'always'", r"launcher\.restart: must be one of no, on-failure"),
+    ("name = [", r"<t>: not valid TOML"),
+])
+def test_errors_name_the_file_and_the_key(text, message, tmp_path):
+    with pytest.raises(CellConfigError, match=message):
+        parse_config(text, "<t>", tmp_path)
+
+
+def test_a_world_file_that_is_wrong_is_named_with_its_own_key(tmp_path):
+    (tmp_path / "w.toml").write_text("[arm]\nvariant = 'TX91'\n")
+    with pytest.raises(CellConfigError, match=r"world: not a usable world file: .*w\.toml: "
+                                              r"arm\.variant"):
+        parse_config("[[devices]]\nname = 'a'\nworld = 'w.toml'", "<t>", tmp_path)
+
+
+def test_insecure_lets_a_device_listen_off_loopback_without_protection(tmp_path):
+    config = parse_config("[[devices]]\nname = 'a'\naddress = '0.0.0.0'\n"
+                          "[security]\ninsecure = true", "<t>", tmp_path)
+    assert config.devices[0].host == "127.0.0.1"
+    assert "--insecure" in device_service(config.devices[0], config.security).argv
