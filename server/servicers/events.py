@@ -31,6 +31,9 @@ class EventServicer(services.EVENTS.servicer_base):
         except events.SequenceOutOfRange as err:
             raise errors.OutOfRange(str(err)) from err
         with subscription:
+            # The headers say "subscribed": a client may wait for them before it acts, even
+            # where no event comes for a long while.
+            await context.send_initial_metadata(())
             while (event := await subscription.next_async()) is not None:
                 yield self._response(event)
 

@@ -469,3 +469,14 @@ def test_the_lock_holder_posts_a_message_every_subscriber_sees(server):
             assert refused.value.code() is grpc.StatusCode.PERMISSION_DENIED
     finally:
         holder.close()
+
+
+def test_a_subscriber_learns_it_is_subscribed_before_any_event(server, stub):
+    """The headers come once the subscription is in place, so a client can wait for them (as
+    grpc's wait_for_connection does) before it acts, even on a device where nothing happens."""
+    stream = subscribe(stub)
+    done = threading.Event()
+    threading.Thread(target=lambda: (stream.initial_metadata(), done.set()), daemon=True).start()
+    assert done.wait(10), "no headers while no event was published"
+    assert server.bus.subscriber_count >= 1
+    stream.cancel()
