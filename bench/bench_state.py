@@ -182,10 +182,13 @@ async def motion_starts(target: str, runs: int):
                     return ((sample.time.ToNanoseconds() / 1e9 - began) * 1000,
                             (time.time() - began) * 1000)
 
-        async def at_rest():
+        async def at_rest(since: float = 0.0):
+            """The commanded joints once a cycle after `since` (wall time, s) shows the device
+            resting: samples queued before a motion started would show it resting too."""
             while True:
                 sample = (await samples.__anext__()).sample
-                if sample.ListFields() and sample.device_state == types_pb2.DEVICE_STATE_RESTING:
+                if (sample.ListFields() and sample.device_state == types_pb2.DEVICE_STATE_RESTING
+                        and sample.time.ToNanoseconds() / 1e9 > since):
                     return np.array(sample.commanded_positions)
 
         ring = [[0.3 * math.sin(i / 15), 0.2 * math.sin(i / 25), 1.5708 + 0.1 * math.cos(i / 20),
@@ -208,13 +211,14 @@ async def motion_starts(target: str, runs: int):
             await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=goal),
                                       metadata=md)
             out["joint move"].append(await first_moving(rest, began))
-            await at_rest()
+            await at_rest(time.time())
             await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT,
                                                                      values=ring[0]), metadata=md)
-            rest = await at_rest()
+            rest = await at_rest(time.time())
             began = time.time()
             await device.PathMove(motion_pb2.PathMoveRequest(path_name="bench100"), metadata=md)
             out["100-point path"].append(await first_moving(rest, began))
+            await at_rest(time.time())
         stream.cancel()
         await device.Deactivate(control_pb2.DeactivateRequest(), metadata=md)
         return out
