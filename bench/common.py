@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import json
 import math
 import multiprocessing as mp
+import os
 import threading
 
 import grpc
@@ -14,6 +16,24 @@ import numpy as np
 
 def pct(values, q: float) -> float:
     return float(np.percentile(values, q)) if len(values) else math.nan
+
+
+# The report runner (report.py) names a file here; a bench run alone records nothing.
+REPORT_ENV = "LANDSCAPE_BENCH_JSON"
+
+
+def record(figure: str, value: float, unit: str, *, baseline: float | None = None,
+           baseline_name: str = "", goal: float | None = None, better: str = "lower") -> None:
+    """One figure for the report, beside what a bench prints: its same-run baseline and the
+    goal an issue names (met when the value is at most, or with better="higher" at least,
+    the goal)."""
+    path = os.environ.get(REPORT_ENV)
+    if not path:
+        return
+    row = {"figure": figure, "value": value, "unit": unit, "baseline": baseline,
+           "baseline_name": baseline_name, "goal": goal, "better": better}
+    with open(path, "a") as out:
+        out.write(json.dumps(row) + "\n")
 
 
 class BareServer:

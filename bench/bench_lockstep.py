@@ -1,0 +1,125 @@
+"""Lock-step simulation speed (issue 18 item 2, issue 17): how many times faster than real time
+the whole stack runs a program, beside what its parts allow, measured in the same run.
+
+- whole stack: a device server on the lock-step clock (as the tests start it), a client on
+  gRPC loopback loading and running a blended joint path (about 11 simulated seconds), the
+  event stream open; simulated time from the controller's clock, wall time from the call to
+  the done event;
+- bare controller: the same cell's BulletController stepped by the lock-step clock with a
+  shuttling arm, no server (bench_cycle's run);
+- pybullet alone: the same world's stepSimulation, as many steps as the controller's cycles
+  take (two 2 ms steps a 4 ms cycle).
+
+Prints simulated s per wall s and the time per cycle of each; no pass/fail. Goal (issue 18):
+the whole stack at 50 times real time or more.
+Run: .venv/bin/python bench/bench_lockstep.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import grpc
+from common import record
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from bench_cycle import run_lock_step  # noqa: E402
+from support import locked_session, start_server  # noqa: E402
+
+from landscape.sim.bullet_controller import BulletController  # noqa: E402
+from landscape.sim.cell import load_cell  # noqa: E402
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,  # noqa: E402
+                          event_service_pb2_grpc, motion_pb2, types_pb2)
+
+GOAL = 50.0
+PATH_POINTS = 40
+LOOPS = 3   # of the path (about 3.7 s each at the default speed)
+
+
+def whole_stack(runs: int) -> tuple[float, float]:
+    """(simulated s, wall s) of `runs` runs of a blended ~10 s joint path through gRPC."""
+    server = start_server()
+    session = locked_session(server, "bench")
+    device = device_service_pb2_grpc.DeviceServiceStub(session.channel)
+    events = event_service_pb2_grpc.EventServiceStub(session.channel).Subscribe(
+        event_service_pb2.SubscribeRequest())
+    try:
+        device.Activate(control_pb2.ActivateRequest(), timeout=30)
+        points = [types_pb2.TagStruct(joint_values=[
+            0.9 * math.sin(2 * math.pi * i / PATH_POINTS), 0.3 * math.sin(4 * math.pi * i / PATH_POINTS),
+            1.5708 + 0.3 * math.cos(2 * math.pi * i / PATH_POINTS), 0.5 * math.sin(2 * math.pi * i / PATH_POINTS),
+            1.5708, math.cos(2 * math.pi * i / PATH_POINTS)], tag_name=f"t{i}", transition_speed=50)
+            for i in range(PATH_POINTS + 1)]
+        header = motion_pb2.PathHeader(path_name="lockstep", frame=types_pb2.REFERENCE_FRAME_JOINT_FRAME,
+                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+        device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=points)]), timeout=60)
+        clock = server.link.between_cycles
+        simulated = wall = 0.0
+        for _ in range(runs):
+            began, began_sim = time.perf_counter(), clock(lambda c: c.time)
+            command = device.PathMove(motion_pb2.PathMoveRequest(
+                path_name="lockstep", number_of_cycles=LOOPS), timeout=60).ret_val.command_id
+            for reply in events:
+                event = reply.event
+                if event.HasField("command") and event.command.command_id == command and \
+                        event.event_id in ("command_done", "command_failed"):
+                    break
+            wall += time.perf_counter() - began
+            simulated += clock(lambda c: c.time) - began_sim
+            if event.event_id != "command_done":
+                raise RuntimeError(f"the path did not complete: {event.command.message}")
+        return simulated, wall
+    finally:
+        events.cancel()
+        try:
+            device.Deactivate(control_pb2.DeactivateRequest(), timeout=30)
+        except grpc.RpcError:
+            pass
+        session.close()
+        server.stop(grace=None)
+
+
+def pybullet_alone(cycles: int) -> tuple[float, float]:
+    """(simulated s, wall s) of the default world's physics for `cycles` controller cycles."""
+    cell = load_cell(None)
+    ctrl = BulletController(cell)
+    steps = cycles * cell.controller.substeps
+    step = ctrl._physics_step   # the same bound stepSimulation the controller's cycle calls
+    began = time.perf_counter()
+    for _ in range(steps):
+        step()
+    wall = time.perf_counter() - began
+    ctrl.destroy()
+    return cycles * cell.controller.cycle_time, wall
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="one path run, for CI")
+    args = parser.parse_args()
+    cycle = load_cell(None).controller.cycle_time
+    simulated, wall = whole_stack(1 if args.quick else 3)
+    bare_wall, _ = run_lock_step(simulated)
+    physics_sim, physics_wall = pybullet_alone(round(simulated / cycle))
+    print(f"lock-step speed, {simulated:.1f} simulated s of a {PATH_POINTS}-point blended path "
+          f"run {LOOPS} times "
+          f"(simulated s per wall s; wall time per 4 ms cycle):")
+    rows = (("whole stack through gRPC", simulated, wall),
+            ("bare controller (baseline)", simulated, bare_wall),
+            ("pybullet alone (baseline)", physics_sim, physics_wall))
+    for name, sim_s, wall_s in rows:
+        print(f"  {name:28s} {sim_s / wall_s:7.1f} x real time   "
+              f"{wall_s / (sim_s / cycle) * 1e6:7.1f} us/cycle")
+    print(f"  goal (issue 18): whole stack >= {GOAL:g} x real time")
+    record("lock-step speed, whole stack", simulated / wall, "x real time",
+           baseline=simulated / bare_wall, baseline_name="bare controller", goal=GOAL,
+           better="higher")
+    record("lock-step speed, pybullet alone", physics_sim / physics_wall, "x real time")
+
+
+if __name__ == "__main__":
+    main()
