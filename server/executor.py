@@ -233,7 +233,7 @@ class Executor:
         op, motion = msg.get("op"), self._motion
         if op in ("io_image", "watch", "unwatch"):
             self._io.handle(msg)
-        elif op in ("jog", "jog_velocity", "jog_end"):
+        elif op in ("jog", "jog_velocity", "jog_clearance", "jog_end"):
             self._handle_jog(msg, fbk)
         elif op == "run":
             if motion is not None:
@@ -283,6 +283,8 @@ class Executor:
                                       self.cycle_time)
         elif jog is not None and op == "jog_velocity":
             jog.command(msg)
+        elif jog is not None and op == "jog_clearance":
+            jog.keep_clear(msg)
         elif jog is not None and op == "jog_end":
             jog.end("done")
 

@@ -16,14 +16,18 @@ The deadman: no request for `deadman` cycles, or a request with the deadman rele
 the arm to rest along its direction. Silence ends the session ("aborted", saying why); a
 released deadman only holds the arm until it is pressed again.
 
-Collision seam: `keep_out(q) -> str | None`, when set, vetoes a setpoint (the arm brakes and
-the session ends, saying why); the cell's collision checker (issue 11) plugs in here.
+Near obstacles (a velocity damper): the server's clearance guard (jog_guard.py) sends the
+gradient of the arm's clearance in joint space (m/rad) and the rate (m/s) at which the arm may
+still close it; every cycle a motion whose approach (-gradient . qd) exceeds that rate is
+scaled down to it, within the arm's full deceleration, while any motion that keeps or opens the
+clearance stays free.
 
 Messages (executor.py routes them):
   server -> cycle  {"op": "jog", "id", "limits": JogLimits, "tool_offset": (4, 4)}
                    {"op": "jog_velocity", "frame": "joint" | "base" | "world" | "tool",
                     "velocity": (6,) rad/s or (m/s, rad/s), "deadman": bool,
                     "world_rotation": (3, 3) world axes in base}
+                   {"op": "jog_clearance", "gradient": (6,) m/rad or None, "rate": m/s}
                    {"op": "jog_end"}   the client is done: brake, then "done"
                    "stop" / "abort" end the session the same way, reporting "aborted"
   cycle -> server  {"op": "started", "id", "wall_time"}, then "done" or "aborted" (with a
@@ -32,7 +36,6 @@ Messages (executor.py routes them):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import pinocchio as pin
@@ -71,7 +74,7 @@ class JogIntegrator:
         self.tool_offset = tool_offset
         self.q = np.array(q, dtype=float)
         self.qd = np.zeros(6)
-        self.keep_out: Callable[[np.ndarray], str | None] | None = None
+        self._clearance: tuple[np.ndarray, float] | None = None   # gradient (6,) m/rad, m/s
         self.ending: tuple[str, str] | None = None   # (report, message) once it must stop
         self._frame = "joint"
         self._velocity = np.zeros(6)
@@ -87,6 +90,11 @@ class JogIntegrator:
         self._velocity = np.asarray(msg["velocity"], dtype=float)
         self._pressed = bool(msg["deadman"])
         self._world = np.asarray(msg.get("world_rotation", np.eye(3)), dtype=float)
+
+    def keep_clear(self, msg: dict) -> None:
+        gradient = msg["gradient"]
+        self._clearance = None if gradient is None else (
+            np.asarray(gradient, dtype=float), max(0.0, float(msg["rate"])))
 
     def end(self, how: str, message: str = "") -> None:
         if self.ending is None:
@@ -110,14 +118,25 @@ class JogIntegrator:
             qd = self._joint_step(stopping)
         else:
             qd = self._cartesian_step(stopping)
-        limited = self._within_range(qd)
+        limited = self._within_range(self._clear_of_obstacles(qd))
         if not np.array_equal(limited, qd):
-            self._reference = None    # a joint range decides: the tip leaves its line
+            self._reference = None    # a joint range or an obstacle decides: the tip leaves its line
         q = self.q + limited * dt
-        if self.keep_out is not None and (why := self.keep_out(q)) is not None:
-            self.end("aborted", why)
         self.q, self.qd = np.clip(q, limits.lower, limits.upper), limited
         return self.q, self.qd
+
+    def _clear_of_obstacles(self, qd: np.ndarray) -> np.ndarray:
+        """qd scaled down as a whole (its direction holds: the arm does not slide along what
+        it nears) so that its approach to the nearest obstacle is at most the rate allowed,
+        reached within the arm's full deceleration."""
+        if self._clearance is None:
+            return qd
+        gradient, rate = self._clearance
+        approach = -float(gradient @ qd)
+        if approach <= rate:
+            return qd
+        wanted = qd * (rate / approach)
+        return self.qd + _limited(wanted - self.qd, self.limits.stop_acceleration * self.dt)
 
     # ---- joint jogs -------------------------------------------------------------------------
 

@@ -13,6 +13,8 @@ a joint's maximum velocity, or the arm's linear and angular tool speeds, times t
 the manual-mode tip speed, with the deadman (jog_control.py): no request for the deadman
 timeout (default DEADMAN_TIMEOUT, from the stream's first request) stops the arm at its full
 deceleration and ends the session; releasing the deadman holds the arm until it is pressed.
+Near the cell the arm slows and stops at the collision margin (jog_guard.py); the stream's
+replies say so.
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ import numpy as np
 
 from landscape.server.errors import ManualControlMode, OutOfRange, ParamError
 from landscape.server.jog_control import MANUAL_TIP_SPEED, JogLimits
+from landscape.server.jog_guard import JogGuard
 from landscape.server.motion_control import ENDED, RunningMotion
 from landscape.server.targets import Frame
 
@@ -67,10 +70,16 @@ class ManualControl:
 class JogSession:
     def __init__(self, device: "Device", motion: RunningMotion):
         self.device, self.motion = device, motion
+        self.guard = JogGuard(device, motion)
 
     @property
     def ended(self) -> bool:
         return self.motion.phase in ENDED
+
+    @property
+    def status(self) -> str:
+        """What the Jog stream's replies say: jogging, or what holds the arm where it is."""
+        return f"jogging; {self.guard.held}" if self.guard.held else "jogging"
 
     def request(self, frame: Frame, percent: np.ndarray, deadman: bool) -> None:
         """One jog request: velocities in percent per axis (joints, or vx, vy, vz, wx, wy, wz of
@@ -93,5 +102,6 @@ class JogSession:
 
     def end(self) -> None:
         """The client is done: the arm brakes to rest and the session ends."""
+        self.guard.close()
         if not self.ended:
             self.device.motions.send({"op": "jog_end"})

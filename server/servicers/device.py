@@ -271,7 +271,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
                 frame = convert.enum_value(convert.FRAMES, request.frame, "frame")
                 session.request(frame, request.velocity, request.deadman)
                 joints, world, units = self._position()
-                yield sensing_pb2.JogResponse(ret_val=convert.ok("jogging"), joint_position=joints,
+                yield sensing_pb2.JogResponse(ret_val=convert.ok(session.status),
+                                              joint_position=joints,
                                               world_position=world, units=units)
                 pending = asyncio.ensure_future(anext(requests, None))
                 while not pending.done() and not session.ended:

@@ -11,6 +11,7 @@ import grpc
 import numpy as np
 import pytest
 
+from landscape.server.collision import clearance
 from landscape.server.feedback import CMD, QD, SEQ
 from landscape.server.jog_control import MANUAL_TIP_SPEED
 from landscape.server.states import State
@@ -155,11 +156,13 @@ def test_a_cartesian_jog_moves_the_tip_straight_within_the_manual_speed(arm):
 def test_a_jog_stops_before_the_end_of_a_joint_range(arm):
     _manual(arm)
     pendant = Pendant(arm)
-    pendant.jog(JOINT, [0, 0, 0, 0, 100, 0], 1.5)    # joint 5 towards its 140 degrees
+    # Joint 6 towards its 270 degrees (it turns the flange, so no obstacle comes nearer;
+    # joint 5 would meet the collision margin of the wrist's shapes first, at about 110).
+    pendant.jog(JOINT, [0, 0, 0, 0, 0, 100], 2.5)
     pendant.close()
-    upper = arm.server.device.arm.upper[4]
-    q5 = arm.joints()[4]
-    assert upper - 0.01 < q5 < upper
+    upper = arm.server.device.arm.upper[5]
+    q6 = arm.joints()[5]
+    assert upper - 0.01 < q6 < upper
     assert arm.server.device.state is State.RESTING    # no controller fault on the way
 
 
@@ -206,3 +209,32 @@ def test_stop_motion_ends_a_jog(arm):
     pendant.close()
     assert pendant.error.code() is grpc.StatusCode.ABORTED
     assert arm.server.device.state is State.RESTING
+
+
+def test_a_jog_toward_the_table_slows_and_stops_at_the_margin_and_may_leave(arm):
+    """Issue 11: jog scaled down near an obstacle, stopped at the margin, free to go away."""
+    arm.move_down_to(0.55, 0.3, 0.45)                # the flange over the table, clear of parts
+    _manual(arm)
+    scene = arm.server.device.collisions
+    first = arm.server.link.feedback.head
+    pendant = Pendant(arm)
+    pendant.jog(BASE, [0, 0, -100, 0, 0, 0], 3.0)   # straight down, as fast as allowed
+    rows = _rows(arm, first)
+    near = clearance(scene.model(), rows[-1, CMD])
+    tips = arm.kin.forward(rows[:, CMD])[:, :3, 3]
+    speeds = np.linalg.norm(np.diff(tips, axis=0), axis=1) / arm.server.link.cycle_time
+    print(f"\njog down onto the table: stopped {near.distance * 1000:.2f} mm from "
+          f"{' and '.join(near.bodies)}; top speed {speeds.max() * 1000:.0f} mm/s")
+    assert "table" in near.bodies
+    assert scene.margin - 0.0005 <= near.distance <= scene.margin + 0.002
+    assert speeds[-10:].max() < 1e-3                # at rest, the deadman still pressed
+    assert speeds.max() > 0.2                       # it jogged at speed on the way
+    assert "margin" in pendant.replies[-1].ret_val.ret_msg
+    assert "table" in pendant.replies[-1].ret_val.ret_msg
+    assert arm.server.device.state is State.MOVING   # still jogging: held, not ended
+
+    before = arm.tool_tip()[:3, 3]
+    pendant.jog(BASE, [0, 0, 50, 0, 0, 0], 0.4)      # away: free at once
+    pendant.close()
+    assert arm.tool_tip()[2, 3] > before[2] + 0.02
+    assert clearance(scene.model(), arm.joints()).distance > scene.margin + 0.02

@@ -175,3 +175,32 @@ def test_tool_commands_refuse_what_does_not_fit_and_change_nothing(arm):
     assert error.code() is grpc.StatusCode.OUT_OF_RANGE
     assert error_info(error).metadata["ret_code"] == "-3"
     assert _state(arm) == ("vacuum", "off")
+
+
+def test_a_held_part_carried_into_the_table_is_refused_and_free_space_is_not(arm):
+    """Issue 11: the part in the gripper is part of the arm for the collision check."""
+    _only_part(arm, "block_2")
+    arm.get_tool("gripper")
+    start = _part(arm, "block_2")
+    arm.move_down_to(start[0], start[1], start[2] + 0.1)
+    _lift(arm, -0.1)
+    arm.device.ActivateTool(ee.ActivateToolRequest(tool_id="gripper", bit_field=1))
+    _lift(arm, 0.1)
+    before = arm.joints().copy()
+    # Straight down by as much as it was lifted: the block (hanging 2 cm below the finger
+    # tips) would meet the table top while the fingers stay 2 cm above it.
+    refused = _refused(lambda: arm.device.MoveRelative(motion_pb2.MoveRelativeRequest(
+        frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME, values=[0, 0, -0.1, 0, 0, 0],
+        motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION), timeout=30))
+    info = error_info(refused)
+    assert refused.code() == grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert {info.metadata["body_a"], info.metadata["body_b"]} == {"block_2", "table"}
+    assert "block_2" in refused.details() and "table" in refused.details()
+    assert np.allclose(arm.joints(), before, atol=1e-6)         # nothing moved
+    assert arm.server.device.state is State.RESTING
+
+    reply = arm.device.MoveRelative(motion_pb2.MoveRelativeRequest(   # free space: it runs
+        frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME, values=[0, 0.1, 0.05, 0, 0, 0],
+        motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION), timeout=30)
+    assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+    assert _part(arm, "block_2") == pytest.approx(start + [0, 0.1, 0.15], abs=3e-3)
