@@ -20,7 +20,7 @@ help:
 	@echo "make test     install, then run every test"
 	@echo "make lint     buf lint of proto/"
 	@echo "make proto    regenerate the Python stubs from proto/"
-	@echo "make bench    run the benchmarks in bench/ and print their figures"
+	@echo "make bench    run every benchmark: one table, bench/results/latest.json (QUICK=1: short)"
 	@echo "make tools    build grpcurl $(GRPCURL_VERSION) into .tools/bin"
 	@echo "make clients  build the Go and TypeScript example clients (clients/)"
 	@echo "make clean    remove the virtualenv, generated stubs and caches"
@@ -63,7 +63,7 @@ lint: install
 	$(VENV)/bin/buf lint
 
 bench: install
-	@for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+	@$(PY) bench/report.py $(if $(QUICK),--quick)
 
 # Needs Go; without it grpcurl is not built and its tests skip, saying so.
 $(GRPCURL):

@@ -31,6 +31,7 @@ import statistics
 import time
 
 import numpy as np
+from common import record
 import pinocchio as pin
 
 from bench_planning import timed   # bench/ is on the path when a benchmark runs
@@ -156,6 +157,8 @@ def main() -> None:
                      "baseline": min(base) * 1e3,
                      "found": f"{result.contact or 'clear'}; baseline: {within} samples "
                               "within the margin"})
+        record(f"collision check, {name}", min(check) * 1e3, "ms", baseline=min(plan) * 1e3,
+               baseline_name="planning it", goal=20.0 if name.startswith("cycle 10") else None)
         sample = Q[:: max(1, len(Q) // 200)]
         per_call = []
         for limit in (math.inf, 0.05):

@@ -26,6 +26,8 @@ import sys
 import time
 from pathlib import Path
 
+from common import record  # noqa: E402  (bench/ is the script's folder)
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from support import spawned_server  # noqa: E402
 
@@ -172,6 +174,12 @@ def main() -> None:
     print(f"CRCL: {N_COMMANDS}-command program, a GetStatus poll after each command until Done; "
           f"{N_STATUS} GetStatus round trips")
     report("gateway + device server", *gateway_figures)
+    seconds, _, rtt = gateway_figures
+    record("CRCL commands/s (1,000, GetStatus polls)", N_COMMANDS / seconds, "commands/s",
+           baseline=N_COMMANDS / baseline[0], baseline_name="TCP echo", goal=500,
+           better="higher")
+    record("CRCL GetStatus p50", _percentile(rtt, 50), "ms",
+           baseline=_percentile(baseline[2], 50), baseline_name="TCP echo", goal=2.0)
     report("baseline: bare TCP echo", *baseline)
     print("(issue 13 quotes NIST's own simulated server at 48 commands/s, 20 ms p50 on this "
           "machine: not measured here)")

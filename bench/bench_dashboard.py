@@ -30,6 +30,7 @@ import threading
 import time
 
 import grpc
+from common import pct, record, skipped
 
 DISPLAY_RATE_HZ = 30.0
 WARM_UP_S = 3.0
@@ -153,6 +154,7 @@ def main() -> None:
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 20.0
     if not os.access(CHROMIUM, os.X_OK):
         print(f"skipped: {CHROMIUM} is absent (apt-get install -y chromium; no browser is downloaded)")
+        skipped(f"{CHROMIUM} is absent")
         return
     server, target = spawn("landscape.server", "--port", "0", ready="listening on")
     dashboard, url = spawn("landscape.supervisor", "--device", f"arm1={target}", "--port", "0",
@@ -182,6 +184,9 @@ def main() -> None:
     print(row("dashboard WebSocket, no browser", window(ws_ages)))
     print(row("browser: the dashboard page", in_browser))
     print("target (issue 14): browser p99 < 30 ms")
+    record("browser state latency p99", pct(in_browser, 99), "ms",
+           baseline=pct(window(grpc_ages), 99), baseline_name="bare StreamState client",
+           goal=30.0)
 
 
 if __name__ == "__main__":

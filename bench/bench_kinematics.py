@@ -13,6 +13,7 @@ import argparse
 import time
 
 import numpy as np
+from common import record
 
 from landscape.sim.arm import VARIANTS, arm_model
 from landscape.sim.kinematics import Kinematics, PinocchioModel, ReversingResult, wrap_angle
@@ -98,6 +99,11 @@ def main() -> None:
     for what, seconds, note in rows:
         print(f"{what:{width}}  {seconds * 1e6:10.2f}  {seconds / baseline:8.2f}  "
               f"{1.0 / seconds:11,.0f}  {note}")
+    record("IK, one pose (reverse)", rows[0][1] * 1e6, "us", baseline=baseline * 1e6,
+           baseline_name="pinocchio FK", goal=15.0)
+    batch = next(r for r in rows if "solve_batch" in r[0])
+    record("IK, batched, per pose", batch[1] * 1e6, "us", baseline=baseline * 1e6,
+           baseline_name="pinocchio FK", goal=4.0)
     errors = np.abs(kin.forward(closed_q[found_ok]) - poses[found_ok]).max()
     print(f"\nclosed form exact to {errors:.1e} (largest pose element error of reverse()'s "
           f"joints); goals (issue 18): reverse() <= 15 us, solve_batch() <= 4 us a pose")

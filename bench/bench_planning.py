@@ -32,6 +32,7 @@ import statistics
 import time
 
 import numpy as np
+from common import record
 
 from landscape.server.motion.cartesian import arc, straight_line, tool_pose
 from landscape.server.motion.timing import (ConstAccelProfile, chord_parameters, gridpoints,
@@ -157,6 +158,11 @@ def main() -> None:
             off = np.linalg.norm((tips - a) - ((tips - a) @ d)[:, None] * d, axis=1).max()
             speed = np.linalg.norm(np.diff(tips, axis=0), axis=1).max() / DT
             extra = f"samples within {off * 1e6:.1f} um of the line; peak {speed:.4f} m/s"
+        record(f"timing over the optimum, {name}", 100 * (tr.duration / reference - 1), "%",
+               goal=1.0)
+        if len(W) == 100:
+            record(f"planning {name}", best * 1e3, "ms", baseline=same_time * 1e3,
+                   baseline_name="toppra, same grid", goal=0.1 * same_time * 1e3)
         quality_rows.append((name, tr.duration, 100 * (tr.duration / profile - 1), len(fine),
                              reference, ref_time, 100 * (tr.duration / reference - 1),
                              100 * (profile / reference - 1), same, same_time * 1e3,

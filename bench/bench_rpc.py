@@ -1,8 +1,8 @@
 """RPC overhead (issues 17 and 18): unary calls of the device server beside a bare gRPC echo of
 the same response size, measured in the same run. Prints, no pass/fail.
 
-For GetRobotPosition, GetDeviceState, GetVelocities (reads, every client) and SetSpeed (the lock
-holder's lease): latency p50/p99 and throughput with 1, 8 and 32 concurrent clients, and the
+For every read-only unary call of DeviceService (any client may make them) and SetSpeed (the
+lock holder's lease): latency p50/p99 and throughput with 1, 8 and 32 concurrent clients, and the
 same for a bare grpc.aio echo server in this process answering a message of the same size.
 Goals: p50 within 1.2 times the echo for reads (1.5 for commands), throughput with 32 clients
 at least 0.8 times the echo's.
@@ -17,18 +17,28 @@ import asyncio
 import time
 
 import grpc
-from common import BareServer, in_child, pct
+from common import BareServer, in_child, pct, record
 
 from landscape.client import Session
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
-from landscape.v1 import (control_pb2, device_service_pb2_grpc, settings_pb2, types_pb2)
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, end_effector_pb2, sensing_pb2,
+                          settings_pb2, types_pb2)
 
 LEASE = "landscape-lease"
+# Every read-only unary call of DeviceService, then a command.
 CALLS = {
     "GetRobotPosition": (settings_pb2.GetRobotPositionRequest, False),
     "GetDeviceState": (control_pb2.GetDeviceStateRequest, False),
     "GetVelocities": (settings_pb2.GetVelocitiesRequest, False),
+    **{name: (getattr(settings_pb2, name + "Request"), False)
+       for name in ("GetUnits", "GetAccelerations", "GetMaxVelocities", "GetMaxAccelerations",
+                    "GetToolOffsets", "GetMotionControlState", "GetTagId")},
+    "GetSensorReading": (lambda: sensing_pb2.GetSensorReadingRequest(
+        sensor_type="force_sensor"), False),
+    "GetEndEffectorState": (end_effector_pb2.GetEndEffectorStateRequest, False),
+    "GetRobotDescription": (control_pb2.GetRobotDescriptionRequest, False),
+    "GetCellDescription": (control_pb2.GetCellDescriptionRequest, False),
     "SetSpeed": (lambda: settings_pb2.SetSpeedRequest(
         speed=30, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), True),
 }
@@ -106,6 +116,12 @@ def main() -> None:
                 print(f"  {rpc:17s} {clients:2d} clients: device {d50:6.3f} / {d99:6.3f} ms "
                       f"{drate:7.0f}/s   echo ({size} B) {e50:6.3f} / {e99:6.3f} ms "
                       f"{erate:7.0f}/s   ratio {d50 / e50:4.2f}, {drate / erate:4.2f}")
+                # Goals: reads within 1.2 times the echo (issue 18), commands 1.5 (issue 17).
+                record(f"{rpc} p50, {clients} clients", d50, "ms", baseline=e50,
+                       baseline_name="echo", goal=(1.5 if rpc == "SetSpeed" else 1.2) * e50)
+                if clients == 32:
+                    record(f"{rpc} throughput, 32 clients", drate, "calls/s", baseline=erate,
+                           baseline_name="echo", goal=0.8 * erate, better="higher")
     finally:
         holder.close()
         echo.stop()

@@ -28,7 +28,7 @@ import time
 
 import grpc
 import numpy as np
-from common import BareServer, in_child, pct
+from common import BareServer, in_child, pct, record
 from google.protobuf import wrappers_pb2
 
 from landscape.client import AsyncSession
@@ -314,6 +314,16 @@ def fan_out(server, bare: BareServer, holder: Holder, seconds: float):
               f"(min {min(rates):5.1f}), gaps {gaps}, age p50 {pct(ages, 50):6.2f} ms "
               f"p99 {pct(ages, 99):7.2f} ms, this process's CPU {cpu:5.1f} %, cycle overruns "
               f"{after.overruns - before.overruns}, late p99 {after.late_p99 * 1e3:.3f} ms")
+        if is_bare:
+            record("state fan-out 50 x 250 Hz, samples/s per subscriber", device_rate,
+                   "samples/s", baseline=statistics.mean(rates), baseline_name="bare stream",
+                   better="higher")
+            record("state fan-out 50 x 250 Hz, sample age p99", device_age, "ms",
+                   baseline=pct(ages, 99), baseline_name="bare stream")
+        else:
+            device_rate, device_age = statistics.mean(rates), pct(ages, 99)
+            record("cycle overruns, 50 state subscribers", after.overruns - before.overruns,
+                   "cycles", goal=0)
 
 
 def idle(server, bare: BareServer, n: int):
@@ -329,6 +339,10 @@ def idle(server, bare: BareServer, n: int):
     busy = unary_latency_in_child(server.target, False)
     echo = unary_latency_in_child(bare.target, True)
     queue.get(timeout=120)
+    record(f"server memory, {n} idle subscribers", rss1, "MB", baseline=rss0,
+           baseline_name="none")
+    record(f"GetDeviceState p50 beside {n} idle subscribers", pct(busy, 50), "ms",
+           baseline=pct(quiet, 50), baseline_name="none", goal=1.5 * pct(quiet, 50))
     print(f"  server memory {rss0:.0f} MB -> {rss1:.0f} MB with them "
           f"({(rss1 - rss0) * 1024 / n:.1f} kB each)")
     print(f"  GetDeviceState p50/p99: {pct(quiet, 50):.3f} / {pct(quiet, 99):.3f} ms alone, "
@@ -351,6 +365,8 @@ def starts(server, bare: BareServer, runs: int):
         seen = [s for _, s in pairs]
         print(f"  {kind:15s}: first moving cycle {pct(cycle, 50):6.2f} / {pct(cycle, 99):6.2f}"
               f"   client sees it {pct(seen, 50):6.2f} / {pct(seen, 99):6.2f}")
+        record(f"command to first moving cycle p99, {kind}", pct(cycle, 99), "ms",
+               goal=10.0 if kind == "joint move" else 20.0)
     echo = unary_latency_in_child(bare.target, True, 500)
     print(f"  baseline, a bare unary echo round trip: {pct(echo, 50):.3f} / {pct(echo, 99):.3f}")
 
@@ -384,6 +400,9 @@ def event_latency(server, bare: BareServer, holder: Holder):
             print(f"  {n:2d} subscriber(s): p50 {pct(latencies, 50):6.2f} p99 "
                   f"{pct(latencies, 99):6.2f} ({len(latencies)} events)   bare tick stream "
                   f"p50 {pct(base, 50):6.2f} p99 {pct(base, 99):6.2f}")
+            record(f"event latency p99, {n} subscriber(s)", pct(latencies, 99), "ms",
+                   baseline=pct(base, 99), baseline_name="bare tick stream",
+                   goal=8.0 if n == 50 else None)
             time.sleep(2.0)
     finally:
         motions.on_report = original

@@ -20,7 +20,7 @@ import multiprocessing as mp
 import time
 
 import grpc
-from common import in_child, pct
+from common import in_child, pct, record
 
 from landscape.client import AsyncSession
 from landscape.server.app import serve
@@ -129,6 +129,11 @@ def stop_latency(server, trials: int) -> None:
         del busy   # the loader's queue had to live until it started
         print(f"  {load:25s}: p50 {pct(latencies, 50):6.2f}  p99 {pct(latencies, 99):6.2f}  "
               f"max {max(latencies):6.2f}  (cycles: p99 {pct(latencies, 99) / 4:.1f})")
+        if load.startswith("idle"):
+            idle_p99 = pct(latencies, 99)
+        record(f"stop latency p99, {load.split(' (')[0]}", pct(latencies, 99), "ms",
+               baseline=None if load.startswith("idle") else idle_p99,
+               baseline_name="idle server", goal=4.0)
         while server.device.status().locked:
             time.sleep(0.1)
 
@@ -153,6 +158,8 @@ def handover(server) -> None:
         print(f"  {label:25s}: missed {stats.missed}, overruns {stats.overruns}, late p99 "
               f"{stats.late_p99 * 1e3:.3f} ms, max {stats.late_max * 1e3:.3f} ms, step max "
               f"{stats.exec_max * 1e3:.3f} ms")
+        if run:
+            record("missed cycles, 10-minute hand-over", stats.missed, "cycles", goal=0)
     device.StopMotion(motion_pb2.StopMotionRequest(), timeout=10)
     device.AbortMotion(motion_pb2.AbortMotionRequest(), timeout=10)
     session.close()

@@ -36,6 +36,11 @@ def record(figure: str, value: float, unit: str, *, baseline: float | None = Non
         out.write(json.dumps(row) + "\n")
 
 
+def skipped(reason: str) -> None:
+    """The bench could not run here (a tool is missing): the report says why."""
+    record("skipped", math.nan, "", baseline_name=reason)
+
+
 class BareServer:
     """A bare grpc.aio server on a loop thread of this process, like the device server's:
     `handlers` maps method names of service `service` to grpc method handlers."""
