@@ -141,9 +141,11 @@ def main() -> None:
                                   else ""), flush=True)
         report["benches"].append(result)
     report["machine"]["load_after"] = os.getloadavg()[0]
-    RESULTS.parent.mkdir(exist_ok=True)
-    RESULTS.write_text(json.dumps(report, indent=1, allow_nan=True))
-    print(f"\n{table(report)}\n\nreport: {RESULTS.relative_to(HERE.parent)}")
+    # A partial run does not stand for the latest report.
+    out = RESULTS.with_name("only.json") if args.only else RESULTS
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(json.dumps(report, indent=1, allow_nan=True))
+    print(f"\n{table(report)}\n\nreport: {out.relative_to(HERE.parent)}")
     if any(bench["error"] for bench in report["benches"]):
         sys.exit(1)
 
