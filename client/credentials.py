@@ -52,16 +52,21 @@ def read_token(path: str | Path) -> str:
     raise ValueError(f"{path}: holds no token")
 
 
+def _credentials(tls: ClientTLS, token: str | None) -> grpc.ChannelCredentials:
+    """TLS, with the token on every call if given (gRPC sends call credentials only over TLS)."""
+    credentials = tls.credentials()
+    if token:
+        credentials = grpc.composite_channel_credentials(
+            credentials, grpc.access_token_call_credentials(token))
+    return credentials
+
+
 def open_channel(target: str, tls: ClientTLS | None = None, token: str | None = None,
                  options=()) -> grpc.Channel:
     """A synchronous channel: plaintext without `tls`, the token on every call if given."""
     options = [*options, *(tls.options() if tls else ())]
     if tls is not None:
-        credentials = tls.credentials()
-        if token:
-            credentials = grpc.composite_channel_credentials(
-                credentials, grpc.access_token_call_credentials(token))
-        return grpc.secure_channel(target, credentials, options)
+        return grpc.secure_channel(target, _credentials(tls, token), options)
     channel = grpc.insecure_channel(target, options)
     return grpc.intercept_channel(channel, _Bearer(token)) if token else channel
 
@@ -71,11 +76,7 @@ def open_aio_channel(target: str, tls: ClientTLS | None = None, token: str | Non
     """The grpc.aio twin of `open_channel`."""
     options = [*options, *(tls.options() if tls else ())]
     if tls is not None:
-        credentials = tls.credentials()
-        if token:
-            credentials = grpc.composite_channel_credentials(
-                credentials, grpc.access_token_call_credentials(token))
-        return grpc.aio.secure_channel(target, credentials, options)
+        return grpc.aio.secure_channel(target, _credentials(tls, token), options)
     interceptors = _AioBearer.every_kind(token) if token else None
     return grpc.aio.insecure_channel(target, options, interceptors=interceptors)
 

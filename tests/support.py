@@ -97,6 +97,16 @@ def locked_session(server, name: str = "supervisor") -> Session:
     return session
 
 
+def bus_history(server) -> list:
+    """Every event a server's bus still keeps, oldest first (domain events)."""
+    subscription = server.bus.subscribe(after_sequence=0)
+    events = []
+    while (event := subscription.get(timeout=0.1)) is not None:
+        events.append(event)
+    subscription.close()
+    return events
+
+
 def activate(session: Session) -> None:
     device_service_pb2_grpc.DeviceServiceStub(session.channel).Activate(
         control_pb2.ActivateRequest(), timeout=10)
@@ -198,9 +208,4 @@ class Arm:
 
     def history(self) -> list:
         """Every event the bus still keeps, oldest first."""
-        subscription = self.server.bus.subscribe(after_sequence=0)
-        events = []
-        while (event := subscription.get(timeout=0.1)) is not None:
-            events.append(event)
-        subscription.close()
-        return events
+        return bus_history(self.server)

@@ -19,7 +19,7 @@ from landscape.server.states import State
 from landscape.sim.controller import EnableState
 from landscape.v1 import control_pb2, event_service_pb2, settings_pb2, types_pb2
 
-from support import activate, error_info, locked_session, stubs, wait_until
+from support import activate, bus_history, error_info, locked_session, stubs, wait_until
 
 
 @pytest.fixture
@@ -91,20 +91,12 @@ def test_a_killed_lock_holder_leaves_the_arm_disabled_and_the_lock_free(server):
         assert elapsed < 1.0
     finally:
         proc.kill()
-    alarms = [e for e in _history(server) if e.event_id == "alarm"]
+    alarms = [e for e in bus_history(server) if e.event_id == "alarm"]
     assert any("doomed disconnected" in e.detail.message for e in alarms)
     successor = locked_session(server, "next")
     assert server.device.status().lock_holder == "next"
     successor.close()
 
-
-def _history(server):
-    subscription = server.bus.subscribe(after_sequence=0)
-    events = []
-    while (event := subscription.get(timeout=0.1)) is not None:
-        events.append(event)
-    subscription.close()
-    return events
 
 
 def test_a_session_without_keepalives_ends_and_releases(server):
@@ -212,9 +204,9 @@ def test_estop_faults_the_device_and_reset_needs_it_released_then_asks_the_holde
         server.link.between_cycles(lambda c: c.panel.release_estop())
         wait_until(lambda: server.device.state is State.INACTIVE)  # the holder answered "reset"
         assert answers[0].event_id == "estop_released" and list(answers[0].choices) == ["reset", "stay"]
-        kinds = [e.event_id for e in _history(server)]
+        kinds = [e.event_id for e in bus_history(server)]
         assert kinds.index("rsvp_request") < kinds.index("rsvp_answer")
-        assert any(e.event_id == "alarm" and e.detail.code == 102 for e in _history(server))
+        assert any(e.event_id == "alarm" and e.detail.code == 102 for e in bus_history(server))
     finally:
         session.close()
 
@@ -226,8 +218,8 @@ def test_an_unanswered_rsvp_takes_its_default(server):
         server.link.between_cycles(lambda c: c.panel.press_estop())
         wait_until(lambda: server.device.state is State.ERROR)
         server.link.between_cycles(lambda c: c.panel.release_estop())
-        wait_until(lambda: any(e.event_id == "rsvp_answer" for e in _history(server)))
-        answer = next(e for e in _history(server) if e.event_id == "rsvp_answer").detail
+        wait_until(lambda: any(e.event_id == "rsvp_answer" for e in bus_history(server)))
+        answer = next(e for e in bus_history(server) if e.event_id == "rsvp_answer").detail
         assert (answer.choice, answer.timed_out) == ("stay", True)
         assert server.device.state is State.ERROR
     finally:

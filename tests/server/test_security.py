@@ -28,7 +28,7 @@ from landscape.server.tls import exposure_problem
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
 
-from support import error_info, start_server, wait_until
+from support import bus_history, error_info, start_server, wait_until
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 GOAL = [0.3, -0.2, 1.8, 0.1, 1.2, -0.4]
@@ -80,14 +80,6 @@ def _move(channel, lease: str):
         metadata=[("landscape-lease", lease)], timeout=10)
 
 
-def _events(server) -> list:
-    subscription = server.bus.subscribe(after_sequence=0)
-    events = []
-    while (event := subscription.get(timeout=0.1)) is not None:
-        events.append(event)
-    subscription.close()
-    return events
-
 
 def test_without_a_token_or_as_a_viewer_a_move_is_refused_and_nothing_moves(secured, keys):
     with open_channel(secured.target, _tls(keys), keys.token["operator"]) as channel, \
@@ -110,7 +102,7 @@ def test_without_a_token_or_as_a_viewer_a_move_is_refused_and_nothing_moves(secu
         time.sleep(0.3)    # the lock-step clock runs many cycles meanwhile
         assert secured.device.state is State.RESTING
         assert np.max(np.abs(secured.device.feedback().position - before)) < 1e-6  # servo hold
-        assert not [e for e in _events(secured) if e.event_id.startswith("command_")]
+        assert not [e for e in bus_history(secured) if e.event_id.startswith("command_")]
 
         # The operator's token, over TLS: the same move runs.
         reply = _move(channel, lease)
