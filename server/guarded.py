@@ -110,7 +110,7 @@ class GuardedMotion:
     def _tip_in_world(self, joints) -> np.ndarray:
         settings = self.device.settings
         tip = self.device.kinematics.forward(np.asarray(joints)) @ settings.tool_offset
-        return (np.linalg.inv(settings.world_frame) @ tip)[:3, 3]
+        return (settings.base_in_world @ tip)[:3, 3]
 
     # ---- seed 3.7.2 comply ------------------------------------------------------------------
 

@@ -3,6 +3,7 @@ validated, in SI. Immutable: a Set command builds a new value or changes nothing
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -68,6 +69,12 @@ class MotionSettings:
     tool_offset: np.ndarray = field(default_factory=lambda: np.eye(4))   # tool tip in flange
     world_frame: np.ndarray = field(default_factory=lambda: np.eye(4))   # world in base
     units: Units = Units()
+
+    @functools.cached_property
+    def base_in_world(self) -> np.ndarray:
+        """The inverse of world_frame (4x4): maps base poses into the world; computed once per
+        settings (reads convert every pose with it)."""
+        return np.linalg.inv(self.world_frame)
 
     def __post_init__(self):
         for name, default in (("linear_speed", self.arm.max_linear_velocity),

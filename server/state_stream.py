@@ -157,7 +157,7 @@ class StateHub:
             self._poses[sequence] = flange
         settings = self.device.settings
         tip = flange @ settings.tool_offset
-        return np.linalg.inv(settings.world_frame) @ tip if frame is Frame.WORLD else tip
+        return settings.base_in_world @ tip if frame is Frame.WORLD else tip
 
     def _convert(self, row: np.ndarray, view: View) -> pb.StreamStateResponse:
         device, units = self.device, view.units
