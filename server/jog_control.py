@@ -120,7 +120,7 @@ class JogIntegrator:
             qd = self._cartesian_step(stopping)
         limited = self._within_range(self._clear_of_obstacles(qd))
         if not np.array_equal(limited, qd):
-            self._reference = None    # a joint range or an obstacle decides: the tip leaves its line
+            self._reference = None    # a joint range or an obstacle decides: off the line
         q = self.q + limited * dt
         self.q, self.qd = np.clip(q, limits.lower, limits.upper), limited
         return self.q, self.qd

@@ -42,9 +42,8 @@ class JogGuard:
         self._thread.start()
 
     def close(self) -> None:
+        """The guard stops after its present tick (no wait: the event loop calls this)."""
         self._stop.set()
-        if threading.current_thread() is not self._thread:
-            self._thread.join(1.0)
 
     def _run(self) -> None:
         from landscape.server.motion_control import ENDED
