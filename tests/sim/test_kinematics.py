@@ -146,7 +146,12 @@ def test_scalar_path_matches_batch_and_returns_the_original(kin):
     batch = kin.solve_batch(T)
     assert np.array_equal(np.isnan(scalar), np.isnan(batch))
     found = ~np.isnan(batch)
-    assert np.allclose(scalar[found], batch[found], atol=1e-12, rtol=0)
+    # Exact to rounding, except that near the wrist singularity a few ulps of the wrist's
+    # rotation become (ulps / |sin q5|) in joints 4 and 6, and the two paths round differently.
+    wrist = np.zeros(6)
+    wrist[[3, 5]] = 1e-14
+    tolerance = 1e-12 + wrist / np.maximum(np.abs(np.sin(batch[..., 4:5])), 1e-300)
+    assert np.all(np.abs(scalar - batch)[found] <= tolerance[found])
     assert np.allclose(reversed_, Q, atol=1e-9, rtol=0)
 
 
