@@ -73,7 +73,12 @@ PASSING = (asyncio.CancelledError, grpc.aio.AbortError, GeneratorExit)
 
 async def end_call(context, rpc: str, exc: Exception) -> None:
     """End the call with the status of `exc`: a CommandError's own, else INTERNAL (logged with
-    its traceback); either way one line in the log says who was refused and why."""
+    its traceback); either way one line in the log says who was refused and why. A call the
+    client has already left (or the server already ended) has no one to tell: noted, not
+    reported as a failure."""
+    if context.done():
+        log.debug("%s ended while the call was over already: %r", rpc, exc)
+        return
     if not isinstance(exc, CommandError):
         log.error("%s failed unexpectedly", rpc, exc_info=exc)
         exc = Internal(f"{rpc} failed inside the server: {type(exc).__name__}: {exc}")
