@@ -24,6 +24,7 @@ import math
 import time
 
 import numpy as np
+from common import record
 
 from landscape.server.cycle_inputs import CycleSensors, IoMonitor
 from landscape.server.executor import Executor
@@ -112,6 +113,8 @@ def _move(ctrl, mailbox, loops: dict) -> None:
 def _figures(label: str, executor_us: np.ndarray, step_us: np.ndarray) -> None:
     p = lambda a: f"{np.percentile(a, 50):7.1f} {np.percentile(a, 99):7.1f} {a.max():8.1f}"  # noqa
     print(f"{label:20s} executor p50/p99/max {p(executor_us)} us   whole step {p(step_us)} us")
+    record(f"cycle step p99, {label.lstrip('+ ')}", float(np.percentile(step_us, 99)), "us",
+           baseline=4000.0, baseline_name="the cycle")
 
 
 def main() -> None:
