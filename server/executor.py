@@ -11,7 +11,9 @@ A motion may carry a sensor loop (force_control.py): a guard (moveReact) that st
 sensor crosses a threshold, a compliance (comply) that shifts its setpoints to hold a force.
 Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. Sensors,
 the I/O image and the I/O watches are read every cycle (cycle_inputs.py), so the loops see
-this cycle's readings.
+this cycle's readings. The arm model's joint torques for the motion the drives just followed
+(arm_dynamics.py: pinocchio's RNEA at the measured position and velocity and the commanded
+acceleration, with the payload the server declared) go into every row beside the measured ones.
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
@@ -22,6 +24,8 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                     when its sample is passed
                    {"op": "comply", "id", "spec": ComplySpec}: compliance for the running motion
                    {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
+                   {"op": "payload", "parameters": (10,)}: what the flange carries now
+                    (arm_dynamics.py)
                    the jog messages (jog_control.py) and the I/O ones (cycle_inputs.py)
   cycle -> server  {"op": "controller", "enable": EnableState value, "estop": bool} on change
                    {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label",
@@ -39,8 +43,8 @@ import time
 import numpy as np
 
 from landscape.server.cycle_inputs import CycleSensors, IoMonitor
-from landscape.server.feedback import (CMD, ENABLE, ESTOP, IO, QD, SENSORS, SEQ, TAU, TIME, WALL,
-                                       WIDTH, Q, FeedbackRing)
+from landscape.server.feedback import (CMD, ENABLE, ESTOP, IO, MODEL_TAU, QD, SENSORS, SEQ, TAU,
+                                       TIME, WALL, WIDTH, Q, FeedbackRing)
 from landscape.server.force_control import RANGE_KIND, Admittance, ThresholdMonitor, vector
 from landscape.server.jog_control import JogIntegrator
 from landscape.server.playback import Motion, brake
@@ -61,10 +65,11 @@ SETTLE_TIMEOUT = 1.0
 class Executor:
     """The cyclic function. `ring` receives every cycle's feedback (feedback.py); reports go to
     the server through `mailbox`, in order, after that cycle's row. `arm`: the arm model for
-    the loops that need its Jacobian (jog, comply); without it they are refused."""
+    the loops that need its Jacobian (jog, comply), refused without it, and for the model
+    torques (`gravity`: m/s^2 in the arm's base frame)."""
 
     def __init__(self, mailbox, cycle_time: float, ring: FeedbackRing | None = None,
-                 arm: ArmModel | None = None):
+                 arm: ArmModel | None = None, gravity=(0.0, 0.0, -9.81)):
         self.mailbox = mailbox
         self.cycle_time = cycle_time
         self.ring = ring
@@ -79,10 +84,14 @@ class Executor:
         self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
         self._sensors = CycleSensors()
         self._io = IoMonitor()
-        self._tip = None
+        self._tip = self._dynamics = None
+        self._setpoints: np.ndarray | None = None   # (3, 6): the last three cycles', newest first
         if arm is not None:
-            from landscape.server.tip_model import TipModel   # pinocchio: only where it runs
+            # pinocchio: only where it runs
+            from landscape.server.arm_dynamics import ArmDynamics
+            from landscape.server.tip_model import TipModel
             self._tip = TipModel(arm)
+            self._dynamics = ArmDynamics(arm, gravity)
 
     @property
     def sequence(self) -> int:
@@ -113,6 +122,7 @@ class Executor:
         else:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
+        model = self._model_torques(fbk, pos)
 
         key = (state.enable, state.estop)
         if key != self._last_state:   # first, so the server knows the power before the rest
@@ -120,13 +130,29 @@ class Executor:
             self._reports.insert(0, {"op": "controller", "enable": int(state.enable),
                                      "estop": state.estop is EstopState.ESTOP})
         if self.ring is not None:
-            self._write_row(ctrl, fbk, pos, state)
+            self._write_row(ctrl, fbk, pos, state, model)
         for report in self._reports:
             self.mailbox.post(report)
         self._reports.clear()
         return True
 
-    def _write_row(self, ctrl, fbk, pos, state) -> None:
+    def _model_torques(self, fbk, pos: np.ndarray) -> np.ndarray | float:
+        """The arm model's torques for the cycle the drives just played: they went from the
+        setpoint of two cycles ago to last cycle's (linearly, LLI 5.3.12), so the commanded
+        acceleration is the second difference of the last three setpoints. Then `pos` (this
+        cycle's) becomes the newest."""
+        past = self._setpoints
+        if past is None:
+            past = self._setpoints = np.tile(fbk.pos, (3, 1))
+        model = np.nan
+        if self._dynamics is not None:
+            acceleration = (past[0] - 2.0 * past[1] + past[2]) / (self.cycle_time ** 2)
+            model = self._dynamics.torques(fbk.pos, fbk.vel, acceleration)
+        past[1:] = past[:2].copy()
+        past[0] = pos
+        return model
+
+    def _write_row(self, ctrl, fbk, pos, state, model) -> None:
         row = self._row
         row[SEQ] = self._sequence
         row[TIME] = getattr(ctrl, "time", 0.0)
@@ -136,6 +162,7 @@ class Executor:
         row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
         row[SENSORS] = self._sensors.values
         row[IO] = self._io.image
+        row[MODEL_TAU] = model
         self.ring.write(self._sequence, row)
         self._sequence += 1
 
@@ -233,6 +260,9 @@ class Executor:
         op, motion = msg.get("op"), self._motion
         if op in ("io_image", "watch", "unwatch"):
             self._io.handle(msg)
+        elif op == "payload":
+            if self._dynamics is not None:
+                self._dynamics.set_payload(msg["parameters"])
         elif op in ("jog", "jog_velocity", "jog_clearance", "jog_end"):
             self._handle_jog(msg, fbk)
         elif op == "run":
