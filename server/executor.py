@@ -8,7 +8,8 @@ A motion is a timed trajectory played one sample per cycle, stopped and resumed 
 within the acceleration limits (playback.py).
 
 A motion may carry a sensor loop (force_control.py): a guard (moveReact) that stops it when a
-sensor crosses a threshold, a compliance (comply) that shifts its setpoints to hold a force.
+sensor crosses a threshold (on a force, the stop then settles the force near the threshold), a
+compliance (comply) that shifts its setpoints to hold a force.
 Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. Sensors,
 the I/O image and the I/O watches are read every cycle (cycle_inputs.py), so the loops see
 this cycle's readings. The arm model's joint torques for the motion the drives just followed
@@ -33,7 +34,9 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                    {"op": "paused", "id"}  {"op": "resumed", "id"}  {"op": "done", "id"}
                    {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
                    a guarded motion's end adds "guard": {"event": "triggered" | "envelope" |
-                   "full distance", "values": (3,), "position": (6,) rad}; a compliant one's
+                   "full distance", "values": (3,), "position": (6,) rad} (at the trigger),
+                   once triggered "rest": (3,) (the reading at rest) and "settle": why the
+                   force did not settle, if it did not; a compliant one's
                    "comply": {"offset": (3,) m, "force": (3,) N, "panic": code or None}
 """
 from __future__ import annotations
@@ -45,7 +48,8 @@ import numpy as np
 from landscape.server.cycle_inputs import CycleSensors, IoMonitor
 from landscape.server.feedback import (CMD, ENABLE, ESTOP, IO, MODEL_TAU, QD, SENSORS, SEQ, TAU,
                                        TIME, WALL, WIDTH, Q, FeedbackRing)
-from landscape.server.force_control import RANGE_KIND, Admittance, ThresholdMonitor, vector
+from landscape.server.force_control import (RANGE_KIND, Admittance, ForceSettle, ThresholdMonitor,
+                                            vector)
 from landscape.server.jog_control import JogIntegrator
 from landscape.server.playback import Motion, brake
 from landscape.server.run_arrays import Segments
@@ -183,11 +187,13 @@ class Executor:
             elif motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused:
                 motion.settling = motion.end_as or ("aborted" if motion.abort_when_paused
                                                     else "paused")
+            if motion.settling == "done" and self._settling_force(motion):
+                motion.settling = None
             if motion.settling is None:
                 # outlives the motion's arrays
                 self._hold = self._shifted(motion, sensors, running and motion.settling is None)
                 velocity = motion.sample(motion.velocities) * motion.rate
-                if motion.compliance is not None:
+                if motion.compliance is not None or motion.force_settle is not None:
                     velocity = velocity + (self._hold - self._last_setpoint) / self.cycle_time
                 self._last_setpoint = self._hold
                 return self._hold, velocity
@@ -210,6 +216,8 @@ class Executor:
                     note["message"] = f"{motion.outcome['message']}; {note['message']}"
                 if motion.compliance is not None:
                     motion.outcome["comply"] = motion.compliance.summary(sensors)
+                if motion.stopped_by is not None:
+                    motion.outcome["guard"]["rest"] = motion.stopped_by.reading(sensors).tolist()
                 self._end(motion.settling, **{**motion.outcome, **note})
         return self._hold, np.zeros_like(self._hold)
 
@@ -218,12 +226,16 @@ class Executor:
     def _watch(self, motion: Motion, fbk, sensors) -> None:
         """A running motion's sensor loops: a guard that fires, or a compliance that must stop,
         brake the motion at the arm's full deceleration."""
-        if motion.guard is not None:
-            verdict = motion.guard.check(sensors)
+        guard = motion.guard
+        if guard is not None:
+            verdict = guard.check(sensors)
             if verdict is not None:
                 event, values = verdict
                 motion.guard = None
-                self._sensors.watch_range = False
+                if event == "triggered":
+                    motion.stopped_by = guard
+                else:
+                    self._sensors.watch_range = False
                 motion.outcome["guard"] = {"event": event, "values": values.tolist(),
                                            "position": fbk.pos.tolist()}
                 if event == "envelope":
@@ -235,9 +247,26 @@ class Executor:
             motion.outcome["message"] = compliance.problem
             brake(motion, "failed")
 
+    def _settling_force(self, motion: Motion) -> bool:
+        """Whether a motion braked on a force threshold settles its force now (starting
+        that once it is at a stop: ForceSettle)."""
+        settle = motion.force_settle
+        if settle is None:
+            guard = motion.stopped_by
+            if guard is None or self._tip is None or not ForceSettle.wanted(guard.spec):
+                return False
+            settle = motion.force_settle = ForceSettle(guard.spec, self._tip, self.cycle_time)
+            self._last_setpoint = self._hold
+        if settle.finished and settle.note:
+            motion.outcome["guard"]["settle"] = settle.note
+        return not settle.finished
+
     def _shifted(self, motion: Motion, sensors, active: bool) -> np.ndarray:
-        """The motion's setpoint now: planned, shifted by its compliance if it has one."""
+        """The motion's setpoint now: planned, shifted by its compliance or its force settling
+        if it has one."""
         planned = motion.sample(motion.positions)
+        if motion.force_settle is not None:
+            return motion.force_settle.shift(planned, sensors)
         compliance = motion.compliance
         if compliance is None:
             return planned.copy()
@@ -282,6 +311,9 @@ class Executor:
                 self._attach(motion, {"comply": msg["spec"]})
         elif self._jog is not None and op in ("stop", "abort"):
             self._jog.end("aborted", f"{op} while jogging")
+        elif (op in ("stop", "abort") and motion is not None and motion.force_settle is not None
+              and not motion.force_settle.finished):
+            motion.force_settle.stop(f"{op} while settling the force")
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
             motion.limit = motion.stop_limit   # stops brake at the arm's full deceleration
             motion.target_rate = 0.0

@@ -3,6 +3,7 @@ moves (comply) on the real server, the simulated arm on the lock-step clock, the
 pressing on the real (simulated) table."""
 from __future__ import annotations
 
+import re
 import threading
 import time
 
@@ -45,9 +46,10 @@ def _react(arm, **fields) -> list:
     return arm.wait_command(reply.ret_val.command_id)
 
 
-def _touch(arm, threshold: float = -20.0) -> list:
-    """Down onto the table at 2 mm/s (0.1 % of the arm's 2 m/s) until fz reaches `threshold`."""
-    return _react(arm, sensor_type="force_sensor", motion=Z(z=0.1), speed=0.1,
+def _touch(arm, threshold: float = -20.0, mm_per_s: float = 2.0) -> list:
+    """Down onto the table at `mm_per_s` (as a % of the arm's 2 m/s) until fz reaches
+    `threshold`."""
+    return _react(arm, sensor_type="force_sensor", motion=Z(z=0.1), speed=mm_per_s / 20,
                   thresholds=Z(z=threshold))
 
 
@@ -88,18 +90,30 @@ def test_the_force_sensor_reads_at_the_tool_tip_in_the_tool_frame(cup):
 
 # ---- 3.7.2 moveReact ------------------------------------------------------------------------
 
-def test_move_react_stops_on_the_table_at_the_threshold(cup):
-    events = _touch(cup)
+def _vectors(message: str) -> list[np.ndarray]:
+    """The (x, y, z) vectors a message quotes, in order."""
+    return [np.array([float(v) for v in m.split(",")])
+            for m in re.findall(r"\(([-0-9.e, ]+)\)", message)]
+
+
+@pytest.mark.parametrize("mm_per_s", [2, 10, 20, 40])
+def test_move_react_stops_on_the_table_at_the_threshold(cup, mm_per_s):
+    events = _touch(cup, mm_per_s=mm_per_s)
     done = events[-1]
     assert done.event_id == "command_done" and done.command.command == "MoveReact"
-    assert done.command.message.startswith("triggered")
+    message = done.command.message
+    assert message.startswith("triggered")
     force = cup.reading()
     tip_height = cup.tool_tip()[2, 3]
-    print(f"\nmoveReact onto the table: at rest fz = {force[2]:.2f} N (threshold -20 N), tip "
-          f"{(tip_height - TABLE_TOP) * 1000:.2f} mm from the table; {done.command.message}")
+    print(f"\nmoveReact onto the table at {mm_per_s} mm/s: at rest fz = {force[2]:.2f} N "
+          f"(threshold -20 N), tip {(tip_height - TABLE_TOP) * 1000:.2f} mm from the table; "
+          f"{message}")
     assert force[2] == pytest.approx(-20.0, rel=0.2)
     assert abs(tip_height - TABLE_TOP) < 0.002
     assert cup.server.device.state is State.RESTING
+    trigger, _, rest = _vectors(message)[:3]     # the reading at the trigger, where, at rest
+    assert trigger[2] <= -20.0
+    assert rest == pytest.approx(force[:3], abs=0.5)
 
 
 def test_move_react_in_free_air_runs_its_full_distance_and_says_so(cup):
