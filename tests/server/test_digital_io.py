@@ -220,7 +220,9 @@ def test_the_alarm_callback_raises_an_alarm(arm):
     assert events[1].alarm.code == alarms.DIGITAL_IO
 
 
-def test_the_rsvp_callback_asks_the_lock_holder_and_gets_its_answer(tmp_path):
+@pytest.mark.parametrize("callback, alarm", [(pb.CALLBACK_TYPE_CLIENT_EVENT_RSVP, False),
+                                             (pb.CALLBACK_TYPE_CLIENT_ALARM_RSVP, True)])
+def test_the_rsvp_callback_asks_the_lock_holder_and_gets_its_answer(tmp_path, callback, alarm):
     arm = Arm(tmp_path)
     asked = []
 
@@ -238,12 +240,13 @@ def test_the_rsvp_callback_asks_the_lock_holder_and_gets_its_answer(tmp_path):
         io = stubs(holder.channel)[1]
         command_id = io.SignalDigitalIO(pb.SignalDigitalIORequest(
             type="input", unit_id=INPUTS, bit_string=PART_AT_PLACE,
-            callback_type=pb.CALLBACK_TYPE_CLIENT_EVENT_RSVP)).ret_val.command_id
+            callback_type=callback)).ret_val.command_id
         _place_part_in_the_zone(arm)
         events = _events(arm, command_id)
         kinds = [e.event_id for e in events]
         assert kinds == ["command_started", "rsvp_request", "rsvp_answer", "command_done"], kinds
         assert asked and asked[0].event_id == "digital_io"
+        assert asked[0].alarm is alarm and events[1].rsvp_request.alarm is alarm
         assert list(asked[0].choices) == ["acknowledge"]
         answer_event = events[2].rsvp_answer
         assert (answer_event.choice, answer_event.timed_out) == ("acknowledge", False)
