@@ -250,16 +250,18 @@ class Executor:
     def _settling_force(self, motion: Motion) -> bool:
         """Whether a motion braked on a force threshold settles its force now (starting
         that once it is at a stop: ForceSettle)."""
-        settle = motion.force_settle
-        if settle is None:
-            guard = motion.stopped_by
-            if guard is None or self._tip is None or not ForceSettle.wanted(guard.spec):
-                return False
+        settle, guard = motion.force_settle, motion.stopped_by
+        if guard is None or self._tip is None or not ForceSettle.wanted(guard.spec):
+            return False
+        if settle is None and not motion.unsettled:
             settle = motion.force_settle = ForceSettle(guard.spec, self._tip, self.cycle_time)
             self._last_setpoint = self._hold
-        if settle.finished and settle.note:
-            motion.outcome["guard"]["settle"] = settle.note
-        return not settle.finished
+        if settle is not None and not settle.finished and motion.unsettled:
+            settle.stop(motion.unsettled)
+        note = settle.note if settle is not None else motion.unsettled
+        if note:
+            motion.outcome["guard"]["settle"] = note
+        return settle is not None and not settle.finished
 
     def _shifted(self, motion: Motion, sensors, active: bool) -> np.ndarray:
         """The motion's setpoint now: planned, shifted by its compliance or its force settling
@@ -311,9 +313,8 @@ class Executor:
                 self._attach(motion, {"comply": msg["spec"]})
         elif self._jog is not None and op in ("stop", "abort"):
             self._jog.end("aborted", f"{op} while jogging")
-        elif (op in ("stop", "abort") and motion is not None and motion.force_settle is not None
-              and not motion.force_settle.finished):
-            motion.force_settle.stop(f"{op} while settling the force")
+        elif op in ("stop", "abort") and motion is not None and motion.stopped_by is not None:
+            motion.unsettled = f"{op} before the force settled"   # a guarded stop's: no more
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
             motion.limit = motion.stop_limit   # stops brake at the arm's full deceleration
             motion.target_rate = 0.0

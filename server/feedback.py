@@ -11,9 +11,10 @@ time, so the server's event loop can sleep on the pipe instead of polling.
 
 Row layout (float64): see the column constants below. Angles rad, velocities rad/s, torques
 N*m, times s. The model torques are the arm model's (arm_dynamics.py): what the cycle's motion
-takes with the payload the server declared; NaN when the cycle has no arm model. The sensor columns hold the cell's first force/torque sensor (read every cycle)
-and its first range sensor (read every RANGE_PERIOD cycles, every cycle while a guarded move
-watches it; between two reads the last one stays); `ring_sensors` says which sensors those are.
+takes with the payload the server declared; NaN when the cycle has no arm model. The sensor
+columns hold the cell's first force/torque sensor (read every cycle) and its first range
+sensor (read every RANGE_PERIOD cycles, every cycle while a guarded move watches it; between
+two reads the last one stays); `ring_sensors` says which sensors those are.
 The I/O columns mirror up to IO_UNITS units of digital I/O, each read every cycle through the
 mask the server asked for (executor "io_image"): a bit field as a float, exact to 2**53.
 """

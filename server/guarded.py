@@ -16,8 +16,9 @@ What the seed leaves open, decided as a cell integrator would expect:
   within 5 % of the threshold, at most 5 mm and 2 s, no faster than the approach), so that at
   rest the force is the threshold's whatever the approach speed. Then it is done; the done
   event says whether it triggered, the reading and the tip's position (world frame) at the
-  trigger, and the reading at rest. With no crossing it runs its full distance and says so. `gains[0]` in [0, 1] filters the readings (the newest one's
-  weight; 0 and 1: none); the others are ignored, as in the seed. `envelope_max[i] > 0`: a
+  trigger, and the reading at rest. With no crossing it runs its full distance and says so.
+  `gains[0]` in [0, 1] filters the readings (the newest one's weight; 0 and 1: none); the
+  others are ignored, as in the seed. `envelope_max[i] > 0`: a
   component beyond it ends the move as failed (an alarm); `envelope_min` is ignored, as in the
   seed. The compliance vector and speed must be zero ("mov-til-touch"; Comply complies).
 - Both are meant to touch something: the collision check before they start leaves out the
@@ -106,11 +107,12 @@ class GuardedMotion:
         if event == "triggered":
             values = guard["values"][:3 if kind == FORCE else 1]
             unit = "N" if kind == FORCE else "m"
-            rest = guard["rest"][:len(values)]
+            rest = (f"; at rest {vector(guard['rest'][:len(values)])} {unit}"
+                    if "rest" in guard else "")
             settle = f" ({guard['settle']})" if "settle" in guard else ""
             return (f"triggered: reading {vector(values)} {unit} with the tip at "
-                    f"{vector(self._tip_in_world(guard['position']))} m (world frame); at rest "
-                    f"{vector(rest)} {unit}{settle}")
+                    f"{vector(self._tip_in_world(guard['position']))} m (world frame)"
+                    f"{rest}{settle}")
         if event == "full distance" and report["op"] == "done":
             return "not triggered: moved the full distance"
         return report.get("message", "")

@@ -45,6 +45,7 @@ class Motion:
         self.compliance: Admittance | None = None
         self.stopped_by: ThresholdMonitor | None = None   # the guard that fired
         self.force_settle: ForceSettle | None = None      # after its stop (force_control.py)
+        self.unsettled = ""   # why the force is not settled after all (a stop or an abort)
 
     def _load(self, index: int) -> None:
         if index == 0 or self.before is None:

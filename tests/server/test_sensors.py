@@ -174,6 +174,26 @@ def test_move_react_stops_on_the_table_at_the_threshold(cup, mm_per_s):
     assert rest == pytest.approx(force[:3], abs=0.5)
 
 
+def test_a_stop_while_the_force_settles_ends_the_settling(cup):
+    clock = cup.link.clock
+    reply = cup.device.MoveReact(sensing_pb2.MoveReactRequest(
+        sensor_type="force_sensor", motion=Z(z=0.1), speed=2, thresholds=Z(z=-20)), timeout=30)
+    clock.hold()
+    try:
+        def until_settling(controller) -> None:   # the cycles, stepped here, one by one
+            while (motion := controller.cyclic._motion) is None or motion.force_settle is None:
+                controller.step()
+        cup.link.between_cycles(until_settling, timeout=60)
+        cup.server.device.motions.request_stop()
+    finally:
+        clock.release()
+    done = cup.wait_command(reply.ret_val.command_id)[-1]
+    assert done.event_id == "command_done"
+    assert done.command.message.startswith("triggered")
+    assert done.command.message.endswith("(stop before the force settled)")
+    assert cup.server.device.state is State.RESTING
+
+
 def test_move_react_in_free_air_runs_its_full_distance_and_says_so(cup):
     before = cup.tool_tip()[:3, 3]
     events = _react(cup, sensor_type="force_sensor", motion=Z(z=-0.05), speed=2,
