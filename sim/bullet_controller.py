@@ -180,7 +180,8 @@ class BulletController(Controller):
                 if tau is not None:
                     motors(pb.TORQUE_CONTROL, forces=tau)
                 physics()
-                applied = [a + s[3] for a, s in zip(applied, self._joint_states())]
+                states = self._joint_states()
+                applied = [a + s[3] for a, s in zip(applied, states)]
             self._start = self._cmd_list
         elif drive is _Drive.TORQUE:
             for _ in self._fractions:
@@ -191,7 +192,8 @@ class BulletController(Controller):
                 physics()
 
         # Feedback, in plain lists until the arrays are built: numpy is slow on 6 values.
-        states = self._joint_states()
+        if drive is not _Drive.POSVEL:   # (following, the last substep has read them)
+            states = self._joint_states()
         pos = [s[0] for s in states]
         vel = [s[1] for s in states]
         speed = max(map(abs, vel))
