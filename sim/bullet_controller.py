@@ -22,8 +22,9 @@ or the e-stop disable at once, with an error event. While not ENABLED, set() is 
 ignored: there is nothing to command.
 
 Feedback (`get()`): measured position, velocity, following error (command, or the held
-position, minus measured) and torque (motor plus feed-forward; the torque command in torque
-mode; 0 while DISABLED: the drives are off and the brakes carry the load).
+position, minus measured) and torque (motor, averaged over the cycle's substeps, plus
+feed-forward; the torque command in torque mode; 0 while DISABLED: the drives are off and the
+brakes carry the load).
 
 Single-threaded: call everything from the thread that steps (the cycle process).
 """
