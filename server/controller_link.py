@@ -35,10 +35,11 @@ CLOCKS = ("realtime", "lockstep")
 def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox):
     """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function."""
     from landscape.sim.bullet_controller import BulletController  # pybullet: only here
+    from landscape.server.arm_dynamics import base_gravity
     from landscape.sim.cell import load_cell
     cell = load_cell(cell_path)
     return BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time, ring,
-                                                  cell.arm))
+                                                  cell.arm, base_gravity(cell)))
 
 
 class ControllerLink:

@@ -11,10 +11,14 @@ What the seed leaves open, decided as a cell integrator would expect:
   frame, N; range sensor: the distance, first component only). Thresholds are signed: a move
   stops when a watched (non-zero) component reaches its threshold from the side it started
   on (pressing down on a table with the tool pointing down: fz falls, a threshold of -20 N).
-  It stops at the arm's full deceleration and is done; the done event says whether it
-  triggered, the tip's position (world frame) and the reading. With no crossing it runs its
-  full distance and says so. `gains[0]` in [0, 1] filters the readings (the newest one's
-  weight; 0 and 1: none); the others are ignored, as in the seed. `envelope_max[i] > 0`: a
+  It stops at the arm's full deceleration; on a force threshold it then settles the force
+  near the threshold (force_control.ForceSettle: along the watched axes it approached on,
+  within 5 % of the threshold, at most 5 mm and 2 s, no faster than the approach), so that at
+  rest the force is the threshold's whatever the approach speed. Then it is done; the done
+  event says whether it triggered, the reading and the tip's position (world frame) at the
+  trigger, and the reading at rest. With no crossing it runs its full distance and says so.
+  `gains[0]` in [0, 1] filters the readings (the newest one's weight; 0 and 1: none); the
+  others are ignored, as in the seed. `envelope_max[i] > 0`: a
   component beyond it ends the move as failed (an alarm); `envelope_min` is ignored, as in the
   seed. The compliance vector and speed must be zero ("mov-til-touch"; Comply complies).
 - Both are meant to touch something: the collision check before they start leaves out the
@@ -86,8 +90,10 @@ class GuardedMotion:
             raise OutOfRange(f"envelope maxima are magnitudes, 0 or more; got {envelope_max}")
         trajectory = self._tool_move(motion, speed)
         settings = self.device.settings
+        limits = self.device.motions.planner.limits(settings, speed)
         guard = GuardSpec(kind, tuple(thresholds), tuple(envelope_max),
-                          float(gains[0]) or 1.0, settings.tool_offset)
+                          float(gains[0]) or 1.0, settings.tool_offset, tuple(motion),
+                          limits.linear_velocity, limits.linear_acceleration)
         exclude = self._meant_to_touch(trajectory)
         if kind == FORCE:
             self.sensors.tare(sensor)
@@ -101,8 +107,12 @@ class GuardedMotion:
         if event == "triggered":
             values = guard["values"][:3 if kind == FORCE else 1]
             unit = "N" if kind == FORCE else "m"
+            rest = (f"; at rest {vector(guard['rest'][:len(values)])} {unit}"
+                    if "rest" in guard else "")
+            settle = f" ({guard['settle']})" if "settle" in guard else ""
             return (f"triggered: reading {vector(values)} {unit} with the tip at "
-                    f"{vector(self._tip_in_world(guard['position']))} m (world frame)")
+                    f"{vector(self._tip_in_world(guard['position']))} m (world frame)"
+                    f"{rest}{settle}")
         if event == "full distance" and report["op"] == "done":
             return "not triggered: moved the full distance"
         return report.get("message", "")

@@ -24,6 +24,9 @@ or switches the cup's suction on (blocking for two cycles; `vacuum_ok` then says
 is held). DeactivateTool opens the gripper (blocking for its rated opening time: there is no
 "open" input) or switches the suction off.
 
+Whenever the flange's load changes (a tool coupled or released, a part taken or let go) the
+cycle is told its mass properties (arm_dynamics.py), for the model torques it reports.
+
 The state (GetEndEffectorState, state streams) is read from the ring's I/O image, at most a
 cycle old: the tool from its id inputs, and per kind: gripper "open", "closing" or "closed";
 cup "off", "suction_on" or "holding" (a part held).
@@ -36,6 +39,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from landscape.server.arm_dynamics import NO_PAYLOAD, part_payload, tool_payload
 from landscape.server.errors import ControllerFailure, OutOfRange, ParamError, WrongState
 from landscape.server.units import pose_matrix
 from landscape.sim.cell import Pose, ToolSpec
@@ -82,6 +86,8 @@ class Tooling:
                        for t in tools}
         self._signals: dict[str, tuple[int, int]] = {}   # name -> (unit, bit)
         self._image: list[tuple[int, int]] = []          # (unit, mask) per ring I/O column
+        self._payloads = {t.name: tool_payload(t) for t in tools}
+        self._carried: tuple = (None, None)   # the tool on the flange, its part's payload
 
     # ---- the I/O image ----------------------------------------------------------------------
 
@@ -96,6 +102,7 @@ class Tooling:
                 masks[unit] = masks.get(unit, 0) | 1 << bit
         self._image = sorted(masks.items())
         self.device.link.send({"op": "io_image", "units": self._image})
+        self._carry(*self._carried)   # a fresh cycle knows no payload
 
     def changer_bits(self, unit: IoUnit) -> int:
         """The bits of `unit` that drive the tool changer (its lock)."""
@@ -210,6 +217,8 @@ class Tooling:
         if mounted is not None and scene.mounted is None:
             scene.mount_tool(mounted.name)
             self._set_tool_offset(_along_z(mounted.length))
+        if mounted is not self._carried[0]:
+            self._carry(mounted)
 
     # ---- seed 3.8.1 activateTool / deactivateTool -------------------------------------------
 
@@ -247,6 +256,7 @@ class Tooling:
             if scene.held is not None:
                 scene.forbid(f"grasp {scene.held}")
                 scene.release_part(q)
+                self._carry(tool)
             if tool.kind == "parallel_gripper":
                 scene.set_finger_gap(tool.stroke)
             return None
@@ -255,9 +265,21 @@ class Tooling:
         if tool.kind == "parallel_gripper":   # closed on the part, or all the way
             scene.set_finger_gap(min(self._parts[part].size[:2]) if part else 0.0)
         if part is not None and scene.held is None:
+            flange = self._world_base @ self.device.kinematics.forward(q)
+            in_flange = np.linalg.inv(flange) @ self.device.collisions.part_pose(part)
             scene.allow(scene.grasp(part))
             scene.attach_part(part, q)
+            self._carry(tool, part_payload(self._parts[part], in_flange))
         return part
+
+    def _carry(self, tool: ToolSpec | None, part: np.ndarray | None = None) -> None:
+        """Tell the cycle what the flange carries: `tool` and the part it holds (its dynamic
+        parameters, arm_dynamics.py), if any."""
+        self._carried = (tool, part)
+        payload = np.array(NO_PAYLOAD) if tool is None else self._payloads[tool.name]
+        if part is not None:
+            payload = payload + part
+        self.device.link.send({"op": "payload", "parameters": tuple(payload.tolist())})
 
     def _part_at_tip(self, q: np.ndarray, tool: ToolSpec) -> str | None:
         """The part of the collision scene whose centre is nearest the tool's tip, within

@@ -22,8 +22,9 @@ or the e-stop disable at once, with an error event. While not ENABLED, set() is 
 ignored: there is nothing to command.
 
 Feedback (`get()`): measured position, velocity, following error (command, or the held
-position, minus measured) and torque (motor plus feed-forward; the torque command in torque
-mode; 0 while DISABLED: the drives are off and the brakes carry the load).
+position, minus measured) and torque (motor, averaged over the cycle's substeps, plus
+feed-forward; the torque command in torque mode; 0 while DISABLED: the drives are off and the
+brakes carry the load).
 
 Single-threaded: call everything from the thread that steps (the cycle process).
 """
@@ -171,6 +172,7 @@ class BulletController(Controller):
             start = self._start
             delta = [e - s for s, e in zip(start, self._cmd_list)]
             tau = self._tau_list if self._ffw else None
+            applied = [0.0] * 6   # the motors' torques summed over the substeps
             for f in self._fractions:
                 target = [s + f * d for s, d in zip(start, delta)]
                 motors(pb.POSITION_CONTROL, targetPositions=target, targetVelocities=self._zeros,
@@ -179,6 +181,8 @@ class BulletController(Controller):
                 if tau is not None:
                     motors(pb.TORQUE_CONTROL, forces=tau)
                 physics()
+                states = self._joint_states()
+                applied = [a + s[3] for a, s in zip(applied, states)]
             self._start = self._cmd_list
         elif drive is _Drive.TORQUE:
             for _ in self._fractions:
@@ -189,13 +193,18 @@ class BulletController(Controller):
                 physics()
 
         # Feedback, in plain lists until the arrays are built: numpy is slow on 6 values.
-        states = self._joint_states()
+        if drive is not _Drive.POSVEL:   # (following, the last substep has read them)
+            states = self._joint_states()
         pos = [s[0] for s in states]
         vel = [s[1] for s in states]
         speed = max(map(abs, vel))
         if drive is _Drive.POSVEL:
-            torque = ([s[3] + t for s, t in zip(states, self._tau_list)] if self._ffw
-                      else [s[3] for s in states])
+            # Averaged over the cycle, as a drive's current filtered at the cycle rate: the
+            # dead-beat motors change speed in the first substep, so the last one alone would
+            # miss the inertial torque.
+            n = len(self._fractions)
+            torque = ([a / n + t for a, t in zip(applied, self._tau_list)] if self._ffw
+                      else [a / n for a in applied])
         elif drive is _Drive.TORQUE:
             torque = self._tau_list
         elif drive is _Drive.HOLDING:
