@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 from landscape.server.limits import Cap
 
+CLOCKS = ("realtime", "lockstep")   # the controller's: controller_link.py
 DEFAULT_ADDRESS = "127.0.0.1"   # loopback unless the operator exposes the server on purpose
 DEFAULT_PORT = 50051
 

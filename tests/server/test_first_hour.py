@@ -22,18 +22,41 @@ def _start(*args, timeout=30):
     return subprocess.run([*SERVER, *args], capture_output=True, text=True, timeout=timeout)
 
 
+def _refusal(*args) -> str:
+    """The one line a server that cannot listen writes, checking that it exits 2 without a
+    traceback and before it loads the simulation (-X importtime: no sim module imported)."""
+    began = time.monotonic()
+    done = subprocess.run([sys.executable, "-X", "importtime", *SERVER[1:], *args],
+                          capture_output=True, text=True, timeout=60)
+    took = time.monotonic() - began
+    imported = [line.rsplit("|", 1)[-1].strip() for line in done.stderr.splitlines()
+                if line.startswith("import time:")]
+    lines = [line for line in done.stderr.splitlines()
+             if line.strip() and not line.startswith("import time:")]
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert "Traceback" not in done.stderr
+    assert not [m for m in imported if m.startswith(("landscape.sim", "pybullet"))], imported
+    print(f"refused in {took:.2f} s: {lines[0]}")
+    return lines[0]
+
+
 def test_a_port_in_use_is_one_line_naming_the_cause_and_exits_non_zero(tmp_path):
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
-        began = time.monotonic()
-        done = _start("--port", str(taken.getsockname()[1]), "--paths", str(tmp_path / "p.db"))
-    took = time.monotonic() - began
-    lines = [line for line in done.stderr.splitlines() if line.strip()]
-    assert done.returncode == 2 and len(lines) == 1, done.stderr
-    assert "cannot listen on 127.0.0.1:" in lines[0] and "--port" in lines[0]
-    assert "Traceback" not in done.stderr
-    print(f"refused in {took:.2f} s: {lines[0]}")
+        port = taken.getsockname()[1]
+        line = _refusal("--port", str(port), "--paths", str(tmp_path / "p.db"))
+    assert line.startswith(f"landscape-device-server: cannot listen on 127.0.0.1:{port}: "
+                           f"port {port} is in use"), line
+    assert "--port" in line
+
+
+def test_an_address_not_of_this_machine_is_told_apart_from_a_port_in_use(tmp_path):
+    """192.0.2.1 is TEST-NET-1 (RFC 5737): no machine's own address."""
+    line = _refusal("--address", "192.0.2.1", "--insecure", "--port", "0",
+                    "--paths", str(tmp_path / "p.db"))
+    assert "192.0.2.1 is not an address of this machine" in line and "--address" in line, line
+    assert "in use" not in line
 
 
 def test_an_ipv6_address_works_with_or_without_brackets(tmp_path):
