@@ -20,7 +20,7 @@ from landscape.server import services, tls
 from landscape.server.audit import AuditLog
 from landscape.server.auth import TokenFileError, TokenStore
 from landscape.server.collision import CollisionScene
-from landscape.server.config import IDENTITY_CAPS, SecurityConfig, ServerConfig
+from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.server.controller_link import ControllerLink
 from landscape.server.device import Device
 from landscape.server.events import EventBus
@@ -188,8 +188,7 @@ def _security_layer(security: SecurityConfig) -> SecurityInterceptor:
                            f"{error.strerror}; choose another with --audit-log") from None
     rate = (RateLimiter(security.rate_limit, security.rate_burst)
             if security.rate_limit else None)
-    return SecurityInterceptor(tokens, audit, rate,
-                               StreamLimits(security.identity_caps or IDENTITY_CAPS))
+    return SecurityInterceptor(tokens, audit, rate)
 
 
 async def _bind(config: ServerConfig,
