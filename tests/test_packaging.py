@@ -1,7 +1,8 @@
-"""Issue 9: `make run` and `make test` open with no setuptools warnings. The build backend
-(setuptools, as pip runs it) builds a wheel and an editable wheel from a copy of the
-repository's sources warning of nothing but the one notice every editable install of this
-layout gets (the Makefile filters that one), and the wheel holds the package data."""
+"""Issue 9, a newcomer's install: `make run` and `make test` open with no setuptools warnings.
+The build backend (setuptools, as pip runs it) builds a wheel and an editable wheel from a copy
+of the repository's sources warning of nothing but the one notice every editable install of
+this layout gets (the Makefile filters that one), and the wheel holds the package data.
+Without npm, the page's build is skipped with one line saying so, not an error."""
 from __future__ import annotations
 
 import json
@@ -10,6 +11,8 @@ import subprocess
 import sys
 import zipfile
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 # Not sources: environments, caches, what builds make, what other tests leave.
@@ -44,3 +47,26 @@ def test_the_build_warns_of_nothing_and_packages_the_data(tmp_path):
             assert f"landscape/{folder}/{toml.name}" in names
     if (ROOT / "supervisor_gui_web/frontend/dist/index.html").is_file():
         assert "landscape/supervisor/frontend/dist/index.html" in names
+
+
+def test_without_npm_the_page_is_skipped_in_one_line_and_make_goes_on(tmp_path):
+    make = shutil.which("make")
+    if make is None:
+        pytest.skip("no make on this machine")
+    page = "supervisor_gui_web/frontend/dist/index.html"
+    # -B: as on a fresh clone, whatever is built here; an empty PATH: no npm (nor anything).
+    done = subprocess.run([make, "-s", "-B", page], cwd=ROOT, capture_output=True, text=True,
+                          env={"PATH": str(tmp_path), "HOME": str(tmp_path)}, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [
+        "make: no npm on this machine, so the web supervisor's page is not built and the cell "
+        "runs without it (install Node.js and npm, then make install)"], done.stdout
+    assert done.stderr == ""
+
+
+def test_the_cell_says_why_the_web_supervisor_does_not_start_without_its_page(tmp_path):
+    from landscape.cell.services import supervisor_missing
+    why = supervisor_missing(tls=False, tokens=False, page=tmp_path / "index.html")
+    assert why.startswith("its page is not built") and "npm" in why, why
+    (tmp_path / "index.html").write_text("<html></html>")
+    assert supervisor_missing(tls=False, tokens=False, page=tmp_path / "index.html") is None
