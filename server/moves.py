@@ -88,10 +88,10 @@ class Planner:
             raise _unreachable(error) from None
         longest = 2.0 * math.pi * (reach(self.arm)[1] + float(np.linalg.norm(tcp[:3, 3])))
         if radius * sweep > longest:
-            raise OutOfRange(f"arc_value: the arc through it is {radius * sweep:.4g} m long and "
-                             f"leaves the arm's reach (an arc within it is at most "
-                             f"{longest:.4g} m long)", field="arc_value",
-                             maximum=f"{longest:.4g} m")
+            raise Unreachable(f"arc_value: the arc through it is not reachable: it is "
+                              f"{radius * sweep:.4g} m long, and an arc within the arm's reach "
+                              f"is at most {longest:.4g} m long", reason_code="OUT_OF_WORKSPACE",
+                              field="arc_value", maximum=f"{longest:.4g} m")
 
     def joint_move(self, q_now, q_goal, limits: Limits) -> Trajectory:
         return self.timed(np.array([q_now, check_joints(self.arm, q_goal)]), limits)

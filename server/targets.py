@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from landscape.server.errors import OutOfRange, ParamError
+from landscape.server.errors import OutOfRange, ParamError, Unreachable
 from landscape.server.settings import MotionSettings
 from landscape.server.units import pose_matrix
 
@@ -68,14 +68,15 @@ def reach(arm) -> tuple[np.ndarray, float]:
 
 
 def check_reach(arm, flange: np.ndarray, field: str) -> None:
-    """OutOfRange naming `field` if the flange pose (4, 4) in the base frame, m, is beyond the
-    arm's reach: refused before anything samples the way there."""
+    """Unreachable (OUT_OF_RANGE) naming `field` and the reach if the flange pose (4, 4) in
+    the base frame, m, is beyond it: refused before anything samples the way there."""
     shoulder, furthest = reach(arm)
     distance = float(np.linalg.norm(flange[:3, 3] - shoulder))
     if not distance <= furthest:
-        raise OutOfRange(f"{field}: the target puts the flange {distance:.4g} m from the arm's "
-                         f"shoulder; the arm reaches {furthest:.4g} m at most", field=field,
-                         maximum=f"{furthest:.4g} m")
+        raise Unreachable(f"{field}: the target is not reachable: it puts the flange "
+                          f"{distance:.4g} m from the arm's shoulder, and the arm reaches "
+                          f"{furthest:.4g} m at most", reason_code="OUT_OF_WORKSPACE",
+                          field=field, maximum=f"{furthest:.4g} m")
 
 
 def goal_tip(frame: Frame, values: np.ndarray, relative: bool, tip_now: np.ndarray,
