@@ -66,6 +66,14 @@ def memory_cap(headroom: int = 3 << 30):
         resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
 
 
+def assert_serving(channel) -> None:
+    """The server behind `channel` answers its health check SERVING."""
+    from grpc_health.v1 import health_pb2, health_pb2_grpc
+    health = health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(),
+                                                       timeout=5)
+    assert health.status == health_pb2.HealthCheckResponse.SERVING
+
+
 def cell_file(directory, replacements: dict[str, str]) -> str:
     """A copy of the default cell file with some of its text replaced; returns its path."""
     from importlib import resources

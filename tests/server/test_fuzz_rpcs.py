@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 from google.protobuf import message_factory
 from google.protobuf.descriptor import FieldDescriptor as F
-from grpc_health.v1 import health_pb2, health_pb2_grpc
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -27,8 +26,9 @@ from landscape.server.states import RULES, Lease, State
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, sensing_pb2,
                           settings_pb2, types_pb2)
 
-from support import Arm, error_info, memory_cap, wait_until
+from support import Arm, assert_serving, error_info, wait_until
 
+pytestmark = pytest.mark.usefixtures("memory_capped")
 REFUSALS = {grpc.StatusCode.INVALID_ARGUMENT, grpc.StatusCode.OUT_OF_RANGE,
             grpc.StatusCode.FAILED_PRECONDITION}
 # The control RPCs hand over or give up control: test_control_sequences drives them, each
@@ -189,18 +189,6 @@ def arm(tmp_path_factory):
     a.close()
 
 
-@pytest.fixture(autouse=True)
-def capped():
-    with memory_cap():
-        yield
-
-
-def _serving(arm) -> None:
-    health = health_pb2_grpc.HealthStub(arm.session.channel).Check(
-        health_pb2.HealthCheckRequest(), timeout=5)
-    assert health.status == health_pb2.HealthCheckResponse.SERVING
-
-
 def _targets():
     for spec in services.ALL:
         for method in spec.descriptor.methods:
@@ -270,7 +258,7 @@ def test_random_requests_are_refused_cleanly_or_done(arm, spec, method):
             after = _snapshot(arm)
             assert after[:4] == before[:4], request
             assert np.allclose(after[4], before[4], atol=1e-9), request
-        _serving(arm)
+        assert_serving(arm.session.channel)
         _back_to_rest(arm)
 
     fuzz()
@@ -362,7 +350,7 @@ def test_control_sequences_keep_the_server_sound(arm):
                 assert error.details() and error_info(error).domain == "landscape"
                 after = _snapshot(arm) + (arm.server.device.lock_holder,)
                 assert after[:4] + after[5:] == before[:4] + before[5:], (name, request)
-            _serving(arm)
+            assert_serving(arm.session.channel)
         _back_to_control(arm)
 
     sequence()
