@@ -79,7 +79,7 @@ class Planner:
         return self.arc_move(q_now, tips[0], tips[1], limits, tcp)
 
     def check_arc_reach(self, tip_now, tip_via, tip_goal, tcp) -> None:
-        """OutOfRange naming arc_value if the arc is longer than any arc within the tip's
+        """Unreachable naming arc_value if the arc is longer than any arc within the tip's
         reach (2 pi times its radius): nearly collinear points with the arc point beyond the
         goal make a huge circle, which no sampling should attempt."""
         try:
@@ -99,7 +99,7 @@ class Planner:
     def pose_goal_joints(self, q_now, flange_goal: np.ndarray, field: str = "values"
                          ) -> np.ndarray:
         """Joints reaching `flange_goal` in q_now's configuration, nearest q_now; a goal beyond
-        reach is OutOfRange naming the request's `field`."""
+        reach is Unreachable naming the request's `field`."""
         check_reach(self.arm, flange_goal, field)
         q, result = self.kinematics.reverse(flange_goal, q_now, SAME_CONFIG)
         if q is None:

@@ -53,7 +53,7 @@ def check_pose_values(values: np.ndarray, field: str = "values") -> np.ndarray:
                          f"got {values.tolist()}", field=field)
     for i, (name, value) in enumerate(zip(_POSE_NAMES, values)):
         bound, unit = (MAX_POSITION, "m") if i < 3 else (MAX_ANGLE, "rad")
-        if abs(value) > bound:
+        if abs(value) > bound * (1.0 + 1e-12):    # 360 degrees in rad may round above 2 pi
             raise OutOfRange(f"{field}: {name} {value:.6g} {unit} is beyond the bound of "
                              f"{bound:.6g} {unit} either way", field=field,
                              maximum=f"{bound:.6g} {unit}")
