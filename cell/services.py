@@ -112,11 +112,18 @@ def supervisor_service(config: CellConfig, targets: dict[str, str],
                        note=f"shows {', '.join(supervisor.devices)}")
 
 
-def supervisor_missing(tls: bool, tokens: bool) -> str | None:
-    """Why the web supervisor cannot be started here, or None. With TLS or tokens on, it must
-    take the client flags (landscape.client.credentials.add_arguments) that say them."""
-    if importlib.util.find_spec(SUPERVISOR_MODULE) is None:
+def supervisor_missing(tls: bool, tokens: bool, page: Path | None = None) -> str | None:
+    """Why the web supervisor cannot be started here, or None: not installed, its page (`page`,
+    default: the installed package's frontend/dist/index.html) not built, or, with TLS or
+    tokens on, without the client flags (landscape.client.credentials.add_arguments) that say
+    them."""
+    spec = importlib.util.find_spec(SUPERVISOR_MODULE)
+    if spec is None:
         return f"{SUPERVISOR_MODULE} is not installed; the rest of the cell runs without it"
+    page = page or Path(spec.submodule_search_locations[0]) / "frontend" / "dist" / "index.html"
+    if not page.is_file():
+        return ("its page is not built (that needs Node.js and npm: install them, then `make "
+                "install`); the rest of the cell runs without it")
     wanted = ["--tls-ca"] * tls + ["--token-file"] * tokens
     if wanted:
         help_text = subprocess.run([*_python(SUPERVISOR_MODULE), "--help"], capture_output=True,

@@ -27,10 +27,10 @@ STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
 resource_tracker.ensure_running()
 signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 
-from landscape.server.app import StartupError, listen_address, serve  # noqa: E402
-from landscape.server.config import (DEFAULT_ADDRESS, DEFAULT_PORT, SecurityConfig,  # noqa: E402
-                                     ServerConfig)
-from landscape.server.controller_link import CLOCKS  # noqa: E402
+# Light modules only up here: a port in use is refused before the simulation loads (main).
+from landscape.server.config import (CLOCKS, DEFAULT_ADDRESS, DEFAULT_PORT,  # noqa: E402
+                                     SecurityConfig, ServerConfig)
+from landscape.server.listen import listen_address, listen_problem  # noqa: E402
 
 log = logging.getLogger("landscape.server")
 
@@ -108,12 +108,16 @@ def _security_arguments(group) -> None:
 def main(argv=None) -> None:
     config, level = parse_args(argv)
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    problem = listen_problem(config.address, config.port)
+    if problem:
+        _refuse(problem)
+    from landscape.server.app import StartupError, serve   # the simulation: seconds to load
     try:
         running = serve(config)
     except StartupError as error:
-        print(f"landscape-device-server: {error}", file=sys.stderr)
-        raise SystemExit(2) from None
+        _refuse(str(error))
     _say_what_runs(running, config)
+    # The one "listening" line, on stdout: scripts and the cell launcher wait for it.
     print(f"landscape device server listening on {listen_address(config.address, running.port)}",
           flush=True)
     received = signal.sigwait(STOP_SIGNALS)
@@ -123,12 +127,17 @@ def main(argv=None) -> None:
     log.info("stopped")
 
 
+def _refuse(problem: str):
+    print(f"landscape-device-server: {problem}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def _say_what_runs(running, config: ServerConfig) -> None:
     link = running.link
     lines = [f"cell: {config.cell or 'built-in default'} ({running.device.arm.name})",
              f"controller: {config.clock} clock, {link.cycle_time * 1000:g} ms cycle",
              f"paths and settings: {config.paths_file or 'in memory'}",
-             f"listening: {listen_address(config.address, running.port)} "
+             f"gRPC: {listen_address(config.address, running.port)} "
              f"({_transport(config.security)})",
              f"audit log: {config.security.audit_log or 'none'}"]
     log.info("LandScape device server\n  " + "\n  ".join(lines))

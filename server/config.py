@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 from landscape.server.limits import Cap
 
+CLOCKS = ("realtime", "lockstep")   # the controller's: controller_link.py
 DEFAULT_ADDRESS = "127.0.0.1"   # loopback unless the operator exposes the server on purpose
 DEFAULT_PORT = 50051
 
@@ -25,13 +26,10 @@ class SecurityConfig:
     audit_log: str | None = None
     audit_max_bytes: int = 10 * 1024 * 1024
     audit_backups: int = 5
-    # Calls per second one client (an identity with tokens, else a connection) may make on
+    # Calls per second one client (its token's identity, else its IP address) may make on
     # average, and at once; stops are never limited. None: no limit.
     rate_limit: float | None = None
     rate_burst: int = 200
-    # Open streams one identity may hold, per kind, when tokens are on (limits.py); None:
-    # IDENTITY_CAPS. Each connection also keeps its own caps (ServerConfig.stream_caps).
-    identity_caps: dict[str, Cap] | None = None
     # Listen on a non-loopback address without TLS and tokens all the same.
     insecure: bool = False
 
@@ -40,17 +38,12 @@ class SecurityConfig:
         return self.tls_cert is not None
 
 
-# One identity (a token) may be several programs: room for a few connections' worth.
-IDENTITY_CAPS = {"session": Cap(per_client=32, total=1_000_000),
-                 "watch": Cap(per_client=256, total=1_000_000)}
-
-
 @dataclass(frozen=True)
 class ServerConfig:
     address: str = DEFAULT_ADDRESS
     port: int = DEFAULT_PORT          # 0 picks a free port
-    # Open streams a client, and the server, may hold, per kind ("session", "watch"); None:
-    # limits.DEFAULT_CAPS.
+    # Open streams a client (its token's identity, else its IP address), and the server, may
+    # hold, per kind ("session", "watch"); None: limits.DEFAULT_CAPS.
     stream_caps: dict[str, Cap] | None = None
     # Largest request accepted; larger ones fail with RESOURCE_EXHAUSTED. Paths stream in
     # chunks, so no single message needs to be big.

@@ -29,7 +29,7 @@ from landscape.sim.shared_array import SharedArrays
 
 log = logging.getLogger(__name__)
 
-CLOCKS = ("realtime", "lockstep")
+from landscape.server.config import CLOCKS  # noqa: E402  (its home: the command line needs it)
 
 
 def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox):

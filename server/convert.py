@@ -82,6 +82,33 @@ PANEL_ACTIONS = {control_pb2.PANEL_ACTION_PRESS_ESTOP: "press_estop",
                  control_pb2.PANEL_ACTION_CLOSE_DOOR: "close_door"}
 
 
+# What a setter's reply says it set, in the units the client speaks.
+SYMBOLS = {LinearUnit.INCHES: "in", LinearUnit.FEET: "ft", LinearUnit.METERS: "m",
+           LinearUnit.CENTIMETERS: "cm", LinearUnit.MILLIMETERS: "mm",
+           AngularUnit.DEGREES: "deg", AngularUnit.RADIANS: "rad"}
+
+
+def rate_text(what: str, kind: Kind, value: float, units: Units) -> str:
+    """'speed 40 %', 'linear speed 200 mm/s', 'angular acceleration 90 deg/s^2': `what` is
+    "speed" or "acceleration", `value` as the client sent it."""
+    per = "/s" if what == "speed" else "/s^2"
+    unit = {Kind.PERCENT: " %", Kind.LINEAR: f" {SYMBOLS[units.linear]}{per}",
+            Kind.ANGULAR: f" {SYMBOLS[units.angular]}{per}"}[kind]
+    name = what if kind is Kind.PERCENT else f"{kind.value} {what}"
+    return f"{name} {value:g}{unit}"
+
+
+def pose_text(what: str, pose: types_pb2.Pose, units: Units) -> str:
+    """'tool offset x 0, y 0, z 100 mm; roll 0, pitch 0, yaw 90 deg', as the client sent it."""
+    return (f"{what} x {pose.x:g}, y {pose.y:g}, z {pose.z:g} {SYMBOLS[units.linear]}; "
+            f"roll {pose.roll:g}, pitch {pose.pitch:g}, yaw {pose.yaw:g} "
+            f"{SYMBOLS[units.angular]}")
+
+
+def units_text(units: Units) -> str:
+    return f"units {units.linear.name.lower()} and {units.angular.name.lower()}"
+
+
 def units_from_pb(linear: int, angular: int) -> Units:
     return Units(enum_value(LINEAR, linear, "linear_units"), enum_value(ANGULAR, angular, "angular_units"))
 

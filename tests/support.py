@@ -49,6 +49,31 @@ def spawned_server(*args: str):
     assert code == 0, f"the server exited with {code}"
 
 
+@contextlib.contextmanager
+def memory_cap(headroom: int = 3 << 30):
+    """This process's address space capped at what it maps now plus `headroom` bytes while the
+    block runs (RLIMIT_AS, Linux): a runaway allocation in an in-process server fails with
+    MemoryError, which a test sees as a wrong status, instead of exhausting the machine."""
+    import resource
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    with open("/proc/self/statm") as statm:
+        mapped = int(statm.read().split()[0]) * resource.getpagesize()
+    cap = mapped + headroom if hard == resource.RLIM_INFINITY else min(mapped + headroom, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
+def assert_serving(channel) -> None:
+    """The server behind `channel` answers its health check SERVING."""
+    from grpc_health.v1 import health_pb2, health_pb2_grpc
+    health = health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(),
+                                                       timeout=5)
+    assert health.status == health_pb2.HealthCheckResponse.SERVING
+
+
 def cell_file(directory, replacements: dict[str, str]) -> str:
     """A copy of the default cell file with some of its text replaced; returns its path."""
     from importlib import resources

@@ -49,28 +49,32 @@ class DeviceServicer(services.DEVICE.servicer_base):
         kind = convert.enum_value(convert.SPEED_KINDS, request.attribute, "attribute")
         value = convert.rate_to_si(kind, request.speed, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_speed(kind, value))
-        return settings_pb2.SetSpeedResponse(ret_val=convert.ok())
+        return settings_pb2.SetSpeedResponse(ret_val=convert.ok(convert.rate_text(
+            "speed", kind, request.speed, self.device.settings.units)))
 
     def SetAcceleration(self, request, context):
         kind = convert.enum_value(convert.ACCEL_KINDS, request.attribute, "attribute")
         value = convert.rate_to_si(kind, request.accel, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_accel(kind, value))
-        return settings_pb2.SetAccelerationResponse(ret_val=convert.ok())
+        return settings_pb2.SetAccelerationResponse(ret_val=convert.ok(convert.rate_text(
+            "acceleration", kind, request.accel, self.device.settings.units)))
 
     def SetToolOffset(self, request, context):
         offset = convert.pose_to_matrix(request.offset, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_tool_offset(offset))
-        return settings_pb2.SetToolOffsetResponse(ret_val=convert.ok())
+        return settings_pb2.SetToolOffsetResponse(ret_val=convert.ok(convert.pose_text(
+            "tool offset", request.offset, self.device.settings.units)))
 
     def SetWorldCartesianFrame(self, request, context):
         frame = convert.pose_to_matrix(request.frame, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_world_frame(frame))
-        return settings_pb2.SetWorldCartesianFrameResponse(ret_val=convert.ok())
+        return settings_pb2.SetWorldCartesianFrameResponse(ret_val=convert.ok(convert.pose_text(
+            "world frame", request.frame, self.device.settings.units)))
 
     def SetUnits(self, request, context):
         units = convert.units_from_pb(request.linear_units, request.angular_units)
         self.device.update_settings(lambda s: s.with_units(units))
-        return settings_pb2.SetUnitsResponse(ret_val=convert.ok())
+        return settings_pb2.SetUnitsResponse(ret_val=convert.ok(convert.units_text(units)))
 
     # ---- 3.3 ----
     def GetUnits(self, request, context):
@@ -187,7 +191,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
 
     def PathClearPath(self, request, context):
         self.device.motions.path_clear(request.path_name)
-        return motion_pb2.PathClearPathResponse(ret_val=convert.ok())
+        return motion_pb2.PathClearPathResponse(
+            ret_val=convert.ok(f"path {request.path_name!r} cleared"))
 
     def PathMove(self, request, context):
         cycles = request.number_of_cycles if request.HasField("number_of_cycles") else 1

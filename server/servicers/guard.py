@@ -31,6 +31,7 @@ import grpc
 
 from landscape.server import bounds, states
 from landscape.server.errors import CommandError, Internal, Unimplemented, to_status
+from landscape.server.limits import client_of
 from landscape.server.states import Lease
 
 log = logging.getLogger(__name__)
@@ -128,7 +129,7 @@ def _stream(name: str, body, streaming_response: bool):
         if hasattr(request, "ListFields"):
             bounds.check(request)   # streamed requests are checked message by message
         self.device.admit(name, lease_of(context))
-        return self.limits.acquire(name, context.peer()) if streaming_response else None
+        return self.limits.acquire(name, client_of(context.peer())) if streaming_response else None
 
     if streaming_response:
         @functools.wraps(body)
