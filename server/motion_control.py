@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from landscape.server import alarms, aux_commands, path_planning, states
-from landscape.server.collision import check_motion
+from landscape.server.collision import CheckResult, check_motion
 from landscape.server.errors import (Collision, ControllerFailure, ManualControlMode, NotFound,
                                      WrongState)
 from landscape.server.events import Phase, Severity
@@ -147,21 +147,29 @@ class MotionControl:
     # ---- starting ----------------------------------------------------------------------------
 
     def check_collisions(self, trajectories: list, what: str = "the motion", *,
-                         allow=(), exclude=()) -> None:
+                         allow=(), exclude=(), model=None) -> CheckResult:
         """Refuse trajectories (played back to back) that would bring two bodies of the cell
         within the safety margin (collision/); `allow` names contacts meant to happen (a tool
-        coupling), `exclude` bodies the motion is meant to touch (a guarded move's surface)."""
-        model = self.device.collisions.model()
-        offset = 0.0
+        coupling, a guarded move's surface); `model`: what to check against (default: the cell
+        as it is now). A piece that comes again (the cycles of a path run) is checked once. A
+        refusal says where in the whole motion. Returns the counts of the check."""
+        model = model or self.device.collisions.model()
+        samples = sum(len(t) for t in trajectories)
+        checked: set[int] = set()
+        first = configurations = pair_checks = bound_checks = 0
         for trajectory in trajectories:
-            result = check_motion(model, trajectory.positions, trajectory.dt, trajectory.marks,
-                                  allow=allow, exclude=exclude)
-            contact = result.contact
-            if contact is not None:
-                where = contact.metadata()
-                where["time"] = f"{offset + contact.time:.3f}"
-                raise Collision(f"{what} would collide: {contact}", **where)
-            offset += trajectory.duration
+            if id(trajectory) not in checked:
+                checked.add(id(trajectory))
+                result = check_motion(model, trajectory.positions, trajectory.dt,
+                                      trajectory.marks, allow=allow, exclude=exclude)
+                configurations += result.configurations
+                pair_checks += result.pair_checks
+                bound_checks += result.bound_checks
+                if result.contact is not None:
+                    contact = result.contact.within(first, samples, trajectory.dt)
+                    raise Collision(f"{what} would collide: {contact}", **contact.metadata())
+            first += len(trajectory)
+        return CheckResult(None, configurations, pair_checks, bound_checks)
 
     def start(self, command: str, point_name: str, trajectories: list,
               tags: dict | None = None, aux: dict | None = None, *, allow=(), exclude=(),

@@ -28,7 +28,7 @@ import bisect
 import heapq
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -76,6 +76,13 @@ class Contact:
         if self.segment is not None:
             out["segment"] = str(self.segment)
         return out
+
+    def within(self, first: int, samples: int, dt: float) -> "Contact":
+        """The contact of a piece of a longer motion (played one sample per dt), in terms of
+        the whole: the piece starts at the whole's sample `first`, which has `samples`."""
+        time = self.time + first * dt
+        return replace(self, time=time, sample=self.sample + first,
+                       fraction=time / ((samples - 1) * dt) if samples > 1 else 0.0)
 
     def __str__(self) -> str:
         where = f" (segment {self.segment})" if self.segment is not None else ""

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import grpc
+from landscape.server import path_planning
 from landscape.server.states import State
 from landscape.server.units import pose_matrix
 from landscape.v1 import motion_pb2, types_pb2
@@ -77,3 +78,58 @@ def test_a_path_sweeping_through_the_rack_is_refused_at_load_naming_its_segment(
     assert info.metadata["segment"] == "7"
     assert "sweep" not in arm.server.device.motions.paths      # nothing stored
     _path(arm, "sweep", points[:7], blend=50)                  # up to point 6 it is clear
+
+
+def _around(arm):
+    """Paths "down" (run: the flange beside the table at a) and "around" (a, over the table,
+    b beside it on the other side); returns (a, b)."""
+    q0 = arm.joints()
+    over_a = _joints(arm, (0.6, -0.55, 0.45), q0)
+    a = _joints(arm, (0.6, -0.55, 0.12), over_a)
+    over_b = _joints(arm, (0.6, 0.55, 0.45), over_a)
+    b = _joints(arm, (0.6, 0.55, 0.12), over_b)
+    _path(arm, "down", [q0, over_a, a])
+    assert _run(arm, "down") == "command_done"
+    _path(arm, "around", [a, over_a, over_b, b])
+    return a, b
+
+
+def _plan_run(arm, name, cycles):
+    motions = arm.server.device.motions
+    return path_planning.plan_run(motions.planner, motions.paths.get(name),
+                                  motions.planning_start(), arm.server.device.settings, cycles)
+
+
+def test_a_path_run_checks_each_of_its_pieces_once_whatever_its_cycles(arm):
+    """A run of many cycles repeats the same pieces: checking them once per cycle made the
+    check grow with the cycles (7.6 s for 1000) before anything moved."""
+    q0 = arm.joints()
+    over_a = _joints(arm, (0.6, -0.3, 0.5), q0)
+    _path(arm, "over", [q0, over_a, _joints(arm, (0.6, 0.3, 0.5), over_a)])
+    motions = arm.server.device.motions
+    one = motions.check_collisions(_plan_run(arm, "over", 1))
+    two = motions.check_collisions(_plan_run(arm, "over", 2))
+    many = motions.check_collisions(_plan_run(arm, "over", 1000))
+    assert one.pair_checks > 0 and two.pair_checks > one.pair_checks   # the way back, too
+    assert many.pair_checks == two.pair_checks
+    assert many.configurations == two.configurations
+
+
+def test_a_refusal_in_a_later_piece_says_where_in_the_whole_motion(arm):
+    """The way back from the last point to the first (joints straight from b to a) sweeps
+    through the table: the second piece of a two-cycle run. Time, sample, fraction and the
+    message count from the start of the whole run."""
+    a, _ = _around(arm)
+    run, first_pass = _plan_run(arm, "around", 2), _plan_run(arm, "around", 1)
+    dt = run[0].dt
+    with pytest.raises(grpc.RpcError) as refused:
+        arm.device.PathMove(motion_pb2.PathMoveRequest(path_name="around", number_of_cycles=2))
+    assert refused.value.code() is grpc.StatusCode.FAILED_PRECONDITION
+    where = error_info(refused.value).metadata
+    assert where["body_b"] == "table"
+    time, sample, fraction = float(where["time"]), int(where["sample"]), float(where["fraction"])
+    assert time > (sum(len(t) for t in first_pass) - 1) * dt      # after the first pass
+    assert sample == pytest.approx(time / dt, abs=1)
+    assert fraction == pytest.approx(time / ((sum(len(t) for t in run) - 1) * dt), abs=1e-3)
+    assert f"{100 * fraction:.1f} % of the motion" in refused.value.details()
+    assert np.allclose(arm.joints(), a, atol=1e-4)           # nothing moved
