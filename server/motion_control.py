@@ -147,7 +147,7 @@ class MotionControl:
     # ---- starting ----------------------------------------------------------------------------
 
     def check_collisions(self, trajectories: list, what: str = "the motion", *,
-                         allow=(), exclude=(), model=None) -> CheckResult:
+                         allow=(), model=None) -> CheckResult:
         """Refuse trajectories (played back to back) that would bring two bodies of the cell
         within the safety margin (collision/); `allow` names contacts meant to happen (a tool
         coupling, a guarded move's surface); `model`: what to check against (default: the cell
@@ -161,7 +161,7 @@ class MotionControl:
             if id(trajectory) not in checked:
                 checked.add(id(trajectory))
                 result = check_motion(model, trajectory.positions, trajectory.dt,
-                                      trajectory.marks, allow=allow, exclude=exclude)
+                                      trajectory.marks, allow=allow)
                 configurations += result.configurations
                 pair_checks += result.pair_checks
                 bound_checks += result.bound_checks
@@ -172,21 +172,20 @@ class MotionControl:
         return CheckResult(None, configurations, pair_checks, bound_checks)
 
     def start(self, command: str, point_name: str, trajectories: list,
-              tags: dict | None = None, aux: dict | None = None, *, allow=(), exclude=(),
+              tags: dict | None = None, aux: dict | None = None, *, allow=(),
               loops: dict | None = None, finish: Callable[[dict], str] | None = None) -> str:
         """Hand planned trajectories to the executor, to play back to back; Resting -> Moving.
         `tags` maps mark labels to (tag name, tag index) for tag events, `aux` to the aux
-        commands run there; `allow` and `exclude` as in check_collisions, which runs first;
+        commands run there; `allow` as in check_collisions, which runs first;
         `loops` adds the sensor loops of the run message (executor.py: "guard", "comply") and
         `finish(report) -> message` words its end. Returns the command id that the started /
         tag / done / failed events name (seed: CMD_STARTED_OK)."""
         return self._start(command, point_name, trajectories, tags, aux, allow=allow,
-                           exclude=exclude, loops=loops, finish=finish).command_id
+                           loops=loops, finish=finish).command_id
 
     def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
-               exclude=(), loops=None, finish=None) -> RunningMotion:
-        self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow,
-                              exclude=exclude)
+               loops=None, finish=None) -> RunningMotion:
+        self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
         arrays = self.device.link.share(pack_run(trajectories, self.planner.dt))
         motion = RunningMotion(f"{command}-{next(self._ids)}", command, point_name, tags or {},
                                aux or {}, arrays, finish=finish)
