@@ -15,7 +15,9 @@ each check the exact distance d (coal, through pinocchio) puts the next check ma
 margin) further along the pair's motion bound. All runs advance together, the one furthest
 behind first, so the first contact found is the earliest and ends the walk.
 
-Allowed contacts (model.AllowedContact) and excluded bodies drop pairs from a check. A pair that
+Allowed contacts (model.AllowedContact) and excluded bodies drop pairs from a check; the bare
+flange and an unmounted tool are checked only where the flange is out of the tool's docking
+corridor (docking.py). A pair that
 starts within the margin (the arm resting on what it touched, a part lifted off the table) may
 leave it: until it first reaches the margin it is held only to its starting distance less
 LEAVE_TOLERANCE, checked at least every LEAVE_TOLERANCE of motion.
@@ -36,6 +38,7 @@ import pinocchio as pin
 
 from .bounds import (SphereCentres, joint_travel, lower_bounds, sphere_centres,
                      uncertain_stretches)
+from .docking import strict_stretches
 from .model import AllowedContact, CollisionModel
 
 LEAVE_TOLERANCE = 0.001   # m: how much closer a pair starting within the margin may come
@@ -145,8 +148,12 @@ def check_motion(model: CollisionModel, positions, dt: float, marks: Marks = (),
     bound_checks = stretches[-1]
     runs = []
     for p, s, e in _runs(*stretches[:-1]):
-        along = (travel[s:e + 1] @ table.lever[p]).tolist()
-        runs.append(_Run(p, s, e, along, float(s), along[0], margin, margin))
+        dock = model.docks.get(p)
+        parts = [(s, e)] if dock is None else strict_stretches(
+            dock.inside(model.kinematics.forward(Q[s:e + 1])), s)
+        for s, e in parts:
+            along = (travel[s:e + 1] @ table.lever[p]).tolist()
+            runs.append(_Run(p, s, e, along, float(s), along[0], margin, margin))
     walk = _Walk(model, Q, margin, allow_leaving)
     walk.walk(runs)
     contact = None

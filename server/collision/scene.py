@@ -11,7 +11,8 @@ the loose parts and (if the cell has one) the floor. Then:
   given one); release_part leaves it where it is; place_part puts it down at a pose (an
   obstacle there); remove_part takes it out of the cell;
 - allow / forbid: allowed contacts kept until forbidden; `coupling` and `grasp` name the usual
-  ones for a single check.
+  ones for a single check. The bare flange docking on an unmounted tool needs none: the model
+  allows it in the tool's corridor (docking.py).
 
 `model()` returns the compiled, immutable CollisionModel of the present state (cached until the
 next change); checks run on it (check.py), so a change never disturbs a check in progress.
@@ -28,11 +29,10 @@ from landscape.server.units import pose_matrix
 from landscape.sim.cell import Cell
 from landscape.sim.kinematics import Kinematics
 
+from .docking import Dock
 from .model import DEFAULT_MARGIN, AllowedContact, CollisionModel, CollisionModelError
 from .shapes import (ARM_LINKS, FLANGE_LINK, FLOOR, Geometry, arm_description, box_geometry,
                      floor_geometry, tool_geometries)
-
-FLANGE = ARM_LINKS[FLANGE_LINK]   # the body a tool's plate couples to
 
 
 class CollisionScene:
@@ -190,11 +190,12 @@ class CollisionScene:
             self._changed()
 
     def coupling(self, tool: str) -> tuple[AllowedContact, ...]:
-        """The contacts of taking or leaving `tool` at the changer: the flange on its plate, and
-        the tool on the fixtures its rack slot stands on (within the margin of its slot)."""
+        """The contacts of taking `tool` out of its rack slot or putting it back: the tool on
+        the fixtures its slot stands on (within the margin of its slot). The bare flange on
+        its plate needs nothing: it is allowed in the tool's docking corridor (docking.py)."""
         spec = self._tool(tool)
         reason = f"coupling {tool}"
-        out = [AllowedContact(reason, FLANGE, tool)]
+        out = []
         slot = self._world_in_base @ pose_matrix(spec.slot.xyz, spec.slot.rpy)
         shapes = tool_geometries(spec, spec.stroke, 0, slot)
         for f in self.cell.world.fixtures:
@@ -217,8 +218,17 @@ class CollisionScene:
         with self._lock:
             if self._model is None:
                 self._model = CollisionModel(self.cell.arm, self._base, self._geometries(),
-                                             self._known, self._allowed, self.margin)
+                                             self._known, self._allowed, self.margin,
+                                             self._docks())
             return self._model
+
+    def _docks(self) -> list[Dock]:
+        """The unmounted tools' docking corridors, while the flange is bare."""
+        if self._mounted is not None:
+            return []
+        world = self.cell.world
+        return [Dock(name, self._world_in_base @ pose, world.lock_distance, world.lock_angle)
+                for name, pose in self._tool_at.items()]
 
     def _geometries(self) -> list[Geometry]:
         _, out = arm_description(self.cell.arm)

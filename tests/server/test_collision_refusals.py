@@ -9,9 +9,11 @@ import grpc
 from landscape.server import path_planning
 from landscape.server.states import State
 from landscape.server.units import pose_matrix
+from landscape.v1 import digital_io_service_pb2 as io_pb
+from landscape.v1 import end_effector_pb2 as ee
 from landscape.v1 import motion_pb2, types_pb2
 
-from support import Arm, error_info
+from support import Arm, error_info, stubs
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 DOWN = (np.pi, 0.0, 0.0)
@@ -133,3 +135,41 @@ def test_a_refusal_in_a_later_piece_says_where_in_the_whole_motion(arm):
     assert fraction == pytest.approx(time / ((sum(len(t) for t in run) - 1) * dt), abs=1e-3)
     assert f"{100 * fraction:.1f} % of the motion" in refused.value.details()
     assert np.allclose(arm.joints(), a, atol=1e-4)           # nothing moved
+
+
+SLOT = np.array([-0.1, -0.6, 0.461])    # the gripper's plate in its rack slot (world), down
+
+
+def _straight_to(arm, xyz):
+    """A straight move of the (bare) flange to xyz (world), pointing down; its events."""
+    reply = arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME, values=[*xyz, np.pi, 0, 0],
+        motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION), timeout=30)
+    return arm.wait_command(reply.ret_val.command_id)
+
+
+def test_the_bare_flange_docks_on_a_rack_tool_along_its_axis_and_the_changer_couples_it(arm):
+    """Issue 11, a tool coupling at the changer: a client driving the arm itself (CRCL: MoveTo
+    above the slot, MoveTo onto it, CloseToolChanger) couples a tool in the rack."""
+    arm.move_down_to(*(SLOT + [0, 0, 0.1]))              # above the plate, on its axis
+    assert _straight_to(arm, SLOT)[-1].event_id == "command_done"
+    _, io, _ = stubs(arm.session.channel)
+    io.SetDigitalIO(io_pb.SetDigitalIORequest(type="output", unit_id=2, bits_on=1))  # lock
+    reply = arm.device.GetEndEffectorState(ee.GetEndEffectorStateRequest())
+    assert reply.current_ee == "gripper"
+    assert _straight_to(arm, SLOT + [0, 0, 0.25])[-1].event_id == "command_done"   # out
+
+
+def test_a_sideways_motion_of_the_bare_flange_into_a_rack_tool_is_refused(arm):
+    """Only the straight approach along the coupling's axis may touch: sliding onto the
+    plate from the side, 3 mm above it, is refused."""
+    beside = SLOT + [0.1, 0, 0.003]
+    arm.move_down_to(*(beside + [0, 0, 0.1]))
+    assert _straight_to(arm, beside)[-1].event_id == "command_done"
+    before = arm.joints().copy()
+    with pytest.raises(grpc.RpcError) as refused:
+        _straight_to(arm, SLOT + [0, 0, 0.003])
+    info = error_info(refused.value)
+    assert info.reason == "COLLISION"
+    assert {info.metadata["body_a"], info.metadata["body_b"]} == {"link6", "gripper"}
+    assert np.allclose(arm.joints(), before, atol=1e-6)         # nothing moved

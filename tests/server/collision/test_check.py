@@ -161,17 +161,25 @@ def tool_approach(kit, tool_index: int, height: float):
     return kit.joints(at, q_up), q_up
 
 
-def test_the_tool_changer_couples_only_under_its_allowed_contact(kit, scene):
+def test_the_bare_flange_docks_on_a_rack_tool_along_its_axis_only(kit, scene):
+    """The coupling at the changer: link6 may meet a tool in the rack in the tool's corridor
+    (within the changer's 5 mm and 3 degrees of the plate's axis), nowhere else."""
     q_slot, q_up = tool_approach(kit, 0, 0.1)
-    contact = kit.check(scene, [q_up, q_slot]).contact
-    assert contact.bodies == ("link6", "gripper")
-    coupling = scene.coupling("gripper")
-    assert {c.reason for c in coupling} == {"coupling gripper"}
-    assert {frozenset((c.a, c.b)) for c in coupling} == {frozenset(("link6", "gripper")),
-                                                        frozenset(("gripper", "rack"))}
-    assert kit.check(scene, [q_up, q_slot], allow=coupling).clear
-    # Something left on the tool is still hit.
+    assert kit.check(scene, [q_up, q_slot]).clear                 # straight down its axis
     slot = kit.cell.world.tools[0].slot
+    at = pose_matrix(slot.xyz, slot.rpy)
+    for off in (pose_matrix((0.01, 0, 0), (0, 0, 0)),            # 1 cm beside the axis
+                pose_matrix((0, 0, 0), (np.radians(5), 0, 0))):   # tilted 5 degrees
+        q_off = kit.joints(at @ off, q_slot)
+        contact = kit.check(scene, [kit.joints(at @ off @ pose_matrix((0, 0, -0.1), (0, 0, 0)),
+                                               q_off), q_off]).contact
+        assert contact.bodies == ("link6", "gripper")
+    side = kit.joints(at @ pose_matrix((0.1, 0, -0.003), (0, 0, 0)), q_slot)
+    over = kit.joints(at @ pose_matrix((0, 0, -0.003), (0, 0, 0)), q_slot)
+    assert kit.check(scene, [side, over]).contact.bodies == ("link6", "gripper")   # a swipe
+    coupling = scene.coupling("gripper")
+    assert {(c.reason, c.a, c.b) for c in coupling} == {("coupling gripper", "gripper", "rack")}
+    # Something left on the tool is still hit.
     scene.place_part("block_2", pose_matrix(np.add(slot.xyz, (0, 0, 0.03)), (0, 0, 0)))
     contact = kit.check(scene, [q_up, q_slot], allow=coupling).contact
     assert contact.bodies == ("link6", "block_2")
@@ -189,6 +197,7 @@ def test_putting_a_tool_back_touches_the_rack_only_at_its_slot(kit, scene):
 
 
 def test_persistent_allowed_contacts_until_forbidden(kit, scene):
+    scene.mount_tool("gripper")
     q_slot, q_up = tool_approach(kit, 0, 0.1)
     scene.allow(*scene.coupling("gripper"))
     assert kit.check(scene, [q_up, q_slot]).clear
