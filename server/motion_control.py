@@ -31,6 +31,7 @@ from landscape.server.moves import Planner
 from landscape.server.paths import PathLibrary, PathStore
 from landscape.server.states import State
 from landscape.server.targets import Frame
+from landscape.server.world_parts import WorldParts
 from landscape.sim.controller import DoutValue, Status
 from landscape.sim.clock import CycleProcessError
 from landscape.sim.shared_array import SharedArrays
@@ -74,6 +75,7 @@ class MotionControl:
         self._changed = threading.Condition()
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
+        self.parts = WorldParts(device)  # the collision scene's parts follow the world
 
     @property
     def running_id(self) -> str:
@@ -153,7 +155,7 @@ class MotionControl:
         coupling, a guarded move's surface); `model`: what to check against (default: the cell
         as it is now). A piece that comes again (the cycles of a path run) is checked once. A
         refusal says where in the whole motion. Returns the counts of the check."""
-        model = model or self.device.collisions.model()
+        model = model or self.collision_model()
         samples = sum(len(t) for t in trajectories)
         checked: set[int] = set()
         first = configurations = pair_checks = bound_checks = 0
@@ -170,6 +172,11 @@ class MotionControl:
                     raise Collision(f"{what} would collide: {contact}", **contact.metadata())
             first += len(trajectory)
         return CheckResult(None, configurations, pair_checks, bound_checks)
+
+    def collision_model(self):
+        """The collision scene's model, its parts where the world has them now."""
+        self.parts.refresh()
+        return self.device.collisions.model()
 
     def start(self, command: str, point_name: str, trajectories: list,
               tags: dict | None = None, aux: dict | None = None, *, allow=(),
@@ -199,6 +206,7 @@ class MotionControl:
 
     def start_jog(self, message: dict) -> RunningMotion:
         """A jog session (jogging.py) as a motion: Resting -> Moving until it ends."""
+        self.parts.refresh()      # the jog guard checks against the scene
         motion = RunningMotion(f"Jog-{next(self._ids)}", "Jog", "", {})
         self._begin(motion, {**message, "op": "jog", "id": motion.command_id})
         return motion

@@ -247,6 +247,7 @@ class Tooling:
             if scene.held is not None:
                 scene.forbid(f"grasp {scene.held}")
                 scene.release_part(q)
+                self.device.motions.parts.settle()   # where it lands, not where it was let go
             if tool.kind == "parallel_gripper":
                 scene.set_finger_gap(tool.stroke)
             return None

@@ -204,3 +204,43 @@ def test_a_held_part_carried_into_the_table_is_refused_and_free_space_is_not(arm
         motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION), timeout=30)
     assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
     assert _part(arm, "block_2") == pytest.approx(start + [0, 0.1, 0.15], abs=3e-3)
+
+
+# ---- the collision scene follows the parts (issue 11) -----------------------------------------
+
+def _scene_part(arm, name: str) -> np.ndarray:
+    return arm.server.device.collisions.part_pose(name)[:3, 3]
+
+
+def test_a_part_a_person_puts_in_the_way_is_an_obstacle_and_one_taken_away_is_not(arm):
+    arm.move_down_to(0.65, 0.3, 0.45)
+    before = arm.joints().copy()
+    down = motion_pb2.MoveAbsoluteRequest(
+        frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
+        values=[0.65, 0.3, TABLE_TOP + 0.035, np.pi, 0, 0],
+        motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION)
+    _world(arm, lambda c: c.panel.place_part("block_1", (0.65, 0.3, TABLE_TOP + 0.0201)))
+    refused = _refused(lambda: arm.device.MoveAbsolute(down, timeout=30))
+    info = error_info(refused)
+    assert refused.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert info.metadata["body_b"] == "block_1"
+    assert np.allclose(arm.joints(), before, atol=1e-6)
+    _world(arm, lambda c: c.panel.remove_part("block_1"))
+    reply = arm.device.MoveAbsolute(down, timeout=30)
+    assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+    assert _scene_part(arm, "block_1") == pytest.approx(_part(arm, "block_1"), abs=1e-3)
+
+
+def test_a_part_let_go_above_the_table_lies_on_the_table_in_the_scene(arm):
+    _only_part(arm, "block_2")
+    arm.get_tool("gripper")
+    start = _part(arm, "block_2")
+    arm.move_down_to(start[0], start[1], start[2] + 0.1)
+    _lift(arm, -0.1)
+    arm.device.ActivateTool(ee.ActivateToolRequest(tool_id="gripper", bit_field=1))
+    _lift(arm, 0.08)
+    arm.device.DeactivateTool(ee.DeactivateToolRequest(tool_id="gripper", bit_field=1))
+    landed = _part(arm, "block_2")
+    assert landed[2] == pytest.approx(start[2], abs=2e-3)          # it fell onto the table
+    assert _scene_part(arm, "block_2") == pytest.approx(landed, abs=1e-3)
+    assert _attached(arm) == {"gripper": "flange"}
