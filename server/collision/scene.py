@@ -20,6 +20,7 @@ Poses are (4, 4) in the world frame, metres; joint vectors (6,) rad. Thread-safe
 """
 from __future__ import annotations
 
+import copy
 import threading
 
 import coal
@@ -82,6 +83,16 @@ class CollisionScene:
         self._part(name)
         pose = self._part_at.get(name)
         return None if pose is None else pose.copy()
+
+    def copy(self) -> "CollisionScene":
+        """A scene in the same state, to change without changing this one (to check what a
+        tool change will make of it before it starts)."""
+        with self._lock:
+            other = copy.copy(self)
+            other._lock = threading.Lock()
+            other._gap, other._tool_at = dict(self._gap), dict(self._tool_at)
+            other._part_at, other._allowed = dict(self._part_at), list(self._allowed)
+            return other
 
     # ---- the world changes --------------------------------------------------------------------
 

@@ -244,3 +244,21 @@ def test_a_part_let_go_above_the_table_lies_on_the_table_in_the_scene(arm):
     assert landed[2] == pytest.approx(start[2], abs=2e-3)          # it fell onto the table
     assert _scene_part(arm, "block_2") == pytest.approx(landed, abs=1e-3)
     assert _attached(arm) == {"gripper": "flange"}
+
+
+def test_a_tool_change_is_checked_whole_before_the_arm_moves(arm):
+    """A block left on the gripper's plate: the way into the slot is blocked, so GetTool is
+    refused before its approach runs (step by step, the arm went there first)."""
+    plate = _world(arm, lambda c: c.world.tools["gripper"].plate_pose())[0]
+    _world(arm, lambda c: c.panel.place_part("block_1", np.add(plate, (0, 0, 0.0215))))
+    before = arm.joints().copy()
+    refused = _refused(lambda: arm.get_tool("gripper"))
+    info = error_info(refused)
+    assert refused.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert info.metadata["body_b"] == "block_1" and "into the slot" in refused.details()
+    assert np.allclose(arm.joints(), before, atol=1e-6)              # nothing moved
+    assert not [e for e in arm.history() if e.event_id == "command_started"
+                and e.detail.command == "GetTool"]
+    _world(arm, lambda c: c.panel.remove_part("block_1"))
+    arm.get_tool("gripper")
+    assert _state(arm) == ("gripper", "open")
