@@ -242,8 +242,9 @@ class GuardedMotion:
         check: the tool, or the part it holds, with each body it would come within the margin
         of, in the order met (at most MAX_CONTACTS). Nothing else: the arm's links stay checked
         against everything, and the tool and the part against every other body."""
-        model, scene, allowed = self.device.motions.collision_model(), self.device.collisions, []
+        scene = self.device.collisions
         carried = {scene.mounted, scene.held} - {None}
+        model, allowed = scene.model(), []
         for trajectory in trajectories:
             while len(allowed) < MAX_CONTACTS:
                 contact = check_motion(model, trajectory.positions, trajectory.dt,

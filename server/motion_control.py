@@ -87,6 +87,7 @@ class MotionControl:
         return self._motion
 
     def close(self) -> None:
+        self.parts.close()
         self.paths.close()
 
     # ---- 3.4 single motions ----------------------------------------------------------------
@@ -155,7 +156,7 @@ class MotionControl:
         coupling, a guarded move's surface); `model`: what to check against (default: the cell
         as it is now). A piece that comes again (the cycles of a path run) is checked once. A
         refusal says where in the whole motion. Returns the counts of the check."""
-        model = model or self.collision_model()
+        model = model or self.device.collisions.model()
         samples = sum(len(t) for t in trajectories)
         checked: set[int] = set()
         first = configurations = pair_checks = bound_checks = 0
@@ -172,11 +173,6 @@ class MotionControl:
                     raise Collision(f"{what} would collide: {contact}", **contact.metadata())
             first += len(trajectory)
         return CheckResult(None, configurations, pair_checks, bound_checks)
-
-    def collision_model(self):
-        """The collision scene's model, its parts where the world has them now."""
-        self.parts.refresh()
-        return self.device.collisions.model()
 
     def start(self, command: str, point_name: str, trajectories: list,
               tags: dict | None = None, aux: dict | None = None, *, allow=(),
@@ -206,7 +202,6 @@ class MotionControl:
 
     def start_jog(self, message: dict) -> RunningMotion:
         """A jog session (jogging.py) as a motion: Resting -> Moving until it ends."""
-        self.parts.refresh()      # the jog guard checks against the scene
         motion = RunningMotion(f"Jog-{next(self._ids)}", "Jog", "", {})
         self._begin(motion, {**message, "op": "jog", "id": motion.command_id})
         return motion

@@ -308,7 +308,7 @@ class Tooling:
         the joints q it starts at). Returns (step, trajectory, allowed contacts) per step."""
         motions = self.device.motions
         planner, settings = motions.planner, self.device.settings
-        model = motions.collision_model()          # the parts where the world has them now
+        model = self.device.collisions.model()
         coupling = self.device.collisions.coupling(tool)
         q, out = motions.planning_start(), []
         for k, (step, flange_goal, joint) in enumerate(steps):

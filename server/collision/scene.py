@@ -9,7 +9,8 @@ the loose parts and (if the cell has one) the floor. Then:
 - set_finger_gap: the mounted gripper's fingers (open: its stroke);
 - attach_part: a part moves with the tool (in its present pose relative to the flange, or a
   given one); release_part leaves it where it is; place_part puts it down at a pose (an
-  obstacle there); remove_part takes it out of the cell;
+  obstacle there); remove_part takes it out of the cell; follow_parts takes the poses the
+  world reports for the parts lying loose (server/world_parts.py);
 - allow / forbid: allowed contacts kept until forbidden; `coupling` and `grasp` name the usual
   ones for a single check. The bare flange docking on an unmounted tool needs none: the model
   allows it in the tool's corridor (docking.py).
@@ -35,6 +36,8 @@ from .model import DEFAULT_MARGIN, AllowedContact, CollisionModel, CollisionMode
 from .shapes import (ARM_LINKS, FLANGE_LINK, FLOOR, Geometry, arm_description, box_geometry,
                      floor_geometry, tool_geometries)
 
+MOVED, TURNED = 0.001, 0.01   # m, rad: a part that moved less stays where the scene has it
+
 
 class CollisionScene:
     """What is where in the cell, for collision checking."""
@@ -59,6 +62,7 @@ class CollisionScene:
                        | ({FLOOR} if cell.world.floor else set()))
         self._kinematics = Kinematics(cell.arm)
         self._model: CollisionModel | None = None
+        self.version = 0        # changes so far
 
     # ---- what is where ------------------------------------------------------------------------
 
@@ -163,6 +167,23 @@ class CollisionScene:
             self._changed()
             return self._part_at[name].copy()
 
+    def follow_parts(self, poses: dict[str, np.ndarray], version: int) -> bool:
+        """The parts lying loose where the world has them: `poses` (4, 4, world) read when the
+        scene was at `version`. Nothing changes if the scene changed since (the read may
+        predate that change; the next one will not), nor for a part held, nor for a pose
+        within MOVED and TURNED of the scene's (a change recompiles the model). True if
+        the poses were taken."""
+        with self._lock:
+            if version != self.version:
+                return False
+            for name, pose in poses.items():
+                self._part(name)
+                now = self._part_at.get(name)
+                if self.held != name and (now is None or not _near(now, _pose(pose, name))):
+                    self._part_at[name] = _pose(pose, name)
+                    self._changed()
+            return True
+
     def place_part(self, name: str, pose: np.ndarray) -> None:
         """Put part `name` down with its centre at `pose` (4, 4, world); held, it is let go."""
         with self._lock:
@@ -265,6 +286,7 @@ class CollisionScene:
 
     def _changed(self) -> None:
         self._model = None
+        self.version += 1
 
     def _flange_world(self, q) -> np.ndarray:
         q = np.asarray(q, dtype=float)
@@ -295,6 +317,12 @@ def _pose(T, name: str) -> np.ndarray:
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise CollisionModelError(f"{name} must be a finite (4, 4) pose")
     return T.copy()
+
+
+def _near(a: np.ndarray, b: np.ndarray) -> bool:
+    """Two poses within MOVED and TURNED of each other."""
+    turned = np.arccos(np.clip((np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
+    return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < MOVED and turned < TURNED)
 
 
 def _distance(a: Geometry, b: Geometry) -> float:

@@ -12,7 +12,7 @@ from landscape.v1 import digital_io_service_pb2 as io_pb
 from landscape.v1 import end_effector_pb2 as ee
 from landscape.v1 import control_pb2, motion_pb2, sensing_pb2, types_pb2
 
-from support import Arm, error_info, stubs
+from support import Arm, error_info, stubs, wait_until
 
 TABLE_TOP = 0.2
 PLACE_X = 0.73                      # the place zone's centre line
@@ -212,6 +212,12 @@ def _scene_part(arm, name: str) -> np.ndarray:
     return arm.server.device.collisions.part_pose(name)[:3, 3]
 
 
+def _by_hand(arm, part: str, change) -> None:
+    """A person moves `part` (the panel); the device's scene follows within its period."""
+    _world(arm, change)
+    wait_until(lambda: np.allclose(_scene_part(arm, part), _part(arm, part), atol=1e-3))
+
+
 def test_a_part_a_person_puts_in_the_way_is_an_obstacle_and_one_taken_away_is_not(arm):
     arm.move_down_to(0.65, 0.3, 0.45)
     before = arm.joints().copy()
@@ -219,16 +225,16 @@ def test_a_part_a_person_puts_in_the_way_is_an_obstacle_and_one_taken_away_is_no
         frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
         values=[0.65, 0.3, TABLE_TOP + 0.035, np.pi, 0, 0],
         motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION)
-    _world(arm, lambda c: c.panel.place_part("block_1", (0.65, 0.3, TABLE_TOP + 0.0201)))
+    _by_hand(arm, "block_1",
+             lambda c: c.panel.place_part("block_1", (0.65, 0.3, TABLE_TOP + 0.0201)))
     refused = _refused(lambda: arm.device.MoveAbsolute(down, timeout=30))
     info = error_info(refused)
     assert refused.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
     assert info.metadata["body_b"] == "block_1"
     assert np.allclose(arm.joints(), before, atol=1e-6)
-    _world(arm, lambda c: c.panel.remove_part("block_1"))
+    _by_hand(arm, "block_1", lambda c: c.panel.remove_part("block_1"))
     reply = arm.device.MoveAbsolute(down, timeout=30)
     assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
-    assert _scene_part(arm, "block_1") == pytest.approx(_part(arm, "block_1"), abs=1e-3)
 
 
 def test_a_part_let_go_above_the_table_lies_on_the_table_in_the_scene(arm):
@@ -250,7 +256,8 @@ def test_a_tool_change_is_checked_whole_before_the_arm_moves(arm):
     """A block left on the gripper's plate: the way into the slot is blocked, so GetTool is
     refused before its approach runs (step by step, the arm went there first)."""
     plate = _world(arm, lambda c: c.world.tools["gripper"].plate_pose())[0]
-    _world(arm, lambda c: c.panel.place_part("block_1", np.add(plate, (0, 0, 0.0215))))
+    _by_hand(arm, "block_1",
+             lambda c: c.panel.place_part("block_1", np.add(plate, (0, 0, 0.0215))))
     before = arm.joints().copy()
     refused = _refused(lambda: arm.get_tool("gripper"))
     info = error_info(refused)
@@ -259,6 +266,6 @@ def test_a_tool_change_is_checked_whole_before_the_arm_moves(arm):
     assert np.allclose(arm.joints(), before, atol=1e-6)              # nothing moved
     assert not [e for e in arm.history() if e.event_id == "command_started"
                 and e.detail.command == "GetTool"]
-    _world(arm, lambda c: c.panel.remove_part("block_1"))
+    _by_hand(arm, "block_1", lambda c: c.panel.remove_part("block_1"))
     arm.get_tool("gripper")
     assert _state(arm) == ("gripper", "open")
