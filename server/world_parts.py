@@ -43,8 +43,9 @@ class WorldParts:
         self._thread.start()
 
     def close(self) -> None:
+        """The thread stops after its present read (no wait: a hung controller would hold it
+        up to the call's timeout)."""
         self._stop.set()
-        self._thread.join(2.0)
 
     def _run(self) -> None:
         while not self._stop.wait(PERIOD):
