@@ -152,8 +152,8 @@ class MotionControl:
     def check_collisions(self, trajectories: list, what: str = "the motion", *,
                          allow=(), model=None) -> CheckResult:
         """Refuse trajectories (played back to back) that would bring two bodies of the cell
-        within the safety margin (collision/); `allow` names contacts meant to happen (a tool
-        coupling, a guarded move's surface); `model`: what to check against (default: the cell
+        within the safety margin (collision/); `allow` names contacts meant to happen (a
+        guarded move's surface); `model`: what to check against (default: the cell
         as it is now). A piece that comes again (the cycles of a path run) is checked once. A
         refusal says where in the whole motion. Returns the counts of the check."""
         model = model or self.device.collisions.model()
@@ -206,11 +206,10 @@ class MotionControl:
         self._begin(motion, {**message, "op": "jog", "id": motion.command_id})
         return motion
 
-    def play(self, command: str, point_name: str, trajectory, timeout: float, *,
-             allow=()) -> RunningMotion:
+    def play(self, command: str, point_name: str, trajectory, timeout: float) -> RunningMotion:
         """Start one planned motion and wait until it ends or pauses (for commands that move
         the arm in steps, tooling.py); the motion says how it ended."""
-        motion = self._start(command, point_name, [trajectory], allow=allow)
+        motion = self._start(command, point_name, [trajectory])
         self._wait(motion, AT_REST, timeout)
         return motion
 

@@ -303,13 +303,13 @@ class Tooling:
     def _steps(self, command: str, tool: str, steps, after) -> list[tuple]:
         """Plan the moves of a tool change, each from where the one before ends, and check
         them all before any runs: (step, flange goal (4x4 in base_link), joint move?). The
-        fine moves allow the coupling's contacts; the last one is checked against what
-        `after(scene, q)` makes of a copy of the scene (the coupling or uncoupling made, from
-        the joints q it starts at). Returns (step, trajectory, allowed contacts) per step."""
+        last one is checked against what `after(scene, q)` makes of a copy of the scene (the
+        coupling or uncoupling made, from the joints q it starts at). The fine moves into and
+        out of the slot stay in the tool's docking corridor, where the flange may meet the
+        tool and the tool its rack (collision/docking.py). Returns (step, trajectory)."""
         motions = self.device.motions
         planner, settings = motions.planner, self.device.settings
         model = self.device.collisions.model()
-        coupling = self.device.collisions.coupling(tool)
         q, out = motions.planning_start(), []
         for k, (step, flange_goal, joint) in enumerate(steps):
             if k == len(steps) - 1:
@@ -322,17 +322,15 @@ class Tooling:
             else:
                 limits = planner.limits(settings, min(settings.speed_percent, TOOL_CHANGE_SPEED))
                 trajectory = planner.straight_move(q, flange_goal, limits, np.eye(4))
-            allow = () if joint else coupling
             step = f"{tool}: {step}"
-            motions.check_collisions([trajectory], f"{command} {step}", allow=allow, model=model)
-            out.append((step, trajectory, allow))
+            motions.check_collisions([trajectory], f"{command} {step}", model=model)
+            out.append((step, trajectory))
             q = trajectory.positions[-1]
         return out
 
-    def _play(self, command: str, step: str, trajectory, allow) -> None:
+    def _play(self, command: str, step: str, trajectory) -> None:
         """One step of a tool change, planned by _steps."""
-        motion = self.device.motions.play(command, step, trajectory,
-                                          trajectory.duration + 10.0, allow=allow)
+        motion = self.device.motions.play(command, step, trajectory, trajectory.duration + 10.0)
         if motion.phase != "done":
             why = motion.report.get("message", "")
             raise ControllerFailure(f"{command} stopped at the step '{step}' ({motion.phase}"

@@ -1,15 +1,17 @@
-"""Docking: the bare flange meeting a tool's coupling, allowed along the coupling's axis only.
+"""Docking: a tool coupled or put back at the changer, along its coupling's axis only.
 
 A tool not on the flange (in its rack slot, or where the changer let it go) is coupled by
 bringing the bare flange (link6) onto its plate straight along the plate's axis, which is
 what a tool changer needs and what a client driving the arm itself does (CRCL: MoveTo above
-the slot, MoveTo onto it, CloseToolChanger). So link6 may meet that tool while the flange is
-in the tool's corridor: its origin within the changer's capture distance (the cell's
-lock_distance) of the plate's axis, from DEPTH above the plate to lock_distance into it, and
-its orientation within lock_angle of the plate's. Anywhere else link6 meeting the tool is a
-contact like any other: a swipe from the side, a tilted approach, sliding off the plate
-sideways. Nothing else is allowed: link5 and the other links stay checked against the tool,
-and a mounted tool (the flange not bare) has no corridor at all.
+the slot, MoveTo onto it, CloseToolChanger); a mounted tool is put back the same way, down
+into its own rack slot, where it stands on the rack. So the bare flange may meet an unmounted
+tool, and a mounted tool the fixtures its own slot stands on, while the flange is in that
+tool's (or that slot's) corridor: its origin within the changer's capture distance (the
+cell's lock_distance) of the plate's axis, from DEPTH above the plate to lock_distance into
+it, and its orientation within lock_angle of the plate's. Anywhere else those contacts are
+like any other: a swipe from the side, a tilted approach, sliding out sideways. Nothing else
+is allowed there: link5 and the other links stay checked against the tool, the mounted tool
+against the other tools in the rack.
 
 Frames: base_link; the plate's z points along the tool, away from the flange (the approach
 comes from its -z side, as tooling.py's approach point does).
@@ -26,10 +28,12 @@ DEPTH = 0.1     # m above the plate where a corridor begins (tooling.APPROACH: f
 
 @dataclass(frozen=True, eq=False)
 class Dock:
-    """The corridor of an unmounted tool: plate (4, 4) its plate frame in base_link; radius
-    (m) and angle (rad): the changer's capture tolerances."""
+    """A corridor where the moving body `a` may meet body `b`: plate (4, 4) the tool's plate
+    frame when docked, in base_link; radius (m) and angle (rad): the changer's capture
+    tolerances."""
 
-    tool: str
+    a: str
+    b: str
     plate: np.ndarray
     radius: float
     angle: float

@@ -35,7 +35,7 @@ from landscape.sim.kinematics import Kinematics
 
 from .bounds import PairTable, build_bounds, pair_levers
 from .docking import Dock
-from .shapes import ARM_LINKS, FLANGE_LINK, Geometry, arm_description
+from .shapes import ARM_LINKS, Geometry, arm_description
 
 DEFAULT_MARGIN = 0.005   # m: closer than this is a contact
 _ACTIVE_CACHE = 64       # distinct (exclude, allow) requests remembered per model
@@ -64,8 +64,8 @@ class CollisionModel:
     geometries: arm links first (ARM_LINKS), then the rest; pairs (P, 2) geometry indices, the
     moving shape first; pair_bodies: their bodies. known: every body name the cell has (also
     those absent now: a removed part, a tool on the flange), for checking requests. docks:
-    the corridors of the unmounted tools when the flange is bare (docking.py); `docks` maps
-    the pairs of link6 and such a tool to its Dock.
+    contacts allowed in a docking corridor only (docking.py); `docks` maps their pairs to
+    their Dock.
     """
 
     def __init__(self, arm: ArmModel, base: np.ndarray, geometries: Sequence[Geometry],
@@ -115,10 +115,11 @@ class CollisionModel:
         b = np.array([slot[j] for _, j in pairs], dtype=int)
         fixed_b = np.array([self.geometries[j].link == 0 for _, j in pairs], dtype=bool)
         self.pair_table = PairTable(a, b, fixed_b, pair_levers(self.bounds, a, b, fixed_b))
-        # Pairs of the bare flange and an unmounted tool: allowed in that tool's corridor.
-        by_tool = {d.tool: d for d in docks}
-        self.docks = {k: by_tool[b] for k, (a, b) in enumerate(self.pair_bodies)
-                      if a == ARM_LINKS[FLANGE_LINK] and b in by_tool}
+        # Pairs allowed in a docking corridor only (the bare flange and an unmounted tool, a
+        # mounted tool and its rack).
+        corridors = {(d.a, d.b): d for d in docks}
+        self.docks = {k: corridors[bodies] for k, bodies in enumerate(self.pair_bodies)
+                      if bodies in corridors}
         self._local = threading.local()
         self._active: dict = {}    # (exclude, allow) -> active pairs, for repeated requests
 

@@ -11,9 +11,10 @@ the loose parts and (if the cell has one) the floor. Then:
   given one); release_part leaves it where it is; place_part puts it down at a pose (an
   obstacle there); remove_part takes it out of the cell; follow_parts takes the poses the
   world reports for the parts lying loose (server/world_parts.py);
-- allow / forbid: allowed contacts kept until forbidden; `coupling` and `grasp` name the usual
-  ones for a single check. The bare flange docking on an unmounted tool needs none: the model
-  allows it in the tool's corridor (docking.py).
+- allow / forbid: allowed contacts kept until forbidden; `grasp` names the usual one for a
+  single check. Coupling a tool and putting it back need none: the model allows the bare
+  flange on an unmounted tool, and a mounted tool on its rack, in the tool's docking corridor
+  (docking.py).
 
 `model()` returns the compiled, immutable CollisionModel of the present state (cached until the
 next change); checks run on it (check.py), so a change never disturbs a check in progress.
@@ -61,6 +62,7 @@ class CollisionScene:
                        | set(self._tools) | set(self._parts)
                        | ({FLOOR} if cell.world.floor else set()))
         self._kinematics = Kinematics(cell.arm)
+        self._rack = {t.name: self._slot_fixtures(t) for t in cell.world.tools}
         self._model: CollisionModel | None = None
         self.version = 0        # changes so far
 
@@ -221,21 +223,6 @@ class CollisionScene:
             self._allowed = kept
             self._changed()
 
-    def coupling(self, tool: str) -> tuple[AllowedContact, ...]:
-        """The contacts of taking `tool` out of its rack slot or putting it back: the tool on
-        the fixtures its slot stands on (within the margin of its slot). The bare flange on
-        its plate needs nothing: it is allowed in the tool's docking corridor (docking.py)."""
-        spec = self._tool(tool)
-        reason = f"coupling {tool}"
-        out = []
-        slot = self._world_in_base @ pose_matrix(spec.slot.xyz, spec.slot.rpy)
-        shapes = tool_geometries(spec, spec.stroke, 0, slot)
-        for f in self.cell.world.fixtures:
-            box = box_geometry(f, 0, self._world_in_base @ pose_matrix(f.pose.xyz, f.pose.rpy))
-            if min(_distance(s, box) for s in shapes) < self.margin:
-                out.append(AllowedContact(reason, tool, f.name))
-        return tuple(out)
-
     def grasp(self, part: str) -> AllowedContact:
         """The mounted tool closing on (or sucking at) `part`."""
         self._part(part)
@@ -255,12 +242,18 @@ class CollisionScene:
             return self._model
 
     def _docks(self) -> list[Dock]:
-        """The unmounted tools' docking corridors, while the flange is bare."""
-        if self._mounted is not None:
-            return []
+        """The contacts allowed in a docking corridor (docking.py): the bare flange on each
+        unmounted tool, or the mounted tool on what its own rack slot stands on."""
         world = self.cell.world
-        return [Dock(name, self._world_in_base @ pose, world.lock_distance, world.lock_angle)
-                for name, pose in self._tool_at.items()]
+
+        def dock(a: str, b: str, plate: np.ndarray) -> Dock:
+            return Dock(a, b, self._world_in_base @ plate, world.lock_distance, world.lock_angle)
+        if self._mounted is None:
+            return [dock(ARM_LINKS[FLANGE_LINK], name, pose)
+                    for name, pose in self._tool_at.items()]
+        slot = self._tools[self._mounted].slot
+        return [dock(self._mounted, f, pose_matrix(slot.xyz, slot.rpy))
+                for f in self._rack[self._mounted]]
 
     def _geometries(self) -> list[Geometry]:
         _, out = arm_description(self.cell.arm)
@@ -283,6 +276,14 @@ class CollisionScene:
         return out
 
     # ---- helpers ------------------------------------------------------------------------------
+
+    def _slot_fixtures(self, spec) -> list[str]:
+        """The fixtures a tool stands on in its rack slot (within the margin of it there)."""
+        slot = self._world_in_base @ pose_matrix(spec.slot.xyz, spec.slot.rpy)
+        shapes = tool_geometries(spec, spec.stroke, 0, slot)
+        return [f.name for f in self.cell.world.fixtures
+                if min(_distance(s, box_geometry(f, 0, self._world_in_base @ pose_matrix(
+                    f.pose.xyz, f.pose.rpy))) for s in shapes) < self.margin]
 
     def _changed(self) -> None:
         self._model = None

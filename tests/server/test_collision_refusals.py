@@ -148,9 +148,10 @@ def _straight_to(arm, xyz):
     return arm.wait_command(reply.ret_val.command_id)
 
 
-def test_the_bare_flange_docks_on_a_rack_tool_along_its_axis_and_the_changer_couples_it(arm):
+def test_a_client_driving_the_arm_docks_a_rack_tool_along_its_axis_and_puts_it_back(arm):
     """Issue 11, a tool coupling at the changer: a client driving the arm itself (CRCL: MoveTo
-    above the slot, MoveTo onto it, CloseToolChanger) couples a tool in the rack."""
+    above the slot, MoveTo onto it, CloseToolChanger; and back) couples a tool in the rack
+    and returns it."""
     arm.move_down_to(*(SLOT + [0, 0, 0.1]))              # above the plate, on its axis
     assert _straight_to(arm, SLOT)[-1].event_id == "command_done"
     _, io, _ = stubs(arm.session.channel)
@@ -158,6 +159,13 @@ def test_the_bare_flange_docks_on_a_rack_tool_along_its_axis_and_the_changer_cou
     reply = arm.device.GetEndEffectorState(ee.GetEndEffectorStateRequest())
     assert reply.current_ee == "gripper"
     assert _straight_to(arm, SLOT + [0, 0, 0.25])[-1].event_id == "command_done"   # out
+    # And back: the tool down into its slot along the axis (the tool tip, 16 cm below the
+    # plate, is what moves now), the changer opened, the bare flange straight up again.
+    assert _straight_to(arm, SLOT - [0, 0, 0.16])[-1].event_id == "command_done"
+    io.SetDigitalIO(io_pb.SetDigitalIORequest(type="output", unit_id=2, bits_off=1))
+    reply = arm.device.GetEndEffectorState(ee.GetEndEffectorStateRequest())
+    assert reply.current_ee == ""
+    assert _straight_to(arm, SLOT + [0, 0, 0.1])[-1].event_id == "command_done"
 
 
 def test_a_sideways_motion_of_the_bare_flange_into_a_rack_tool_is_refused(arm):
