@@ -177,14 +177,21 @@ def test_tool_commands_refuse_what_does_not_fit_and_change_nothing(arm):
     assert _state(arm) == ("vacuum", "off")
 
 
-def test_a_held_part_carried_into_the_table_is_refused_and_free_space_is_not(arm):
-    """Issue 11: the part in the gripper is part of the arm for the collision check."""
+def _grip_block_2(arm) -> np.ndarray:
+    """block_2 alone on the table, in the gripper (closed around it where it lay); where it
+    lay."""
     _only_part(arm, "block_2")
     arm.get_tool("gripper")
     start = _part(arm, "block_2")
     arm.move_down_to(start[0], start[1], start[2] + 0.1)
     _lift(arm, -0.1)
     arm.device.ActivateTool(ee.ActivateToolRequest(tool_id="gripper", bit_field=1))
+    return start
+
+
+def test_a_held_part_carried_into_the_table_is_refused_and_free_space_is_not(arm):
+    """Issue 11: the part in the gripper is part of the arm for the collision check."""
+    start = _grip_block_2(arm)
     _lift(arm, 0.1)
     before = arm.joints().copy()
     # Straight down by as much as it was lifted: the block (hanging 2 cm below the finger
@@ -238,12 +245,7 @@ def test_a_part_a_person_puts_in_the_way_is_an_obstacle_and_one_taken_away_is_no
 
 
 def test_a_part_let_go_above_the_table_lies_on_the_table_in_the_scene(arm):
-    _only_part(arm, "block_2")
-    arm.get_tool("gripper")
-    start = _part(arm, "block_2")
-    arm.move_down_to(start[0], start[1], start[2] + 0.1)
-    _lift(arm, -0.1)
-    arm.device.ActivateTool(ee.ActivateToolRequest(tool_id="gripper", bit_field=1))
+    start = _grip_block_2(arm)
     _lift(arm, 0.08)
     arm.device.DeactivateTool(ee.DeactivateToolRequest(tool_id="gripper", bit_field=1))
     landed = _part(arm, "block_2")
