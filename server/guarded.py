@@ -185,7 +185,9 @@ class GuardedMotion:
                       else self._tool_move(motion, speed))
         offsets = self._offset_moves(trajectory, spec)
         allow = self._meant_to_touch([trajectory, *offsets])
-        self.device.motions.check_collisions(offsets, "Comply with its compliance", allow=allow)
+        for offset in offsets:
+            self.device.motions.check_collisions([offset], "Comply with its compliance offset",
+                                                 allow=allow)
         return self.device.motions.start("Comply", sensor, [trajectory], allow=allow,
                                          loops={"comply": spec}, finish=finish)
 

@@ -15,9 +15,9 @@ each check the exact distance d (coal, through pinocchio) puts the next check ma
 margin) further along the pair's motion bound. All runs advance together, the one furthest
 behind first, so the first contact found is the earliest and ends the walk.
 
-Allowed contacts (model.AllowedContact) and excluded bodies drop pairs from a check; the bare
-flange and an unmounted tool are checked only where the flange is out of the tool's docking
-corridor (docking.py). A pair that
+Allowed contacts (model.AllowedContact) and excluded bodies drop pairs from a check; the pairs
+of a docking corridor (the bare flange and an unmounted tool, a mounted tool and its rack:
+docking.py) are checked only where the flange is out of the corridor. A pair that
 starts within the margin (the arm resting on what it touched, a part lifted off the table) may
 leave it: until it first reaches the margin it is held only to its starting distance less
 LEAVE_TOLERANCE, checked at least every LEAVE_TOLERANCE of motion.

@@ -18,10 +18,10 @@ comes from its -z side, as tooling.py's approach point does).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 DEPTH = 0.1     # m above the plate where a corridor begins (tooling.APPROACH: far clear of it)
 
@@ -42,9 +42,9 @@ class Dock:
         """(N,) bool: which flange frames (N, 4, 4, base_link) are in the corridor."""
         rel = np.linalg.inv(self.plate) @ flange
         p = rel[:, :3, 3]
-        cos = (np.trace(rel[:, :3, :3], axis1=1, axis2=2) - 1.0) / 2.0
+        turned = Rotation.from_matrix(rel[:, :3, :3]).magnitude()
         return ((np.hypot(p[:, 0], p[:, 1]) <= self.radius) & (p[:, 2] >= -DEPTH)
-                & (p[:, 2] <= self.radius) & (cos >= math.cos(self.angle)))
+                & (p[:, 2] <= self.radius) & (turned <= self.angle))
 
 
 def strict_stretches(inside: np.ndarray, first: int) -> list[tuple[int, int]]:

@@ -27,6 +27,7 @@ import threading
 
 import coal
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from landscape.server.units import pose_matrix
 from landscape.sim.cell import Cell
@@ -180,9 +181,9 @@ class CollisionScene:
                 return False
             for name, pose in poses.items():
                 self._part(name)
-                now = self._part_at.get(name)
-                if self.held != name and (now is None or not _near(now, _pose(pose, name))):
-                    self._part_at[name] = _pose(pose, name)
+                pose, now = _pose(pose, name), self._part_at.get(name)
+                if self.held != name and (now is None or not _near(now, pose)):
+                    self._part_at[name] = pose
                     self._changed()
             return True
 
@@ -322,7 +323,7 @@ def _pose(T, name: str) -> np.ndarray:
 
 def _near(a: np.ndarray, b: np.ndarray) -> bool:
     """Two poses within MOVED and TURNED of each other."""
-    turned = np.arccos(np.clip((np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
+    turned = Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).magnitude()
     return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < MOVED and turned < TURNED)
 
 
