@@ -18,8 +18,8 @@ where the one before ends, and checked against the cell before the first one mov
 one against the cell as the coupling or uncoupling leaves it), so a blocked slot refuses the
 command with the arm where it was. Each step then runs as a motion of its own (the same
 events, stops and aborts as any move, checked again as it starts); a step that does not end
-"done" fails the command, naming the step, and leaves the arm where that step left it. A tool already on the flange is not
-fetched again; another one must be put away first.
+"done" fails the command, naming the step, and leaves the arm where that step left it. A tool
+already on the flange is not fetched again; another one must be put away first.
 
 ActivateTool closes the gripper (blocking until `gripper_closed` reads 1, on a part or empty)
 or switches the cup's suction on (blocking for two cycles; `vacuum_ok` then says whether a part
