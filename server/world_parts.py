@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from landscape.sim.clock import CycleProcessError
-from landscape.sim.world import read_part_states
+from landscape.sim.world_reads import read_part_states
 
 if TYPE_CHECKING:
     from landscape.server.device import Device

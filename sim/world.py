@@ -232,9 +232,3 @@ class World:
         t[:3, :3] = np.array(pb.getMatrixFromQuaternion(quaternion(self.cell.base))).reshape(3, 3)
         t[:3, 3] = self.cell.base.xyz
         return t
-
-
-def read_part_states(controller) -> dict[str, tuple]:
-    """World.part_states of a controller's world, run between two cycles (top level: it
-    pickles to the cycle process, which has this module loaded already)."""
-    return controller.world.part_states()
