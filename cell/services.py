@@ -48,6 +48,7 @@ def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None 
     argv = [*_python("landscape.server"), "--address", device.address,
             "--port", str(device.port if port is None else port),
             "--paths", str(device.data / "paths.sqlite3"), "--clock", device.clock,
+            "--collision-margin", f"{device.collision_margin:g}",
             "--audit-log", str(security.audit_log(device)),
             "--audit-max-bytes", str(security.audit_max_bytes),
             "--audit-backups", str(security.audit_backups),

@@ -29,7 +29,7 @@ signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 
 # Light modules only up here: a port in use is refused before the simulation loads (main).
 from landscape.server.config import (CLOCKS, DEFAULT_ADDRESS, DEFAULT_PORT,  # noqa: E402
-                                     SecurityConfig, ServerConfig)
+                                     MAX_COLLISION_MARGIN, SecurityConfig, ServerConfig)
 from landscape.server.listen import listen_address, listen_problem  # noqa: E402
 
 log = logging.getLogger("landscape.server")
@@ -53,6 +53,10 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
                              "(default %(default)s)")
     parser.add_argument("--reset-settings", action="store_true",
                         help="start from the default settings instead of the stored ones")
+    parser.add_argument("--collision-margin", type=float,
+                        default=ServerConfig.collision_margin, metavar="METRES",
+                        help="no planned motion may bring two bodies of the cell closer than "
+                             "this; a jog stops there (default %(default)s m)")
     _security_arguments(parser.add_argument_group(
         "security", "plaintext is for loopback: any other --address needs TLS and tokens, or "
                     "--insecure"))
@@ -62,6 +66,8 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
     args = parser.parse_args(argv)
     if bool(args.tls_cert) != bool(args.tls_key):
         parser.error("--tls-cert and --tls-key go together")
+    if not 0.0 < args.collision_margin <= MAX_COLLISION_MARGIN:
+        parser.error(f"--collision-margin must be above 0 and at most {MAX_COLLISION_MARGIN} m")
     if args.mtls and not args.tls_ca:
         parser.error("--mtls needs --tls-ca (the CA that signs the clients' certificates)")
     security = SecurityConfig(
@@ -72,6 +78,7 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
     config = ServerConfig(address=args.address, port=args.port, cell=args.cell,
                           clock=args.clock, paths_file=args.paths,
                           reset_settings=args.reset_settings, security=security,
+                          collision_margin=args.collision_margin,
                           max_message_bytes=args.max_message_bytes)
     return config, args.log_level
 
@@ -134,7 +141,8 @@ def _refuse(problem: str):
 
 def _say_what_runs(running, config: ServerConfig) -> None:
     link = running.link
-    lines = [f"cell: {config.cell or 'built-in default'} ({running.device.arm.name})",
+    lines = [f"cell: {config.cell or 'built-in default'} ({running.device.arm.name}), "
+             f"collision margin {config.collision_margin * 1000:g} mm",
              f"controller: {config.clock} clock, {link.cycle_time * 1000:g} ms cycle",
              f"paths and settings: {config.paths_file or 'in memory'}",
              f"gRPC: {listen_address(config.address, running.port)} "

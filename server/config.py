@@ -8,6 +8,7 @@ from landscape.server.limits import Cap
 CLOCKS = ("realtime", "lockstep")   # the controller's: controller_link.py
 DEFAULT_ADDRESS = "127.0.0.1"   # loopback unless the operator exposes the server on purpose
 DEFAULT_PORT = 50051
+MAX_COLLISION_MARGIN = 0.1      # m: a wider safety margin would keep the arm from the table
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,8 @@ class ServerConfig:
     paths_file: str | None = None
     # Start from the default settings instead of the stored ones (and store the defaults).
     reset_settings: bool = False
-    # m: no planned motion may bring two bodies of the cell closer than this (collision/).
+    # m: no planned motion may bring two bodies of the cell closer than this (collision/);
+    # (0, MAX_COLLISION_MARGIN].
     collision_margin: float = 0.005
     # Initialise the controller at start-up (False leaves the device Idle, for tests).
     start_device: bool = True

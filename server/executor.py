@@ -343,7 +343,7 @@ class Executor:
             start = self._hold if self._hold is not None else fbk.pos
             self._jog = JogIntegrator(msg["id"], start, msg["limits"], self._tip,
                                       np.asarray(msg["tool_offset"], dtype=float),
-                                      self.cycle_time)
+                                      self.cycle_time, msg.get("guarded", False))
         elif jog is not None and op == "jog_velocity":
             jog.command(msg)
         elif jog is not None and op == "jog_clearance":

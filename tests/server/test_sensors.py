@@ -224,6 +224,19 @@ def test_a_reading_beyond_the_envelope_ends_move_react_as_failed(cup):
     assert alarm.code == alarms.MOTION and alarm.command_id == events[-1].command.command_id
 
 
+def test_move_react_lets_only_the_tool_touch_its_surface_the_arm_stays_checked(cup):
+    """Issue 11: the cup may meet the table it searches for; the flange may not. A search
+    planned 30 cm down would take the flange (12 cm above the cup's tip) into the table."""
+    before = cup.joints().copy()
+    error = _refused(lambda: cup.device.MoveReact(sensing_pb2.MoveReactRequest(
+        sensor_type="force_sensor", motion=Z(z=0.3), speed=1, thresholds=Z(z=-20))))
+    info = error_info(error)
+    assert error.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert info.metadata["body_a"].startswith("link") and info.metadata["body_b"] == "table"
+    assert np.allclose(cup.joints(), before, atol=1e-6)
+    assert cup.server.device.state is State.RESTING
+
+
 @pytest.mark.parametrize("fields, code", [
     ({"motion": Z(z=0.1), "speed": 1, "thresholds": Z(z=-20), "compliance": Z(x=0.01)},
      grpc.StatusCode.INVALID_ARGUMENT),
@@ -407,6 +420,19 @@ def test_comply_whose_motion_outlasts_its_timeout_fails(cup):
     moved = cup.tool_tip()[:3, 3] - start
     assert 0.005 < moved[0] < 0.015        # about half a second of it
     assert cup.server.device.state is State.RESTING
+def test_comply_is_checked_with_its_compliance_at_both_ends(cup):
+    """Issue 11: the cup may press on the table, but a compliance of 20 cm would let the
+    flange follow it into the table: refused before anything moves. 1 cm is fine."""
+    _touch(cup, threshold=-5.0)
+    before = cup.joints().copy()
+    error = _refused(lambda: _comply(cup, max_timeout=1.0, compliance=Z(z=0.2)))
+    info = error_info(error)
+    assert error.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert info.metadata["body_a"].startswith("link") and info.metadata["body_b"] == "table"
+    assert "compliance" in error.details()
+    assert np.allclose(cup.joints(), before, atol=1e-6)
+    reply = _comply(cup, max_timeout=0.2)
+    assert cup.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
 
 
 @pytest.mark.parametrize("fields", [
