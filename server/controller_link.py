@@ -10,8 +10,10 @@
 between cycles), `send` (messages to the Executor), `between_cycles`, `feedback` (every
 cycle's row, feedback.py) and `share` (large arrays for the cycle, without copying them
 through the pipe). It watches the controller: the cycle process exiting, or its feedback
-falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. `restart()`
-starts a fresh controller (after a loss); the feedback ring survives, so cycle numbers go on.
+falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. A silent
+process is killed before it is reported: one that was only stalled must never wake up and
+go on commanding the arm after the device has said it is lost. `restart()` starts a fresh
+controller (after a loss); the feedback ring survives, so cycle numbers go on.
 """
 from __future__ import annotations
 
@@ -132,11 +134,13 @@ class ControllerLink:
         except Exception:
             log.exception("stopping the controller failed")
 
-    def _lose(self, reason: str) -> None:
+    def _lose(self, reason: str, kill: bool = False) -> None:
         with self._lost_lock:
             if self.lost is not None or self._closing:
                 return
             self.lost = reason
+            if kill:   # before anyone hears of the loss (a stalled process may resume)
+                self._clock.kill()
         log.error("controller lost: %s", reason)
         self._on_lost(reason)
 
@@ -153,5 +157,5 @@ class ControllerLink:
             elif now - since > limit and head >= 0:
                 alive = self._clock.alive
                 self._lose(f"the cycle process sent no feedback for {now - since:.3f} s"
-                           + ("" if alive else " and exited"))
+                           + (" (killed)" if alive else " and exited"), kill=True)
 

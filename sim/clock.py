@@ -191,6 +191,12 @@ class RealTimeClock:
         self._conn.close()
         return self._process.exitcode
 
+    def kill(self) -> None:
+        """SIGKILL the cycle process now, stopped or not: it runs no further instruction (its
+        arm, in the simulator, is gone with it). The loss is reported as for any exit."""
+        if self._process is not None and self._process.is_alive():
+            self._process.kill()
+
     def _kill(self) -> None:
         self._process.terminate()
         self._process.join(2.0)

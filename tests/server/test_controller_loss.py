@@ -7,6 +7,7 @@ NOT_SERVING, a motion in flight fails with its command id, the lock stays with i
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import time
@@ -122,18 +123,19 @@ def test_a_hung_cycle_process_is_noticed_by_its_silence(realtime):
         assert "no feedback" in alarm.alarm.message
         assert latency < 0.2
         assert server.device.state is State.ERROR
+        wait_until(lambda: not _alive(pid), timeout=5)   # killed when found silent
     finally:
-        os.kill(pid, signal.SIGCONT)
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
         stream.cancel()
         holder.close()
-    # The holder left; anyone may reset: the hung process is stopped and a fresh one started.
+    # The holder left; anyone may reset: a fresh cycle process is started.
     wait_until(lambda: server.device.status().lock_holder == "", timeout=5)
     with grpc.insecure_channel(server.target) as channel:
         device, _, _ = stubs(channel)
         reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
     assert reply.state == types_pb2.DEVICE_STATE_UNLOCKED
     assert server.link.clock.pid != pid
-    wait_until(lambda: not _alive(pid), timeout=5)
 
 
 def _alive(pid: int) -> bool:
@@ -143,3 +145,29 @@ def _alive(pid: int) -> bool:
         return False
     with open(f"/proc/{pid}/stat") as stat:
         return stat.read().split()[2] != "Z"
+
+
+def test_a_cycle_process_that_resumes_after_its_silence_never_commands_the_arm_again(realtime):
+    """A cycle process stalled long enough to be declared lost (SIGSTOP), then resumed
+    (SIGCONT), must not go on playing its motion: the README says nothing commands the arm."""
+    server = realtime
+    holder = locked_session(server, "holder")
+    device, _, _ = stubs(holder.channel)
+    pid = server.link.clock.pid
+    try:
+        activate(holder)
+        device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=JOINT, values=[2.5, 0, 1.5708, 0, 1.5708, 0], speed=10), timeout=5)
+        wait_until(lambda: abs(server.device.feedback().velocity[0]) > 0.05, timeout=10)
+        os.kill(pid, signal.SIGSTOP)
+        wait_until(lambda: server.link.lost is not None, timeout=5)
+        os.kill(pid, signal.SIGCONT)
+        wait_until(lambda: not _alive(pid), timeout=5)
+        head = server.link.feedback.head
+        time.sleep(0.3)   # 75 cycles: a live process would have written rows
+        assert server.link.feedback.head == head
+        assert server.device.state is State.ERROR
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
+        holder.close()
