@@ -40,6 +40,7 @@ from landscape.server.safety import SafetyActions, SafetyWorker
 from landscape.server.sessions import Session, SessionRegistry
 from landscape.server.settings import MotionSettings
 from landscape.server.states import Lease, State
+from landscape.sim import panel
 from landscape.sim.arm import ArmModel
 from landscape.sim.controller import EnableState, InitState, Status
 from landscape.sim.clock import CycleProcessError
@@ -318,7 +319,10 @@ class Device(SafetyActions):
         """Press or release the e-stop, open or close the door, as a person at the cell would
         (`action` names a Panel method); returns (e-stop pressed, door open)."""
         log.warning("operator panel: %s", action)
-        estop, door_open = self.link.between_cycles(_operate_panel, action)
+        try:
+            estop, door_open = self.link.between_cycles(panel.operate, action)
+        except (CycleProcessError, TimeoutError) as error:
+            raise ControllerFailure(f"the operator panel did not answer: {error}") from None
         # Returns once the device has seen the e-stop as it is now (the next cycle's report).
         self._wait_controller(lambda: self._estop == estop or self.link.lost is not None, 1.0)
         return estop, door_open
@@ -360,10 +364,4 @@ class Device(SafetyActions):
             power = states.POWER_ON if self._power is EnableState.ENABLED else states.POWER_OFF
             return self.motions.motion_state, power
 
-
-def _operate_panel(controller, action: str) -> tuple[bool, bool]:
-    """Runs between two cycles, where the simulator's panel lives (picklable: top level)."""
-    panel = controller.panel
-    getattr(panel, action)()
-    return panel.estop_pressed, not panel.door_closed
 

@@ -236,10 +236,15 @@ class RealTimeClock:
         """The controller's simulated time, s (None if it has no `time`)."""
         return self.call(cp.SIM_TIME)
 
+    def late_imports(self) -> list[str]:
+        """The modules the cycle process imported since its loop started (should be none)."""
+        return self.call(cp.LATE_IMPORTS)
+
     def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None) -> Any:
         """Run `func(controller, *args)` in the cycle process between two cycles and return
         its result: for what the LLI has no call for (the simulator's panel and sensors).
-        `func` and the arguments must pickle (a top-level function); keep it short."""
+        `func` and the arguments must pickle (a top-level function of a module the cycle
+        process has loaded already: an import there would cost cycles); keep it short."""
         return self.call(cp.RUN, func, args, timeout=timeout)
 
     # -- the two channels

@@ -59,8 +59,10 @@ CONTROLLER_CALLS = frozenset({
 SLOW_CALLS = frozenset({"rec_store"})
 # Calls the cycle process answers itself. RUN: (func, args) -> func(controller, *args), for
 # what the LLI has no call for (the simulator's panel, its sensors); func must pickle.
-PLUG_EVENT_FUNC, RESET_STATS, SIM_TIME, RUN = (
-    "plug_event_func", "_reset_stats", "_sim_time", "_run")
+# LATE_IMPORTS: the modules imported since the loop started (none should be: an import on the
+# loop thread, such as unpickling a function of a module not yet loaded, costs cycles).
+PLUG_EVENT_FUNC, RESET_STATS, SIM_TIME, RUN, LATE_IMPORTS = (
+    "plug_event_func", "_reset_stats", "_sim_time", "_run", "_late_imports")
 
 
 class Steppable(Protocol):
@@ -235,6 +237,7 @@ class _Server:
         self.async_task = _AsyncTask()
         self.running = True
         self.cycles = 0
+        self.modules: frozenset[str] = frozenset()   # what the loop starts with
 
     def between(self, deadline: float) -> bool:
         self.cycles += 1
@@ -317,6 +320,8 @@ class _Server:
             return self.stats.reset()
         if method == SIM_TIME:
             return getattr(self.controller, "time", None)
+        if method == LATE_IMPORTS:
+            return sorted(set(sys.modules) - self.modules)
         return serve_call(self.controller, self.mailbox, method, args)
 
     def _reply(self, call_id: int, ok: bool, value: Any) -> None:
@@ -402,6 +407,7 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
     gc.freeze()
     # The asynchronous thread must hand the GIL back quickly when the loop wakes up.
     sys.setswitchinterval(0.0001)
+    server.modules = frozenset(sys.modules)
     code = 0
     try:
         loop.run(server.between, server.wait)

@@ -19,9 +19,9 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
 from landscape.server.states import State
-from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, types_pb2
+from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, sensing_pb2, types_pb2
 
-from support import activate, locked_session, stubs, wait_until
+from support import activate, bus_history, locked_session, stubs, wait_until
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 
@@ -170,4 +170,30 @@ def test_a_cycle_process_that_resumes_after_its_silence_never_commands_the_arm_a
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGCONT)
+        holder.close()
+
+
+def test_the_estop_on_the_real_time_clock_is_an_estop_and_the_cycle_imports_nothing(realtime):
+    """The operator panel runs in the cycle process between two cycles; nothing sent there may
+    make it import a module on its loop thread (that cost 117 ms once, tripping the silence
+    watchdog: the e-stop was reported as a lost controller, alarm 105 instead of 102)."""
+    server = realtime
+    holder = locked_session(server, "holder")
+    device, _, _ = stubs(holder.channel)
+    try:
+        activate(holder)
+        reply = device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=JOINT, values=[1.0, 0, 1.5708, 0, 1.5708, 0], speed=20), timeout=5)
+        device.GetSensorReading(sensing_pb2.GetSensorReadingRequest(sensor_type="force_sensor"),
+                                timeout=5)
+        device.OperatePanel(control_pb2.OperatePanelRequest(
+            action=control_pb2.PANEL_ACTION_PRESS_ESTOP), timeout=5)
+        wait_until(lambda: server.device.state is State.ERROR, timeout=5)
+        time.sleep(0.2)
+        alarms = [e.detail.code for e in bus_history(server) if e.event_id == "alarm"]
+        assert 102 in alarms and 105 not in alarms, alarms
+        assert server.link.lost is None and "e-stop" in server.device.error
+        assert server.link.clock.late_imports() == []
+        assert reply.ret_val.command_id
+    finally:
         holder.close()
