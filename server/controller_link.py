@@ -13,7 +13,8 @@ through the pipe). It watches the controller: the cycle process exiting, or its 
 falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. A silent
 process is killed before it is reported: one that was only stalled must never wake up and
 go on commanding the arm after the device has said it is lost. `restart()` starts a fresh
-controller (after a loss); the feedback ring survives, so cycle numbers go on.
+controller (after a loss); the feedback ring survives, so cycle numbers go on, and so does
+the e-stop: a button pressed in the cell stays pressed for the new controller.
 """
 from __future__ import annotations
 
@@ -34,13 +35,19 @@ log = logging.getLogger(__name__)
 CLOCKS = ("realtime", "lockstep")
 
 
-def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox):
-    """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function."""
+def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox,
+                     estop_pressed: bool = False):
+    """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function.
+    `estop_pressed`: the cell's e-stop button is down (a latch outside the controller: a
+    controller started afresh finds it as it was left)."""
     from landscape.sim.bullet_controller import BulletController  # pybullet: only here
     from landscape.sim.cell import load_cell
     cell = load_cell(cell_path)
-    return BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time, ring,
-                                                  cell.arm))
+    controller = BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time,
+                                                        ring, cell.arm))
+    if estop_pressed:
+        controller.panel.press_estop()
+    return controller
 
 
 class ControllerLink:
@@ -75,7 +82,9 @@ class ControllerLink:
             self._watchdog.start()
 
     def _start_clock(self):
-        factory = functools.partial(build_controller, self._cell_path, self.feedback)
+        last = self.feedback.latest()   # the e-stop as the controller before this one left it
+        factory = functools.partial(build_controller, self._cell_path, self.feedback,
+                                    estop_pressed=last is not None and last.estop)
         if self.clock_kind == "realtime":
             return RealTimeClock(factory, on_message=self._on_message,
                                  on_failure=lambda why: self._lose(

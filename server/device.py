@@ -120,13 +120,18 @@ class Device(SafetyActions):
         if self._estop:
             self._error = "e-stop pressed"
 
-    def _start_controller(self, timeout: float) -> None:
+    def _start_controller(self, timeout: float, after: int = -1) -> None:
+        """Initialise the controller and wait for its first cycle's feedback (a row after
+        cycle `after`: the ring outlives a controller); power and e-stop are then its own."""
         self.controller.plug_event_func(self._controller_event)
         if self.controller.state().init is not InitState.INITIALIZED:
             if self.controller.init() is not Status.OK:
                 raise ControllerFailure("the controller did not initialise")
-        if not self._wait_controller(lambda: self.link.feedback.head >= 0, timeout):
+        if not self._wait_controller(lambda: self.link.feedback.head > after, timeout):
             raise ControllerFailure("no feedback from the controller")
+        sample = self.link.feedback.latest()
+        with self._controller_changed:
+            self._power, self._estop = sample.enable, sample.estop
         for started in self.on_controller_start:
             started()
 
@@ -297,9 +302,12 @@ class Device(SafetyActions):
         """Leave Error once its cause is cleared; a lost controller is started afresh."""
         if self.link.lost is not None:
             self.bus.alarm(Severity.INFO, alarms.CONTROLLER_LOST, "restarting the controller")
+            last = self.link.feedback.head
             self.link.restart()
-            self._start_controller(30.0)
+            self._start_controller(30.0, after=last)
             self.on_health(True)
+            if self._estop:   # the new controller found the button as it was left
+                self._error = "e-stop pressed"
         if self._estop:
             raise EstopActive("the e-stop is still pressed: release it, then reset")
         with self._state_lock:

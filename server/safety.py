@@ -98,15 +98,22 @@ class SafetyActions:
                        f"lock released")
 
     def _fault(self, code: int, message: str) -> bool:
-        """Into Error (from any state but Idle and Error); False if it was there already."""
+        """Into Error (from any state but Idle) with an alarm; True if it entered it now. In
+        Error already, a new cause (the controller lost during an e-stop) still raises its
+        alarm and becomes the error; the same cause again (an e-stop seen by both the
+        controller's event and its report) is said once."""
         with self._state_lock:
-            if self._state in (State.ERROR, State.IDLE):
+            if self._state is State.IDLE:
+                return False
+            entered = self._state is not State.ERROR
+            if not entered and message == self._error:
                 return False
             self._error = message
-            self._transition(set(State), State.ERROR, message)
+            if entered:
+                self._transition(set(State), State.ERROR, message)
         self.bus.alarm(Severity.CRITICAL if code in (alarms.ESTOP, alarms.CONTROLLER_LOST)
                        else Severity.ERROR, code, message)
-        return True
+        return entered
 
     def fault(self, code: int, message: str) -> None:
         """Into Error with an alarm and the drives off (a fault found above the controller,

@@ -21,7 +21,7 @@ from landscape.server.config import ServerConfig
 from landscape.server.states import State
 from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, sensing_pb2, types_pb2
 
-from support import activate, bus_history, locked_session, stubs, wait_until
+from support import activate, bus_history, error_info, locked_session, stubs, wait_until
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 
@@ -195,5 +195,39 @@ def test_the_estop_on_the_real_time_clock_is_an_estop_and_the_cycle_imports_noth
         assert server.link.lost is None and "e-stop" in server.device.error
         assert server.link.clock.late_imports() == []
         assert reply.ret_val.command_id
+    finally:
+        holder.close()
+
+
+def test_a_controller_lost_during_an_estop_is_alarmed_and_the_estop_outlives_it(realtime):
+    """In Error already (e-stop), the cycle process dies: alarm 105 all the same, and the
+    error names the loss. The e-stop is a latch in the cell, not in the process: Reset starts
+    a fresh controller but is refused while it stays pressed (no "e-stop released?" question
+    either); released, the holder is asked, and Reset works."""
+    server = realtime
+    holder = locked_session(server, "holder")
+    device, _, _ = stubs(holder.channel)
+    try:
+        activate(holder)
+        server.device.operate_panel("press_estop")
+        assert server.device.state is State.ERROR
+        pid = server.link.clock.pid
+        os.kill(pid, signal.SIGKILL)
+        wait_until(lambda: server.link.lost is not None, timeout=5)
+        wait_until(lambda: 105 in [e.detail.code for e in bus_history(server)
+                                   if e.event_id == "alarm"], timeout=5)
+        assert "controller lost" in server.device.error
+        with pytest.raises(grpc.RpcError) as refused:
+            device.Reset(control_pb2.ResetRequest(), timeout=60)
+        assert error_info(refused.value).reason == "ESTOP_ACTIVE"
+        assert server.link.clock.pid != pid and server.link.lost is None
+        status = device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=2)
+        assert status.state == types_pb2.DEVICE_STATE_ERROR and status.estop
+        time.sleep(0.2)
+        assert not [e for e in bus_history(server) if e.event_id == "rsvp_request"]
+        server.device.operate_panel("release_estop")
+        wait_until(lambda: [e for e in bus_history(server) if e.event_id == "rsvp_request"])
+        reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
+        assert reply.state == types_pb2.DEVICE_STATE_INACTIVE
     finally:
         holder.close()
