@@ -268,17 +268,24 @@ class Device(SafetyActions):
             self.manual_control = "off"
 
     def activate(self) -> None:
-        self._command_controller("enable")
-        self._wait_controller(lambda: self._power is EnableState.ENABLED or self._estop
-                              or self.link.lost is not None, self.enable_timeout)
-        if self._power is not EnableState.ENABLED:
-            why = self._error or ("e-stop pressed" if self._estop else "timed out")
+        """Drives on, then Resting; if anything fails on the way (the e-stop, the controller,
+        the lock holder leaving meanwhile), the drives are turned off again."""
+        epoch = self._epoch
+        try:
+            self._command_controller("enable")
+            self._wait_controller(lambda: self._power is EnableState.ENABLED or self._estop
+                                  or self.link.lost is not None or self._epoch != epoch,
+                                  self.enable_timeout)
+            with self._state_lock:
+                self.check_epoch()
+                if self._power is not EnableState.ENABLED:
+                    why = self._error or ("e-stop pressed" if self._estop else "timed out")
+                    raise ControllerFailure(f"the drives did not come on ({why})")
+                self._transition({State.INACTIVE}, State.RESTING, "activated")
+        except BaseException:
             with contextlib.suppress(Exception):
                 self.controller.disable()
-            raise ControllerFailure(f"the drives did not come on ({why})")
-        with self._state_lock:
-            self.check_epoch()
-            self._transition({State.INACTIVE}, State.RESTING, "activated")
+            raise
 
     def deactivate(self) -> None:
         """Stop along the path (at the arm's full deceleration) if moving, then drives off."""

@@ -87,7 +87,7 @@ class SafetyActions:
                            f"disconnect handler for {session.client_name}")
 
     def _disconnect_handler(self, session: Session, reason: str) -> None:
-        if self._state in states.ACTIVE:
+        if self._state in states.ACTIVE or self._drives_may_be_on():
             self._power_down(f"lock holder {session.client_name} gone")
         with self._state_lock:
             if self._state is State.INACTIVE:
@@ -96,6 +96,15 @@ class SafetyActions:
         self.bus.alarm(Severity.WARNING, alarms.LOCK_HOLDER_LOST,
                        f"lock holder {session.client_name} gone: motion stopped, drives off, "
                        f"lock released")
+
+    def _drives_may_be_on(self) -> bool:
+        """The drives are on, or coming on (an Activate that was under way), as far as the
+        controller says (or last reported, if it cannot say)."""
+        try:
+            power = self.controller.state().enable
+        except (CycleProcessError, TimeoutError):
+            power = self._power
+        return power is not EnableState.DISABLED
 
     def _fault(self, code: int, message: str) -> bool:
         """Into Error (from any state but Idle) with an alarm; True if it entered it now. In

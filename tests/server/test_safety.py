@@ -13,6 +13,7 @@ import pytest
 from landscape.client import Session
 from landscape.server.sessions import Outbox
 from landscape.server.states import State
+from landscape.sim.controller import EnableState
 from landscape.sim.cycle_process import EVENT, MSG, Mailbox
 from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
@@ -186,6 +187,28 @@ def test_an_estop_while_activating_fails_the_activation(tmp_path):
             activating.result()
         assert refused.value.code() is grpc.StatusCode.ABORTED
         assert device.state is State.ERROR
+    finally:
+        arm.close()
+
+
+def test_the_holder_leaving_while_its_activate_waits_leaves_the_drives_off(tmp_path):
+    arm = Arm(tmp_path)
+    try:
+        device = arm.server.device
+        arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+        clock = arm.server.link.clock
+        clock.hold()   # enabling takes cycles: the drives come on only after the holder left
+        try:
+            activating = arm.device.Activate.future(control_pb2.ActivateRequest(), timeout=20)
+            wait_until(lambda: device.controller.state().enable is EnableState.ENABLING)
+            arm.session.close()
+            wait_until(lambda: device.state is State.UNLOCKED, timeout=5)
+        finally:
+            clock.release()
+        with pytest.raises(grpc.RpcError):
+            activating.result()
+        wait_until(lambda: device.controller.state().enable is EnableState.DISABLED, timeout=5)
+        assert device.state is State.UNLOCKED
     finally:
         arm.close()
 
