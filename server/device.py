@@ -292,7 +292,8 @@ class Device(SafetyActions):
         self._power_down("deactivated")
 
     def _power_down(self, reason: str, timeout: float = SAFETY_STOP_TIMEOUT) -> None:
-        """Stop any motion (no new one can start meanwhile), disable, wait, then Inactive."""
+        """Stop any motion (no new one can start meanwhile), disable, wait, then Inactive.
+        Drives that do not go off are a fault: Error and ControllerFailure, never Inactive."""
         with self.motions.no_new_motion():
             stopped = self.motions.stop_for_safety(timeout)
             if not stopped:
@@ -301,6 +302,12 @@ class Device(SafetyActions):
             self._command_controller("disable")
             self._wait_controller(lambda: self._power is EnableState.DISABLED
                                   or self.link.lost is not None, self.enable_timeout)
+            if self.link.lost is not None:
+                raise ControllerFailure(f"the controller is lost: {self.link.lost}")
+            if self._power is not EnableState.DISABLED:
+                why = f"the drives did not go off within {self.enable_timeout:g} s ({reason})"
+                self.fault(alarms.CONTROLLER, why)
+                raise ControllerFailure(why)
             with self._state_lock:
                 if self._state in states.ACTIVE:
                     self._transition(states.ACTIVE, State.INACTIVE, reason)

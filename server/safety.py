@@ -88,7 +88,13 @@ class SafetyActions:
 
     def _disconnect_handler(self, session: Session, reason: str) -> None:
         if self._state in states.ACTIVE or self._drives_may_be_on():
-            self._power_down(f"lock holder {session.client_name} gone")
+            try:
+                self._power_down(f"lock holder {session.client_name} gone")
+            except ControllerFailure as failure:   # in Error now, its alarm raised
+                self.bus.alarm(Severity.ERROR, alarms.LOCK_HOLDER_LOST,
+                               f"lock holder {session.client_name} gone: {failure}; lock "
+                               f"released")
+                return
         with self._state_lock:
             if self._state is State.INACTIVE:
                 self._transition({State.INACTIVE}, State.UNLOCKED,

@@ -213,6 +213,30 @@ def test_the_holder_leaving_while_its_activate_waits_leaves_the_drives_off(tmp_p
         arm.close()
 
 
+def test_drives_that_do_not_go_off_are_an_error_not_inactive(tmp_path):
+    arm = Arm(tmp_path)
+    try:
+        device = arm.server.device
+        device.enable_timeout = 0.3
+        arm.server.link.clock.hold()   # no cycle runs: the drives cannot go off
+        try:
+            with pytest.raises(grpc.RpcError) as refused:
+                arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+            assert device.state is State.ERROR and "did not go off" in device.error
+        finally:
+            arm.server.link.clock.release()
+        assert refused.value.code() is grpc.StatusCode.ABORTED
+        history = _history(arm)
+        assert 103 in [e.detail.code for e in history if e.event_id == "alarm"]
+        assert not any(e.event_id == "state_changed" and e.detail.reason == "deactivated"
+                       for e in history)
+        wait_until(lambda: device.controller.state().enable is EnableState.DISABLED)
+        assert arm.device.Reset(control_pb2.ResetRequest(), timeout=10).state == \
+            types_pb2.DEVICE_STATE_INACTIVE
+    finally:
+        arm.close()
+
+
 def test_a_move_planned_while_its_holder_disconnects_never_starts(arm):
     device = arm.server.device
     planner = device.motions.planner
