@@ -9,6 +9,8 @@ Concurrency:
 - Every state change is a compare-and-set against the states it may come from
   (`_transition`, under the short `_state_lock`), and its event is published under the same
   lock, so the events come in the order of the changes and no change overwrites another.
+  Nothing that may wait (a file, the controller) happens under that lock: settings are
+  stored under a lock of their own.
 - Mutating commands run one at a time under `_command_lock` (`command()`); the state and the
   lease are checked (again) once it is held. Commands that stop the arm (`immediate`:
   StopMotion, AbortMotion, Deactivate) do not wait for that lock.
@@ -98,6 +100,7 @@ class Device(SafetyActions):
         self._estop = False
         self._controller_changed = threading.Condition()
         self._state_lock = threading.RLock()
+        self._settings_lock = threading.Lock()   # one settings change at a time
         self._command_lock = threading.Lock()
         self.motions = MotionControl(self, self._store, set(outputs))
         self.manual_control = "off"        # seed 3.7.3: "teachpendant", "spaceball" or "off"
@@ -366,7 +369,7 @@ class Device(SafetyActions):
     def update_settings(self, change) -> MotionSettings:
         """Apply `change(settings) -> settings`: validated, stored, then in force; a validation
         or storage error leaves them as they were."""
-        with self._state_lock:
+        with self._settings_lock:   # not the state lock: the file may keep us waiting
             settings = change(self._settings)
             self._store.save_settings(stored_settings.to_record(settings))
             self._settings = settings

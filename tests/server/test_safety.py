@@ -4,6 +4,7 @@ happen in a given order by holding the clock (simulated time stands still) or a 
 from __future__ import annotations
 
 import math
+import sqlite3
 import threading
 import time
 
@@ -90,6 +91,28 @@ def test_stop_motion_does_not_wait_for_long_planning(arm):
     print(f"StopMotion while a long path resolves: {took * 1000:.0f} ms")
     assert arm.server.device.state is State.PAUSED and not loading.done()
     loading.result()
+
+
+def test_stop_motion_does_not_wait_for_a_settings_save(tmp_path):
+    """A settings change waits for its file (here another program holds the database's write
+    lock); the state table must not wait with it, or the next StopMotion would."""
+    paths = tmp_path / "paths.sqlite3"
+    arm = Arm(tmp_path, pace=1.0, paths_file=str(paths))
+    other = sqlite3.connect(str(paths), isolation_level=None)
+    try:
+        _moving(arm)
+        other.execute("BEGIN EXCLUSIVE")
+        setting = arm.device.SetSpeed.future(settings_pb2.SetSpeedRequest(
+            speed=50, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), timeout=30)
+        time.sleep(0.2)   # the save waits for the file
+        arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=3)
+        assert arm.server.device.state is State.PAUSED and not setting.done()
+        other.execute("COMMIT")
+        setting.result()
+        assert arm.server.device.settings.speed_percent == 50
+    finally:
+        other.close()
+        arm.close()
 
 
 # ---- 8.3 and 8.4 the disconnect handler ---------------------------------------------------
