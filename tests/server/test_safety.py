@@ -12,6 +12,7 @@ import grpc
 import pytest
 
 from landscape.client import Session
+from landscape.server import convert
 from landscape.server.sessions import Outbox
 from landscape.server.states import State
 from landscape.sim.controller import EnableState
@@ -49,27 +50,38 @@ def _history(arm) -> list:
 
 # ---- 8.2 a stop never waits behind another command --------------------------------------
 
-def test_stop_motion_does_not_wait_for_an_open_path_load(arm):
+def test_stop_motion_does_not_wait_for_a_path_load_streaming_in(arm, monkeypatch):
+    """Chunks of a PathLoad stream go on arriving while the stop is sent; one of them is
+    being parsed (the real parser, made to take its time): the event loop must not be the
+    thread that parses, or the stop could not even be received."""
     _moving(arm)
-    release = threading.Event()
+    parsing, proceed = threading.Event(), threading.Event()
+    feed = convert.PathLoadStream.feed
 
-    def slow_load():
-        yield motion_pb2.PathLoadRequest(header=motion_pb2.PathHeader(
-            path_name="slow", frame=JOINT, motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
-            offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA))
-        release.wait(10)
-        yield motion_pb2.PathLoadRequest(tags=[types_pb2.TagStruct(
-            joint_values=[0, 0, 1.5708, 0, 1.5708, 0])])
+    def held_feed(stream, request):
+        if stream._messages == 3:
+            parsing.set()
+            proceed.wait(10)
+        feed(stream, request)
 
-    loading = arm.device.PathLoad.future(slow_load(), timeout=30)
-    time.sleep(0.2)   # the stream is open on the server
-    began = time.monotonic()
-    arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=5)
-    took = time.monotonic() - began
-    print(f"StopMotion with a PathLoad stream open: {took * 1000:.0f} ms")
-    assert arm.server.device.state is State.PAUSED and not loading.done()
-    release.set()
-    assert loading.result().points_loaded == 1
+    monkeypatch.setattr(convert.PathLoadStream, "feed", held_feed)
+    header = motion_pb2.PathHeader(path_name="streamed", frame=JOINT,
+                                   motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+    tags = [types_pb2.TagStruct(joint_values=[0.2 + 0.001 * i, 0, 1.5708, 0, 1.5708, 0],
+                                transition_speed=50) for i in range(100)]
+    chunks = [motion_pb2.PathLoadRequest(header=header)] + [
+        motion_pb2.PathLoadRequest(tags=tags[i:i + 20]) for i in range(0, 100, 20)]
+    loading = arm.device.PathLoad.future(iter(chunks), timeout=30)
+    try:
+        assert parsing.wait(10)
+        with grpc.insecure_channel(arm.server.target) as channel:   # a bystander reads
+            stubs(channel)[0].GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=3)
+        arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=3)
+        assert arm.server.device.state is State.PAUSED and not loading.done()
+    finally:
+        proceed.set()
+    assert loading.result().points_loaded == 100
 
 
 def test_stop_motion_does_not_wait_for_long_planning(arm):
@@ -81,7 +93,7 @@ def test_stop_motion_does_not_wait_for_long_planning(arm):
         motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
         offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
     chunks = [motion_pb2.PathLoadRequest(header=header)] + [
-        motion_pb2.PathLoadRequest(tags=tags[i:i + 10_000]) for i in range(0, len(tags), 10_000)]
+        motion_pb2.PathLoadRequest(tags=tags[i:i + 1_000]) for i in range(0, len(tags), 1_000)]
     loading = arm.device.PathLoad.future(iter(chunks), timeout=120)
     time.sleep(0.3)   # resolving, planning and checking 5,000 points takes a while
     assert not loading.done()
