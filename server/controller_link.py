@@ -113,8 +113,8 @@ class ControllerLink:
     def send(self, msg: Any) -> None:
         self._clock.send(msg)
 
-    def between_cycles(self, func, *args, timeout: float | None = None):
-        return self._clock.between_cycles(func, *args, timeout=timeout)
+    def between_cycles(self, func, *args, timeout: float | None = None, urgent: bool = False):
+        return self._clock.between_cycles(func, *args, timeout=timeout, urgent=urgent)
 
     def share(self, arrays: dict) -> SharedArrays:
         """`arrays` (name -> ndarray) for the cycle: shared memory for a cycle process (the

@@ -345,7 +345,7 @@ class Device(SafetyActions):
         (`action` names a Panel method); returns (e-stop pressed, door open)."""
         log.warning("operator panel: %s", action)
         try:
-            estop, door_open = self.link.between_cycles(panel.operate, action)
+            estop, door_open = self.link.between_cycles(panel.operate, action, urgent=True)
         except (CycleProcessError, TimeoutError) as error:
             raise ControllerFailure(f"the operator panel did not answer: {error}") from None
         # Returns once the device has seen the e-stop as it is now (the next cycle's report).

@@ -240,12 +240,14 @@ class RealTimeClock:
         """The modules the cycle process imported since its loop started (should be none)."""
         return self.call(cp.LATE_IMPORTS)
 
-    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None) -> Any:
+    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None,
+                       urgent: bool = False) -> Any:
         """Run `func(controller, *args)` in the cycle process between two cycles and return
         its result: for what the LLI has no call for (the simulator's panel and sensors).
         `func` and the arguments must pickle (a top-level function of a module the cycle
-        process has loaded already: an import there would cost cycles); keep it short."""
-        return self.call(cp.RUN, func, args, timeout=timeout)
+        process has loaded already: an import there would cost cycles); keep it short.
+        `urgent`: in the cycle process's urgent lane, never behind a slow call."""
+        return self.call(cp.RUN_URGENT if urgent else cp.RUN, func, args, timeout=timeout)
 
     # -- the two channels
     @property
@@ -409,9 +411,11 @@ class ThreadedLockStepClock:
         self._calls.put((future, method, args))
         return future.result(self.call_timeout if timeout is None else timeout)
 
-    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None) -> Any:
+    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None,
+                       urgent: bool = False) -> Any:
         """Run `func(controller, *args)` on the cycle thread between two cycles: for what the
-        LLI has no call for (the simulator's panel and sensors)."""
+        LLI has no call for (the simulator's panel and sensors). Calls here run in order on
+        the cycle thread itself, so `urgent` changes nothing."""
         return self.call(cp.RUN, func, args, timeout=timeout)
 
     def send(self, msg: Any) -> None:

@@ -333,7 +333,7 @@ class DeviceServicer(services.DEVICE.servicer_base):
             lock_holder=s.lock_holder, error=s.error, estop=s.estop,
             manual_control=s.manual_control, command_id=s.command_id)
 
-    @blocking
+    @blocking(lane="panel")
     def OperatePanel(self, request, context):
         action = convert.enum_value(convert.PANEL_ACTIONS, request.action, "action")
         estop, door_open = self.device.operate_panel(action)
