@@ -56,19 +56,23 @@ def blocking(method=None, *, lane: str = "reads"):
 
 class Dispatch:
     """The thread pools the bodies run on, shared by every servicer of one server. The
-    operator panel (the e-stop) has a lane of its own: no slow read ever delays it."""
+    operator panel (the e-stop) has a lane of its own: no slow read ever delays it. Parsing
+    the messages of PathLoad streams has one thread: however many streams send, one thread at
+    most competes with the event loop for the interpreter (a message not yet parsed when its
+    stream is cancelled is never parsed)."""
 
     def __init__(self, commands: int = 16, immediate: int = 8, reads: int = 8, panel: int = 2):
         self.commands = ThreadPoolExecutor(commands, thread_name_prefix="command")
         self.immediate = ThreadPoolExecutor(immediate, thread_name_prefix="immediate")
         self.reads = ThreadPoolExecutor(reads, thread_name_prefix="read")
         self.panel = ThreadPoolExecutor(panel, thread_name_prefix="panel")
+        self.parse = ThreadPoolExecutor(1, thread_name_prefix="parse")
 
     async def run(self, pool: ThreadPoolExecutor, func, *args):
         return await asyncio.get_running_loop().run_in_executor(pool, func, *args)
 
     def shutdown(self) -> None:
-        for pool in (self.commands, self.immediate, self.reads, self.panel):
+        for pool in (self.commands, self.immediate, self.reads, self.panel, self.parse):
             pool.shutdown(wait=False, cancel_futures=True)
 
 
