@@ -90,7 +90,9 @@ class Mailbox:
     `poll()` returns the oldest message the parent sent, or None. `post(msg)` queues a message
     for the parent; it leaves at the end of this cycle. Nothing posted is ever dropped (reports
     of completions, faults and tags must arrive): if the parent stops reading, the queue grows,
-    and passing `high_water` items is said once, as an event, for the parent to alarm on.
+    and passing `high_water` items is said as an event for the parent to alarm on, put first
+    (not behind the backlog it is about); said again each time the queue grows past it after
+    having drained to half of it.
     """
 
     def __init__(self, high_water: int = 10_000):
@@ -111,10 +113,13 @@ class Mailbox:
 
     def _queue(self, item: tuple) -> None:
         self.outbox.append(item)
-        if len(self.outbox) > self.high_water and not self._warned:
+        waiting = len(self.outbox)
+        if waiting > self.high_water and not self._warned:
             self._warned = True
-            self.outbox.append((EVENT, f"the cycle's outbox holds over {self.high_water} "
-                                       f"reports: the server is not reading them"))
+            self.outbox.appendleft((EVENT, f"the cycle's outbox holds over {self.high_water} "
+                                           f"reports: the server is not reading them"))
+        elif self._warned and waiting <= self.high_water // 2:
+            self._warned = False
 
 
 def serve_call(controller, mailbox: Mailbox, method: str, args: tuple) -> Any:

@@ -308,6 +308,11 @@ def test_the_cycles_outbox_drops_nothing_and_says_when_it_runs_high():
     assert [item[1]["label"] for item in posted] == list(range(1000))
     warnings = [item for item in mailbox.outbox if item[0] == EVENT]
     assert len(warnings) == 1 and "outbox" in warnings[0][1]
+    assert mailbox.outbox[0][0] == EVENT   # sent first, not behind the backlog it is about
+    mailbox.outbox.clear()                 # the server caught up; later it falls behind again
+    for i in range(1000):
+        mailbox.post({"op": "mark", "label": i})
+    assert mailbox.outbox[0][0] == EVENT and "outbox" in mailbox.outbox[0][1]
 
 
 def test_a_sessions_outbox_is_bounded_and_overflow_is_refused():
