@@ -10,7 +10,10 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
+import threading
 import time
+from pathlib import Path
 
 import grpc
 import pytest
@@ -45,6 +48,23 @@ def _lost_alarm(events, after: float):
         if alarm and state:
             return alarm, state
     raise AssertionError("no controller-lost alarm")
+
+
+# Where a server thread waits on the controller or on a motion's end.
+WAITS = {("clock.py", "call"), ("device.py", "_wait_controller"), ("motion_control.py", "_wait")}
+
+
+def _blocked_threads() -> list[str]:
+    """The threads of this process waiting in one of WAITS, by name."""
+    names = {thread.ident: thread.name for thread in threading.enumerate()}
+    blocked = []
+    for ident, frame in sys._current_frames().items():
+        while frame is not None:
+            if (Path(frame.f_code.co_filename).name, frame.f_code.co_name) in WAITS:
+                blocked.append(names.get(ident, str(ident)))
+                break
+            frame = frame.f_back
+    return blocked
 
 
 def _health(channel) -> int:
@@ -89,7 +109,12 @@ def test_a_killed_cycle_process_is_an_error_and_reset_brings_a_working_one(realt
             with pytest.raises(grpc.RpcError) as refused:
                 activating.result()
             assert refused.value.code() is grpc.StatusCode.ABORTED
-        # Nothing is left hanging: calls answer, and Reset starts a fresh cycle process.
+        # Nothing is left hanging: no thread waits on the dead controller, every pool runs,
+        # calls answer, and Reset starts a fresh cycle process.
+        wait_until(lambda: not _blocked_threads(), timeout=5)
+        for pool in ("commands", "immediate", "reads", "panel"):
+            assert getattr(server.dispatch, pool).submit(lambda: True).result(5)
+        assert server.device.safety.wait_idle(5)
         status = device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=2)
         assert status.state == types_pb2.DEVICE_STATE_ERROR and "cycle process" in status.error
         reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
