@@ -391,6 +391,7 @@ class ThreadedLockStepClock:
         self._running = True
         self._released = threading.Event()
         self._released.set()
+        self._hold_at: float | None = None
         self.yield_period = 0.0005   # s of wall time between two hand-overs of the interpreter
         self.call_timeout = call_timeout
         self._threads = [threading.Thread(target=self._run, name="lockstep-cycle", daemon=True),
@@ -436,6 +437,19 @@ class ThreadedLockStepClock:
         messages are still served. For tests that need a race to happen in a given order."""
         self._released.clear()
 
+    def hold_at(self, seconds: float) -> None:
+        """`hold` after the first cycle that brings the controller's time to `seconds`."""
+        self._hold_at = seconds
+
+    @property
+    def held(self) -> bool:
+        return not self._released.is_set()
+
+    @property
+    def pending(self) -> int:
+        """Messages sent and not yet taken by the cyclic function."""
+        return len(self._mailbox.inbox)
+
     def release(self) -> None:
         """Step again after `hold`."""
         self._released.set()
@@ -449,6 +463,9 @@ class ThreadedLockStepClock:
                 if self._released.is_set():
                     step()
                     cycles += 1
+                    if self._hold_at is not None and self.controller.time >= self._hold_at:
+                        self._hold_at = None
+                        self._released.clear()
                 else:
                     self._released.wait(0.001)
                 if self._pace:  # keep simulated time from running ahead of the wall clock
