@@ -388,5 +388,3 @@ class Device(SafetyActions):
                 return states.ROBOT_STOPPED_ON_ERROR, states.CONTROLLER_ERROR
             power = states.POWER_ON if self._power is EnableState.ENABLED else states.POWER_OFF
             return self.motions.motion_state, power
-
-

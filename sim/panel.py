@@ -11,9 +11,10 @@ nothing on the loop thread.
 """
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from landscape.sim.world import World
+if TYPE_CHECKING:   # the device server imports this module (operate), never pybullet
+    from landscape.sim.world import World
 
 
 class Panel:

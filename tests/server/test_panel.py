@@ -4,6 +4,8 @@ to Error with an alarm, and Reset is refused until the e-stop is released."""
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 import threading
 
 import grpc
@@ -104,3 +106,10 @@ def test_the_panel_has_a_lane_of_its_own(arm):
     finally:
         held.set()
     assert all(f.result(5) for f in busy)
+
+
+def test_the_device_server_does_not_import_the_physics():
+    """DESIGN.md 7: nothing above the controller interface imports pybullet (the panel's
+    helper, which the server hands to the cycle, lives beside the panel without it)."""
+    code = "import sys, landscape.server.app; sys.exit('pybullet' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0
