@@ -1,7 +1,8 @@
 """Issue 8.5: handing a long motion to the cycle process costs the cycle nothing: the
-trajectory goes through shared memory, and no cycle unpickles or copies it. What crosses the
-pipe is checked everywhere; that no deadline is missed only where the cycle process has
-real-time priority (without it, any other task on the machine can make a cycle late)."""
+trajectory goes through shared memory, and no cycle unpickles or copies it; what crosses the
+pipe is its block's name and layout, whatever its length. The cycle's timing during the
+hand-over is printed here and measured in bench/bench_stop.py (a shared machine can make any
+cycle late, real-time priority or not: timing is not asserted in tests)."""
 from __future__ import annotations
 
 import pickle
@@ -22,7 +23,6 @@ def test_a_ten_minute_trajectory_is_handed_over_without_a_late_cycle():
     server = serve(ServerConfig(port=0, clock="realtime"))
     holder = locked_session(server)
     try:
-        realtime_priority = not server.link.tuning_problems
         activate(holder)
         device, _, events = stubs(holder.channel)
         stream = events.Subscribe(event_service_pb2.SubscribeRequest())
@@ -48,8 +48,6 @@ def test_a_ten_minute_trajectory_is_handed_over_without_a_late_cycle():
                    for _, dtype, shape, _ in motion.arrays.layout)
         assert motion.arrays.block is not None and size > 1e6
         assert len(pickle.dumps(motion.arrays)) < 4096
-        if realtime_priority:
-            assert after.missed == before.missed
         device.StopMotion(motion_pb2.StopMotionRequest(), timeout=10)
         device.AbortMotion(motion_pb2.AbortMotionRequest(), timeout=10)
         wait_until(lambda: server.device.motions.running is None, timeout=10)

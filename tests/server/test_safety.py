@@ -33,6 +33,14 @@ def arm(tmp_path):
     a.close()
 
 
+@pytest.fixture
+def flat_out(tmp_path):
+    """An active arm on the lock-step clock running as fast as it can."""
+    a = Arm(tmp_path)
+    yield a
+    a.close()
+
+
 def _moving(arm, request=SLOW) -> str:
     reply = arm.device.MoveAbsolute(request, timeout=5)
     wait_until(lambda: abs(arm.server.device.feedback().velocity[0]) > 0.05, timeout=10)
@@ -226,50 +234,42 @@ def test_an_estop_while_activating_fails_the_activation(tmp_path):
         arm.close()
 
 
-def test_the_holder_leaving_while_its_activate_waits_leaves_the_drives_off(tmp_path):
-    arm = Arm(tmp_path)
+def test_the_holder_leaving_while_its_activate_waits_leaves_the_drives_off(flat_out):
+    arm, device = flat_out, flat_out.server.device
+    arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+    clock = arm.server.link.clock
+    clock.hold()   # enabling takes cycles: the drives come on only after the holder left
     try:
-        device = arm.server.device
-        arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
-        clock = arm.server.link.clock
-        clock.hold()   # enabling takes cycles: the drives come on only after the holder left
-        try:
-            activating = arm.device.Activate.future(control_pb2.ActivateRequest(), timeout=20)
-            wait_until(lambda: device.controller.state().enable is EnableState.ENABLING)
-            arm.session.close()
-            wait_until(lambda: device.state is State.UNLOCKED, timeout=5)
-        finally:
-            clock.release()
-        with pytest.raises(grpc.RpcError):
-            activating.result()
-        wait_until(lambda: device.controller.state().enable is EnableState.DISABLED, timeout=5)
-        assert device.state is State.UNLOCKED
+        activating = arm.device.Activate.future(control_pb2.ActivateRequest(), timeout=20)
+        wait_until(lambda: device.controller.state().enable is EnableState.ENABLING)
+        arm.session.close()
+        wait_until(lambda: device.state is State.UNLOCKED, timeout=5)
     finally:
-        arm.close()
+        clock.release()
+    with pytest.raises(grpc.RpcError):
+        activating.result()
+    wait_until(lambda: device.controller.state().enable is EnableState.DISABLED, timeout=5)
+    assert device.state is State.UNLOCKED
 
 
-def test_drives_that_do_not_go_off_are_an_error_not_inactive(tmp_path):
-    arm = Arm(tmp_path)
+def test_drives_that_do_not_go_off_are_an_error_not_inactive(flat_out):
+    arm, device = flat_out, flat_out.server.device
+    device.enable_timeout = 0.3
+    arm.server.link.clock.hold()   # no cycle runs: the drives cannot go off
     try:
-        device = arm.server.device
-        device.enable_timeout = 0.3
-        arm.server.link.clock.hold()   # no cycle runs: the drives cannot go off
-        try:
-            with pytest.raises(grpc.RpcError) as refused:
-                arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
-            assert device.state is State.ERROR and "did not go off" in device.error
-        finally:
-            arm.server.link.clock.release()
-        assert refused.value.code() is grpc.StatusCode.ABORTED
-        history = _history(arm)
-        assert 103 in [e.detail.code for e in history if e.event_id == "alarm"]
-        assert not any(e.event_id == "state_changed" and e.detail.reason == "deactivated"
-                       for e in history)
-        wait_until(lambda: device.controller.state().enable is EnableState.DISABLED)
-        assert arm.device.Reset(control_pb2.ResetRequest(), timeout=10).state == \
-            types_pb2.DEVICE_STATE_INACTIVE
+        with pytest.raises(grpc.RpcError) as refused:
+            arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+        assert device.state is State.ERROR and "did not go off" in device.error
     finally:
-        arm.close()
+        arm.server.link.clock.release()
+    assert refused.value.code() is grpc.StatusCode.ABORTED
+    history = _history(arm)
+    assert 103 in [e.detail.code for e in history if e.event_id == "alarm"]
+    assert not any(e.event_id == "state_changed" and e.detail.reason == "deactivated"
+                   for e in history)
+    wait_until(lambda: device.controller.state().enable is EnableState.DISABLED)
+    assert arm.device.Reset(control_pb2.ResetRequest(), timeout=10).state == \
+        types_pb2.DEVICE_STATE_INACTIVE
 
 
 def test_a_move_planned_while_its_holder_disconnects_never_starts(arm):
