@@ -10,8 +10,11 @@
 between cycles), `send` (messages to the Executor), `between_cycles`, `feedback` (every
 cycle's row, feedback.py) and `share` (large arrays for the cycle, without copying them
 through the pipe). It watches the controller: the cycle process exiting, or its feedback
-falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. `restart()`
-starts a fresh controller (after a loss); the feedback ring survives, so cycle numbers go on.
+falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. A silent
+process is killed before it is reported: one that was only stalled must never wake up and
+go on commanding the arm after the device has said it is lost. `restart()` starts a fresh
+controller (after a loss); the feedback ring survives, so cycle numbers go on, and so does
+the e-stop: a button pressed in the cell stays pressed for the new controller.
 """
 from __future__ import annotations
 
@@ -32,14 +35,20 @@ log = logging.getLogger(__name__)
 from landscape.server.config import CLOCKS  # noqa: E402  (its home: the command line needs it)
 
 
-def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox):
-    """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function."""
+def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox,
+                     estop_pressed: bool = False):
+    """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function.
+    `estop_pressed`: the cell's e-stop button is down (a latch outside the controller: a
+    controller started afresh finds it as it was left)."""
     from landscape.sim.bullet_controller import BulletController  # pybullet: only here
     from landscape.server.arm_dynamics import base_gravity
     from landscape.sim.cell import load_cell
     cell = load_cell(cell_path)
-    return BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time, ring,
-                                                  cell.arm, base_gravity(cell)))
+    controller = BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time,
+                                                        ring, cell.arm, base_gravity(cell)))
+    if estop_pressed:
+        controller.panel.press_estop()
+    return controller
 
 
 class ControllerLink:
@@ -74,7 +83,9 @@ class ControllerLink:
             self._watchdog.start()
 
     def _start_clock(self):
-        factory = functools.partial(build_controller, self._cell_path, self.feedback)
+        last = self.feedback.latest()   # the e-stop as the controller before this one left it
+        factory = functools.partial(build_controller, self._cell_path, self.feedback,
+                                    estop_pressed=last is not None and last.estop)
         if self.clock_kind == "realtime":
             return RealTimeClock(factory, on_message=self._on_message,
                                  on_failure=lambda why: self._lose(
@@ -103,8 +114,8 @@ class ControllerLink:
     def send(self, msg: Any) -> None:
         self._clock.send(msg)
 
-    def between_cycles(self, func, *args, timeout: float | None = None):
-        return self._clock.between_cycles(func, *args, timeout=timeout)
+    def between_cycles(self, func, *args, timeout: float | None = None, urgent: bool = False):
+        return self._clock.between_cycles(func, *args, timeout=timeout, urgent=urgent)
 
     def share(self, arrays: dict) -> SharedArrays:
         """`arrays` (name -> ndarray) for the cycle: shared memory for a cycle process (the
@@ -133,11 +144,13 @@ class ControllerLink:
         except Exception:
             log.exception("stopping the controller failed")
 
-    def _lose(self, reason: str) -> None:
+    def _lose(self, reason: str, kill: bool = False) -> None:
         with self._lost_lock:
             if self.lost is not None or self._closing:
                 return
             self.lost = reason
+            if kill:   # before anyone hears of the loss (a stalled process may resume)
+                self._clock.kill()
         log.error("controller lost: %s", reason)
         self._on_lost(reason)
 
@@ -154,5 +167,5 @@ class ControllerLink:
             elif now - since > limit and head >= 0:
                 alive = self._clock.alive
                 self._lose(f"the cycle process sent no feedback for {now - since:.3f} s"
-                           + ("" if alive else " and exited"))
+                           + (" (killed)" if alive else " and exited"), kill=True)
 

@@ -191,6 +191,12 @@ class RealTimeClock:
         self._conn.close()
         return self._process.exitcode
 
+    def kill(self) -> None:
+        """SIGKILL the cycle process now, stopped or not: it runs no further instruction (its
+        arm, in the simulator, is gone with it). The loss is reported as for any exit."""
+        if self._process is not None and self._process.is_alive():
+            self._process.kill()
+
     def _kill(self) -> None:
         self._process.terminate()
         self._process.join(2.0)
@@ -230,11 +236,18 @@ class RealTimeClock:
         """The controller's simulated time, s (None if it has no `time`)."""
         return self.call(cp.SIM_TIME)
 
-    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None) -> Any:
+    def late_imports(self) -> list[str]:
+        """The modules the cycle process imported since its loop started (should be none)."""
+        return self.call(cp.LATE_IMPORTS)
+
+    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None,
+                       urgent: bool = False) -> Any:
         """Run `func(controller, *args)` in the cycle process between two cycles and return
         its result: for what the LLI has no call for (the simulator's panel and sensors).
-        `func` and the arguments must pickle (a top-level function); keep it short."""
-        return self.call(cp.RUN, func, args, timeout=timeout)
+        `func` and the arguments must pickle (a top-level function of a module the cycle
+        process has loaded already: an import there would cost cycles); keep it short.
+        `urgent`: in the cycle process's urgent lane, never behind a slow call."""
+        return self.call(cp.RUN_URGENT if urgent else cp.RUN, func, args, timeout=timeout)
 
     # -- the two channels
     @property
@@ -378,6 +391,7 @@ class ThreadedLockStepClock:
         self._running = True
         self._released = threading.Event()
         self._released.set()
+        self._hold_at: float | None = None
         self.yield_period = 0.0005   # s of wall time between two hand-overs of the interpreter
         self.call_timeout = call_timeout
         self._threads = [threading.Thread(target=self._run, name="lockstep-cycle", daemon=True),
@@ -398,9 +412,11 @@ class ThreadedLockStepClock:
         self._calls.put((future, method, args))
         return future.result(self.call_timeout if timeout is None else timeout)
 
-    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None) -> Any:
+    def between_cycles(self, func: Callable[..., Any], *args, timeout: float | None = None,
+                       urgent: bool = False) -> Any:
         """Run `func(controller, *args)` on the cycle thread between two cycles: for what the
-        LLI has no call for (the simulator's panel and sensors)."""
+        LLI has no call for (the simulator's panel and sensors). Calls here run in order on
+        the cycle thread itself, so `urgent` changes nothing."""
         return self.call(cp.RUN, func, args, timeout=timeout)
 
     def send(self, msg: Any) -> None:
@@ -421,6 +437,19 @@ class ThreadedLockStepClock:
         messages are still served. For tests that need a race to happen in a given order."""
         self._released.clear()
 
+    def hold_at(self, seconds: float) -> None:
+        """`hold` after the first cycle that brings the controller's time to `seconds`."""
+        self._hold_at = seconds
+
+    @property
+    def held(self) -> bool:
+        return not self._released.is_set()
+
+    @property
+    def pending(self) -> int:
+        """Messages sent and not yet taken by the cyclic function."""
+        return len(self._mailbox.inbox)
+
     def release(self) -> None:
         """Step again after `hold`."""
         self._released.set()
@@ -434,6 +463,9 @@ class ThreadedLockStepClock:
                 if self._released.is_set():
                     step()
                     cycles += 1
+                    if self._hold_at is not None and self.controller.time >= self._hold_at:
+                        self._hold_at = None
+                        self._released.clear()
                 else:
                     self._released.wait(0.001)
                 if self._pace:  # keep simulated time from running ahead of the wall clock

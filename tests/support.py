@@ -138,13 +138,14 @@ def activate(session: Session) -> None:
 
 
 class Arm:
-    """An active arm: server (lock-step, `pace` as in ServerConfig), lock holder, stubs, an
-    event subscription from the first event, and the recorder writing into tmp_path."""
+    """An active arm: server (lock-step, `pace` and `config` as in ServerConfig), lock holder,
+    stubs, an event subscription from the first event, and the recorder writing into
+    tmp_path."""
 
-    def __init__(self, tmp_path, pace=None):
+    def __init__(self, tmp_path, pace=None, **config):
         self.record = tmp_path / "record.mcap"
         cell = cell_file(tmp_path, {'path = "var/records/cs8.mcap"': f'path = "{self.record}"'})
-        self.server = start_server(cell=cell, lockstep_pace=pace)
+        self.server = start_server(cell=cell, lockstep_pace=pace, **config)
         self.session = locked_session(self.server)
         activate(self.session)
         self.device, _, events = stubs(self.session.channel)

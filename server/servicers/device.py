@@ -170,10 +170,11 @@ class DeviceServicer(services.DEVICE.servicer_base):
     # ---- 3.5 paths ----
     async def PathLoad(self, request_iterator, context):
         # The points arrive without holding anything: stops and other commands go on while a
-        # long path streams in; only storing it takes the command lock.
+        # long path streams in; only storing it takes the command lock. Each message is
+        # parsed on the parsing thread, never on the event loop.
         stream = convert.PathLoadStream(self.device.settings.units, path_planning.MAX_POINTS)
         async for request in request_iterator:
-            stream.feed(request)
+            await self.dispatch.run(self.dispatch.parse, stream.feed, request)
         header, frame, specs = stream.finish()
         straight = convert.enum_value(convert.STRAIGHT, header.motion_type,
                                       "motion_type (JOINT or STRAIGHT)")
@@ -337,7 +338,7 @@ class DeviceServicer(services.DEVICE.servicer_base):
             lock_holder=s.lock_holder, error=s.error, estop=s.estop,
             manual_control=s.manual_control, command_id=s.command_id)
 
-    @blocking
+    @blocking(lane="panel")
     def OperatePanel(self, request, context):
         action = convert.enum_value(convert.PANEL_ACTIONS, request.action, "action")
         estop, door_open = self.device.operate_panel(action)
