@@ -24,6 +24,7 @@ import threading
 import time
 from typing import Any, Callable
 
+from landscape.server.config import CLOCKS  # noqa: F401  (its home: the command line needs it)
 from landscape.server.executor import Executor
 from landscape.server.feedback import FeedbackRing
 from landscape.sim.clock import RealTimeClock, ThreadedLockStepClock
@@ -31,8 +32,6 @@ from landscape.sim.cycle_process import Mailbox
 from landscape.sim.shared_array import SharedArrays
 
 log = logging.getLogger(__name__)
-
-from landscape.server.config import CLOCKS  # noqa: E402  (its home: the command line needs it)
 
 
 def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox,
