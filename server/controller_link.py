@@ -24,7 +24,7 @@ import threading
 import time
 from typing import Any, Callable
 
-from landscape.server.config import CLOCKS  # noqa: F401  (its home: the command line needs it)
+from landscape.server.config import CLOCKS
 from landscape.server.executor import Executor
 from landscape.server.feedback import FeedbackRing
 from landscape.sim.clock import RealTimeClock, ThreadedLockStepClock
