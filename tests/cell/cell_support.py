@@ -1,39 +1,18 @@
-"""What the cell tests share: development keys, and a move made the way a remote supervisor
-makes it (its own channel, TLS and a token, a session, the lock)."""
+"""What the cell tests share: development keys (support.make_keys), and a move made the way a
+remote supervisor makes it (its own channel, TLS and a token, a session, the lock)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from landscape.cell.certs import CertFiles, make_certificates
-from landscape.cell.tokens import make_tokens
-from landscape.client import ClientTLS, Session, open_channel, read_token
+from landscape.client import Session, open_channel
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, settings_pb2,
                           types_pb2)
+from support import Keys, make_keys  # noqa: F401 (the cell tests' keys)
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 RESTING = types_pb2.DEVICE_STATE_RESTING
-
-
-@dataclass
-class Keys:
-    certs: CertFiles
-    tokens: Path                  # the folder of <role>.tokens
-
-    def token(self, role: str) -> str:
-        return read_token(self.tokens / f"{role}.tokens")
-
-    def tls(self) -> ClientTLS:
-        return ClientTLS(ca=str(self.certs.ca))
-
-
-def make_keys(folder: Path, hosts=()) -> Keys:
-    certs = make_certificates(folder / "certs", hosts=hosts)
-    make_tokens(folder / "tokens")
-    return Keys(certs, folder / "tokens")
 
 
 def joints(device) -> np.ndarray:
