@@ -27,7 +27,7 @@ from typing import TextIO
 
 from landscape.cell.config import CellConfig
 from landscape.cell.services import (ServiceSpec, device_service, gateway_service,
-                                     supervisor_missing, supervisor_service)
+                                     supervisor_service)
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 POLL = 0.1           # s between looks at the children
@@ -153,12 +153,7 @@ class Cell:
             if config.gateway.enabled:
                 self._launch(gateway_service(config, targets, workdir))
             if config.supervisor.enabled:
-                why_not = supervisor_missing(config.security.tls,
-                                             config.security.tokens is not None)
-                if why_not:
-                    self.out.say(f"web supervisor not started: {why_not}")
-                else:
-                    self._launch(supervisor_service(config, targets, workdir))
+                self._launch(supervisor_service(config, targets, workdir))
         except BaseException:
             self.stop()
             raise

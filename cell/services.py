@@ -7,9 +7,7 @@ they really have (a port 0 becomes a real one).
 """
 from __future__ import annotations
 
-import importlib.util
 import re
-import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -110,19 +108,3 @@ def supervisor_service(config: CellConfig, targets: dict[str, str],
     argv += client_arguments(config.security, supervisor.token)
     return ServiceSpec("supervisor", "web supervisor", argv, workdir,
                        note=f"shows {', '.join(supervisor.devices)}")
-
-
-def supervisor_missing(tls: bool, tokens: bool) -> str | None:
-    """Why the web supervisor cannot be started here, or None. With TLS or tokens on, it must
-    take the client flags (landscape.client.credentials.add_arguments) that say them."""
-    if importlib.util.find_spec(SUPERVISOR_MODULE) is None:
-        return f"{SUPERVISOR_MODULE} is not installed; the rest of the cell runs without it"
-    wanted = ["--tls-ca"] * tls + ["--token-file"] * tokens
-    if wanted:
-        help_text = subprocess.run([*_python(SUPERVISOR_MODULE), "--help"], capture_output=True,
-                                   text=True, timeout=60).stdout
-        wanted = [flag for flag in wanted if flag not in help_text]
-        if wanted:
-            return (f"this {SUPERVISOR_MODULE} takes no {' or '.join(wanted)} yet, and the "
-                    f"device servers want them")
-    return None

@@ -52,7 +52,7 @@ def create_app(config: DashboardConfig) -> web.Application:
 
 async def _device_links(app: web.Application):
     config = app[CONFIG]
-    links = {d.name: DeviceLink(d, config.display_rate_hz)
+    links = {d.name: DeviceLink(d, config.display_rate_hz, config.tls, config.token)
              for d in config.devices}
     for link in links.values():
         link.start()

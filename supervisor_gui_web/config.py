@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from landscape.client.credentials import ClientTLS
+
 DEFAULT_HOST = "127.0.0.1"   # loopback unless the operator exposes the page on purpose
 DEFAULT_PORT = 8080
 DEFAULT_DISPLAY_RATE_HZ = 30.0
@@ -35,6 +37,10 @@ class DashboardConfig:
     cell: str | None = None
     # The built page (None: frontend/dist beside this package).
     static_dir: str | None = None
+    # TLS to the device servers and the role token the backend presents for every browser
+    # (credentials.py); None: plaintext, no token (a device server on loopback without roles).
+    tls: ClientTLS | None = None
+    token: str | None = None
 
     def __post_init__(self):
         names = [d.name for d in self.devices]

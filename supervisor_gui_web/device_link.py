@@ -10,8 +10,7 @@ import asyncio
 import logging
 from collections import deque
 
-import grpc
-
+from landscape.client.credentials import ClientTLS, open_aio_channel
 from landscape.supervisor import wire
 from landscape.supervisor.config import DeviceTarget
 from landscape.supervisor.feeds import EventFeed, StatusPoll
@@ -22,10 +21,12 @@ log = logging.getLogger(__name__)
 
 
 class DeviceLink:
-    def __init__(self, target: DeviceTarget, display_rate_hz: float, history: int = 500):
+    def __init__(self, target: DeviceTarget, display_rate_hz: float, tls: ClientTLS | None = None,
+                 token: str | None = None, history: int = 500):
         self.name = target.name
         self.target = target.address
-        self.channel = grpc.aio.insecure_channel(target.address)
+        # Every call of every browser goes with this token: the device's roles decide.
+        self.channel = open_aio_channel(target.address, tls, token)
         self._watchers: set[Outbox] = set()
         self._history: deque[str] = deque(maxlen=history)   # the newest event frames, for joiners
         self._latest: dict[str, str] = {}                   # feed -> its newest frame, for joiners

@@ -49,3 +49,44 @@ def move_as_operator(target: str, keys: Keys, goal, name: str = "cell-test") -> 
         device.Deactivate(control_pb2.DeactivateRequest(), timeout=30)
         device.Release(control_pb2.ReleaseRequest(), timeout=30)
         return reached
+
+
+def through_the_supervisor(url: str, devices, timeout: float = 60.0) -> dict[str, dict]:
+    """What the web supervisor at `url` gets from each device, seen as its page sees it (its
+    WebSocket, wire.py): the first reply of each read it keeps for the page, by device and
+    method ("GetDeviceState", ...). A read the device refused fails with the device's status.
+    Then a session and the lock on the first device, through the backend, as an operator."""
+    import asyncio
+    import json
+
+    import aiohttp
+
+    wanted = {"GetDeviceState"}
+
+    async def main():
+        seen: dict[str, dict] = {name: {} for name in devices}
+        async with aiohttp.ClientSession() as http:
+            async with http.get(url) as page:
+                assert "LandScape supervisor" in await page.text()
+            async with http.ws_connect(url + "ws") as ws:
+                async def frame():
+                    return json.loads((await ws.receive()).data)
+                while any(wanted - set(got) for got in seen.values()):
+                    body = await frame()
+                    method = body["rpc"].rsplit("/", 1)[1]
+                    if body["device"] in seen and method in wanted:
+                        assert "reply" in body, f"{body['device']} {method}: {body['status']}"
+                        seen[body["device"]].setdefault(method, body["reply"])
+                first = devices[0]
+                for call_id, rpc, request in (
+                        (1, "landscape.v1.SessionService/Connect",
+                         {"hello": {"clientName": "compose-test"}}),
+                        (2, "landscape.v1.DeviceService/Lock", {})):
+                    await ws.send_json({"device": first, "rpc": rpc, "id": call_id,
+                                        "request": request})
+                    while (answer := await frame()).get("id") != call_id:
+                        pass
+                    assert "reply" in answer, f"{first} {rpc}: {answer['status']}"
+        return seen
+
+    return asyncio.run(asyncio.wait_for(main(), timeout))

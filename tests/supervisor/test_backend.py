@@ -18,7 +18,7 @@ from landscape.server.config import ServerConfig
 from landscape.server.states import State
 from landscape.supervisor import DashboardConfig, DeviceTarget, start
 from landscape.v1 import event_service_pb2, settings_pb2, state_service_pb2, types_pb2
-from support import start_server, wait_until
+from support import make_keys, start_secured_server, start_server, wait_until
 
 DEVICE = "landscape.v1.DeviceService/"
 CONNECT = "landscape.v1.SessionService/Connect"
@@ -71,10 +71,11 @@ def unpack(reply: dict, message_class):
     return message
 
 
-def run_with_page(server, body):
+def run_with_page(server, body, **config):
     """Run body(page, server) against a backend on a free port, within a time limit."""
     async def main():
-        dashboard = await start(DashboardConfig(devices=(DeviceTarget("arm1", server.target),), port=0))
+        dashboard = await start(DashboardConfig(devices=(DeviceTarget("arm1", server.target),),
+                                                port=0, **config))
         try:
             async with aiohttp.ClientSession() as http:
                 async with http.ws_connect(dashboard.url + "ws") as ws:
@@ -237,3 +238,55 @@ def test_a_restarted_device_server_is_followed_from_its_first_event():
     finally:
         if second is not None:
             second.stop(grace=None)
+
+
+@pytest.fixture(scope="module")
+def keys(tmp_path_factory):
+    return make_keys(tmp_path_factory.mktemp("keys"))
+
+
+@pytest.fixture
+def secured(keys):
+    server = start_secured_server(keys)
+    yield server
+    server.stop(grace=None)
+
+
+def test_the_backend_commands_over_tls_with_its_token_and_the_role_decides(secured, keys):
+    """An operator's token: sessions, the lock and commands; the e-stop (admin only) refused
+    with the device's reason, and nothing pressed."""
+    async def body(page, dashboard):
+        state = await page.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState")
+        assert state["reply"]["state"] == "DEVICE_STATE_UNLOCKED"
+        await page.call(CONNECT, {"hello": {"clientName": "tls-page"}})
+        assert "reply" in await page.call(DEVICE + "Lock")
+        assert "reply" in await page.call(DEVICE + "Activate")
+        assert secured.device.state is State.RESTING
+        refused = (await page.call(DEVICE + "OperatePanel",
+                                   {"action": "PANEL_ACTION_PRESS_ESTOP"}))["status"]
+        assert refused["code"] == 7 and "admin" in refused["message"]   # PERMISSION_DENIED
+        assert secured.device.state is State.RESTING   # not pressed
+    run_with_page(secured, body, tls=keys.tls(), token=keys.token("operator"))
+
+
+def test_an_admin_token_presses_the_estop_through_the_backend(secured, keys):
+    async def body(page, dashboard):
+        pressed = await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
+        assert pressed["reply"]["estopPressed"] is True
+        await asyncio.to_thread(wait_until, lambda: secured.device.state is State.ERROR, 5)
+        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
+    run_with_page(secured, body, tls=keys.tls(), token=keys.token("admin"))
+
+
+def test_without_a_token_every_read_is_refused_and_shown_so(secured, keys):
+    async def body(page, dashboard):
+        refused = await page.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState")
+        assert refused["status"]["code"] == 16   # UNAUTHENTICATED
+    run_with_page(secured, body, tls=keys.tls())
+
+
+def test_the_command_line_takes_the_client_credentials(keys):
+    from landscape.supervisor.__main__ import parse_args
+    config = parse_args(["--device", "a=127.0.0.1:1", "--tls-ca", str(keys.certs.ca),
+                         "--token-file", str(keys.token_file("viewer"))])
+    assert config.tls.ca == str(keys.certs.ca) and config.token == keys.token("viewer")
