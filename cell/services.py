@@ -102,9 +102,6 @@ def supervisor_service(config: CellConfig, targets: dict[str, str],
     for name in supervisor.devices:
         argv += ["--device", f"{name}={targets[name]}"]
     argv += ["--host", supervisor.address, "--port", str(supervisor.port)]
-    world = config.device(supervisor.devices[0]).world
-    if world is not None:
-        argv += ["--cell", str(world)]
     argv += client_arguments(config.security, supervisor.token)
     return ServiceSpec("supervisor", "web supervisor", argv, workdir,
                        note=f"shows {', '.join(supervisor.devices)}")

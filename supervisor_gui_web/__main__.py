@@ -31,14 +31,12 @@ def parse_args(argv=None) -> DashboardConfig:
     parser.add_argument("--port", type=int, default=DEFAULT_PORT, help="0 picks a free port")
     parser.add_argument("--display-rate", type=float, default=DEFAULT_DISPLAY_RATE_HZ,
                         help="state samples per second sent to the page")
-    parser.add_argument("--cell", help="the cell file the devices run (world geometry for the "
-                                       "3D view; default: the default cell)")
     credentials.add_arguments(parser)
     args = parser.parse_args(argv)
     try:
         tls, token = credentials.from_arguments(args)
         return DashboardConfig(devices=tuple(args.device), host=args.host, port=args.port,
-                               display_rate_hz=args.display_rate, cell=args.cell, tls=tls,
+                               display_rate_hz=args.display_rate, tls=tls,
                                token=token)
     except (OSError, ValueError) as error:
         parser.error(str(error))

@@ -32,9 +32,6 @@ class DashboardConfig:
     port: int = DEFAULT_PORT            # 0 picks a free port
     # State samples per second sent to the page (StreamState's rate_hz).
     display_rate_hz: float = DEFAULT_DISPLAY_RATE_HZ
-    # The cell file the world geometry is read from (None: the default cell). TEMPORARY: the
-    # contract has no call that describes the cell's world yet (see cell_world.py).
-    cell: str | None = None
     # The built page (None: frontend/dist beside this package).
     static_dir: str | None = None
     # TLS to the device servers and the role token the backend presents for every browser

@@ -61,7 +61,7 @@ def through_the_supervisor(url: str, devices, timeout: float = 60.0) -> dict[str
 
     import aiohttp
 
-    wanted = {"GetDeviceState"}
+    wanted = {"GetDeviceState", "GetCellDescription"}
 
     async def main():
         seen: dict[str, dict] = {name: {} for name in devices}

@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import urllib.request
+from pathlib import Path
 
 import aiohttp
 import pytest
@@ -22,7 +23,9 @@ from support import make_keys, start_secured_server, start_server, wait_until
 
 DEVICE = "landscape.v1.DeviceService/"
 CONNECT = "landscape.v1.SessionService/Connect"
+CELL = DEVICE + "GetCellDescription"
 TIMEOUT = 30.0
+ROOT = Path(__file__).resolve().parents[2]
 
 
 class PageClient:
@@ -290,3 +293,65 @@ def test_the_command_line_takes_the_client_credentials(keys):
     config = parse_args(["--device", "a=127.0.0.1:1", "--tls-ca", str(keys.certs.ca),
                          "--token-file", str(keys.token_file("viewer"))])
     assert config.tls.ca == str(keys.certs.ca) and config.token == keys.token("viewer")
+
+
+def _bodies(frame: dict) -> dict[str, dict]:
+    return {body["name"]: body for body in frame["reply"]["bodies"]}
+
+
+def test_each_device_describes_its_own_cell():
+    first = start_server()
+    second = start_server(cell=str(ROOT / "sim" / "cells" / "press_tending.toml"))
+
+    async def body(page, dashboard):
+        cells = {}
+        while len(cells) < 2:
+            frame = await page.until(lambda f: f["rpc"] == CELL and f["device"] not in cells)
+            cells[frame["device"]] = frame["reply"]
+        assert (cells["arm1"]["cellName"], cells["arm2"]["cellName"]) == ("default",
+                                                                          "press_tending")
+        assert "block_1" in _bodies({"reply": cells["arm1"]})
+        assert "blank_1" in _bodies({"reply": cells["arm2"]})
+
+    async def main():
+        dashboard = await start(DashboardConfig(devices=(
+            DeviceTarget("arm1", first.target), DeviceTarget("arm2", second.target)), port=0))
+        try:
+            async with aiohttp.ClientSession() as http:
+                async with http.ws_connect(dashboard.url + "ws") as ws:
+                    await body(PageClient(ws), dashboard)
+        finally:
+            await dashboard.stop()
+    try:
+        asyncio.run(asyncio.wait_for(main(), 60))
+    finally:
+        first.stop(grace=None)
+        second.stop(grace=None)
+
+
+def test_the_world_follows_tool_changes_and_parts_taken_and_put(server):
+    """examples/02 fetches the gripper, carries block_1 to the place zone and puts the gripper
+    back: each change of the cell reaches the page as a new GetCellDescription."""
+    async def next_cell(page):   # each description once, in order
+        frame = await page.until(lambda f: f["rpc"] == CELL, timeout=120)
+        page.frames.remove(frame)
+        return _bodies(frame)
+
+    async def body(page, dashboard):
+        bodies = await next_cell(page)
+        seen = [(bodies["gripper"]["attachedTo"], bodies["block_1"]["attachedTo"])]
+        assert seen == [("", "")]
+        example = await asyncio.create_subprocess_exec(
+            sys.executable, str(ROOT / "examples" / "02_pick_and_place.py"), "--target",
+            server.target, stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE)
+        while len(seen) < 5:   # (gripper, block_1) attachments, each change once
+            bodies = await next_cell(page)
+            now = (bodies["gripper"]["attachedTo"], bodies["block_1"]["attachedTo"])
+            if seen[-1] != now:
+                seen.append(now)
+        _, errors = await example.communicate()
+        assert example.returncode == 0, errors.decode()
+        assert seen == [("", ""), ("flange", ""), ("flange", "tool"), ("flange", ""), ("", "")]
+        block = bodies["block_1"]["pose"]
+        assert (block["x"], block["y"]) == pytest.approx((0.73, -0.15), abs=0.01)   # placed
+    run_with_page(server, body)

@@ -31,6 +31,7 @@ def test_lock_and_activate_through_the_buttons(chromium, dashboard, cell_server)
     page.shows("st-lock", "operator-1")
     page.shows("role", "commanding")
     page.log_has("activated")
+    page.shows("scene-note", "TX90 in cell “default”")   # the world from the device
     page.close()
 
 
