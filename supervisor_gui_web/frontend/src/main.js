@@ -60,6 +60,7 @@ async function main() {
   };
   // What the latency benchmark reads: when each sample's cycle ran and when it arrived here.
   const stats = window.dashboardStats = { samples: [] };
+  window.cellView = view;   // the 3D view, for the console and the page tests
 
   link.onConnection = async (up) => {
     $('connection').textContent = up ? 'connected' : 'disconnected: reconnecting…';

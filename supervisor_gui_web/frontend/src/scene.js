@@ -247,16 +247,22 @@ export class CellView {
     this.requestRender();
   }
 
-  // Where the tool tip is at these joint values (radians), in the base frame; toolOffset is the
-  // tip in the flange frame (meters, radians).
-  tipAt(joints, toolOffset) {
+  // The tool tip in the base frame at these joint values (radians), as a matrix; toolOffset is
+  // the tip in the flange frame (meters, radians).
+  tipMatrix(joints, toolOffset) {
     this.jointNames.forEach((name, i) => this.ghost.setJointValue(name, joints[i]));
     this.ghost.updateMatrixWorld(true);
-    const tip = new THREE.Object3D();
-    placePose(tip, [toolOffset.x, toolOffset.y, toolOffset.z], [toolOffset.roll, toolOffset.pitch, toolOffset.yaw]);
-    tip.updateMatrix();
-    const m = this.ghost.links.tool0.matrixWorld.clone().multiply(tip.matrix);
-    return new THREE.Vector3().setFromMatrixPosition(m);
+    return this.ghost.links.tool0.matrixWorld.clone().multiply(poseMatrix(toolOffset));
+  }
+
+  // Where the tool tip is at these joint values, in the base frame.
+  tipAt(joints, toolOffset) {
+    return new THREE.Vector3().setFromMatrixPosition(this.tipMatrix(joints, toolOffset));
+  }
+
+  // A point {x, y, z} through a matrix.
+  transformed(point, matrix) {
+    return new THREE.Vector3(point.x, point.y, point.z).applyMatrix4(matrix);
   }
 
   // The path as loaded: its points ({x, y, z}: tool tip positions, base frame, meters) joined
