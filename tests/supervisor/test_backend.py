@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import subprocess
 import sys
 import urllib.request
@@ -355,3 +356,29 @@ def test_the_world_follows_tool_changes_and_parts_taken_and_put(server):
         block = bodies["block_1"]["pose"]
         assert (block["x"], block["y"]) == pytest.approx((0.73, -0.15), abs=0.01)   # placed
     run_with_page(server, body)
+
+
+def test_an_unanswered_question_times_out_on_the_device_and_the_backend_sends_nothing(
+        server, caplog):
+    """The device's own timer decides: the backend answers nothing when the page does not (a
+    default sent for it would race that timer and be logged as an answer)."""
+    server.device.rsvp_timeout = 0.5
+
+    async def body(page, dashboard):
+        session = await page.send(CONNECT, {"hello": {"clientName": "silent"}})
+        await page.answer(session)
+        await page.call(DEVICE + "Lock")
+        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
+        await asyncio.to_thread(wait_until, lambda: server.device.state is State.ERROR, 5)
+        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
+        await page.until(lambda f: f.get("id") == session and "rsvpRequest" in f.get("reply", {}))
+        settled = await page.until(lambda f: "rsvpAnswer" in f.get("reply", {}).get("event", {}))
+        answer = settled["reply"]["event"]["rsvpAnswer"]
+        assert (answer["choice"], answer["timedOut"]) == ("stay", True)
+        await asyncio.sleep(1.0)   # an answer the backend sent would have arrived by now
+
+    with caplog.at_level(logging.WARNING, logger="landscape.server.servicers.session"):
+        run_with_page(server, body)
+    late = [r.getMessage() for r in caplog.records if "no such question waits" in r.getMessage()]
+    assert not late
+    assert server.device.state is State.ERROR   # "stay": the default kept it there
