@@ -39,13 +39,6 @@ def _hold(page: Page, testid: str, ms: int) -> None:
     page.page.mouse.up()
 
 
-def _manual(page: Page, on: bool) -> None:
-    box = page.page.locator("#manual-control")
-    if box.is_checked() != on:
-        page.click("manual-control")
-    (page.expect(box).to_be_checked if on else page.expect(box).not_to_be_checked)(timeout=30_000)
-
-
 def _open_panel(page: Page, title: str) -> None:
     page.page.locator("details.panel > summary", has_text=title).click()
 
@@ -94,7 +87,7 @@ def test_world_frame_points_are_drawn_through_the_devices_world_frame(chromium, 
 def test_a_cartesian_jog_moves_the_tool_tip_along_the_axis(chromium, dashboard, cell_server):
     page = Page(chromium, dashboard.url)
     page.take_control()
-    _manual(page, True)
+    page.manual_control(True)
     page.page.select_option("#jog-frame", "REFERENCE_FRAME_BASE_CARTESIAN_FRAME")
     before = _tip(cell_server)
     _hold(page, "jog-Z+", 800)
@@ -111,7 +104,7 @@ def test_teach_stores_the_current_poses_as_a_path_that_then_runs(chromium, dashb
     page.take_control()
     page.page.fill("#path-name", "taught")
     taught = []
-    _manual(page, True)
+    page.manual_control(True)
     for jog in ("jog-J1+", "jog-J2-"):
         _hold(page, jog, 500)
         wait_until(lambda: cell_server.device.state is State.RESTING, timeout=10)
@@ -121,7 +114,7 @@ def test_teach_stores_the_current_poses_as_a_path_that_then_runs(chromium, dashb
         page.expect(page.page.locator("#path-progress .tag")).to_have_count(len(taught),
                                                                            timeout=30_000)
     page.expect(page.page.locator("#path-progress .tag")).to_have_text(["t1", "t2"])
-    _manual(page, False)   # paths do not run under manual control
+    page.manual_control(False)   # paths do not run under manual control
     with Robot(cell_server.target, "test-reader") as robot:
         assert robot.get_robot_position().joint_position == pytest.approx(taught[1], abs=1e-3)
     page.click("btn-path-run")
