@@ -53,7 +53,9 @@ def test_path_run_reaches_every_tag_in_the_log(chromium, dashboard, cell_server)
     page.expect(page.page.locator("#path-progress .tag")).to_have_count(len(PATH), timeout=30_000)
     page.click("btn-path-run")
     page.shows("st-state", "moving")
-    page.expect(page.page.locator("#path-progress .tag.reached")).to_have_count(1, timeout=40_000)
+    # A tag or more reached (exactly one would be a moment a loaded machine's polling may miss).
+    page.expect(page.page.locator("#path-progress .tag.reached").first).to_be_attached(
+        timeout=40_000)
     # During the run, the arm in its cell, the path drawn, the first tag reached: for the README.
     SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
     page.page.screenshot(path=str(SCREENSHOT))
