@@ -10,21 +10,9 @@ from landscape.client import (AsyncRobot, ClientTLS, Frame, NotAllowed, Robot, o
 from landscape.client.errors import TransportError
 from landscape.server.states import State
 
-from support import make_keys, start_secured_server
+from support import make_keys
 
 GOAL = [0.4, -0.1, 1.5, 0.0, 1.4, 0.2]
-
-
-@pytest.fixture(scope="module")
-def keys(tmp_path_factory):
-    return make_keys(tmp_path_factory.mktemp("keys"))
-
-
-@pytest.fixture
-def secured(keys):
-    server = start_secured_server(keys)
-    yield server
-    server.stop(grace=None)
 
 
 def test_robot_over_tls_with_an_operator_token_moves(secured, keys):

@@ -20,7 +20,7 @@ from landscape.server.config import ServerConfig
 from landscape.server.states import State
 from landscape.supervisor import DashboardConfig, DeviceTarget, start
 from landscape.v1 import event_service_pb2, settings_pb2, state_service_pb2, types_pb2
-from support import make_keys, start_secured_server, start_server, wait_until
+from support import start_server, wait_until
 
 DEVICE = "landscape.v1.DeviceService/"
 CONNECT = "landscape.v1.SessionService/Connect"
@@ -168,15 +168,22 @@ def test_closing_the_page_ends_its_session_and_the_device_releases(server):
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
 
+async def _estop_question(page, server, name: str) -> tuple[int, dict]:
+    """The page's session takes the lock; the e-stop pressed and released: the device asks
+    the lock holder whether to reset. The session's call id and the question's frame."""
+    session = await page.send(CONNECT, {"hello": {"clientName": name}})
+    await page.answer(session)
+    await page.call(DEVICE + "Lock")
+    await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
+    await asyncio.to_thread(wait_until, lambda: server.device.state is State.ERROR, 5)
+    await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
+    return session, await page.until(
+        lambda f: f.get("id") == session and "rsvpRequest" in f.get("reply", {}))
+
+
 def test_the_estop_rsvp_reaches_the_page_and_its_answer_the_device(server):
     async def body(page, dashboard):
-        session = await page.send(CONNECT, {"hello": {"clientName": "operator"}})
-        await page.answer(session)
-        await page.call(DEVICE + "Lock")
-        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
-        await asyncio.to_thread(wait_until, lambda: server.device.state is State.ERROR, 5)
-        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
-        question = await page.until(lambda f: f.get("id") == session and "rsvpRequest" in f.get("reply", {}))
+        session, question = await _estop_question(page, server, "operator")
         request = question["reply"]["rsvpRequest"]
         assert set(request["choices"]) == {"reset", "stay"} and request["timeoutMs"] > 0
         await page.send(CONNECT, {"rsvpAnswer": {"rsvpId": request["rsvpId"], "choice": "reset"}},
@@ -242,18 +249,6 @@ def test_a_restarted_device_server_is_followed_from_its_first_event():
     finally:
         if second is not None:
             second.stop(grace=None)
-
-
-@pytest.fixture(scope="module")
-def keys(tmp_path_factory):
-    return make_keys(tmp_path_factory.mktemp("keys"))
-
-
-@pytest.fixture
-def secured(keys):
-    server = start_secured_server(keys)
-    yield server
-    server.stop(grace=None)
 
 
 def test_the_backend_commands_over_tls_with_its_token_and_the_role_decides(secured, keys):
@@ -365,13 +360,7 @@ def test_an_unanswered_question_times_out_on_the_device_and_the_backend_sends_no
     server.device.rsvp_timeout = 0.5
 
     async def body(page, dashboard):
-        session = await page.send(CONNECT, {"hello": {"clientName": "silent"}})
-        await page.answer(session)
-        await page.call(DEVICE + "Lock")
-        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
-        await asyncio.to_thread(wait_until, lambda: server.device.state is State.ERROR, 5)
-        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
-        await page.until(lambda f: f.get("id") == session and "rsvpRequest" in f.get("reply", {}))
+        await _estop_question(page, server, "silent")
         settled = await page.until(lambda f: "rsvpAnswer" in f.get("reply", {}).get("event", {}))
         answer = settled["reply"]["event"]["rsvpAnswer"]
         assert (answer["choice"], answer["timedOut"]) == ("stay", True)

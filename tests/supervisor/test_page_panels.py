@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from dashboard_support import DashboardThread, Page
 from landscape.client import Frame, Pose, Robot, TagPoint
 from landscape.server.states import State
-from support import make_keys, start_secured_server, wait_until
+from support import start_secured_server, wait_until
 
 HOME = [0.0, 0.0, 1.5708, 0.0, 1.5708, 0.0]
 
@@ -169,9 +169,7 @@ def test_the_io_panel_shows_bits_by_name_and_toggles_an_output(chromium, dashboa
     page.close()
 
 
-def test_the_estop_is_refused_with_the_reason_when_the_backends_role_lacks_it(chromium,
-                                                                              tmp_path):
-    keys = make_keys(tmp_path / "keys")
+def test_the_estop_is_refused_with_the_reason_when_the_backends_role_lacks_it(chromium, keys):
     secured = start_secured_server(keys, lockstep_pace=1.0)
     running = DashboardThread({"arm1": secured.target}, tls=keys.tls(),
                               token=keys.token("operator"))
