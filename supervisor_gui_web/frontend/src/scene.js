@@ -83,7 +83,7 @@ export class CellView {
     this.pathGroup = new THREE.Group();
     this.base.add(this.pathGroup);
     this.cell = null;                       // the newest GetCellDescription
-    this.bodies = new Map();                // body name -> {object, kind, attachedTo}
+    this.bodies = new Map();                // body name -> {object, attachedTo}
     this.tipOffset = new THREE.Matrix4();   // the tool tip in the flange frame
     this.endEffector = '';                  // "<tool> <state>" of the newest sample
     this.graspFlange = null;                // the flange (world) when the tool last acted,
@@ -128,8 +128,7 @@ export class CellView {
     if (this.robot) this.base.remove(this.robot);
     this.robot = loader.parse(urdf);
     this.base.add(this.robot);
-    if (this.cell) {
-      this.scene.updateMatrixWorld(true);
+    if (this.cell) {   // the bodies on the flange and in the tool go on this arm
       for (const item of this.bodies.values()) item.attachedTo = null;
       this.setCell(this.cell);
     }
@@ -152,7 +151,7 @@ export class CellView {
     const names = new Set();
     for (const body of cell.bodies || []) {
       names.add(body.name);
-      if (!this.bodies.has(body.name)) this.bodies.set(body.name, { object: this.makeBody(body), kind: body.kind, attachedTo: null });
+      if (!this.bodies.has(body.name)) this.bodies.set(body.name, { object: this.makeBody(body), attachedTo: null });
       this.place(this.bodies.get(body.name), body);
     }
     for (const [name, item] of this.bodies) {
