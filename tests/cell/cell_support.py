@@ -55,7 +55,8 @@ def through_the_supervisor(url: str, devices, timeout: float = 60.0) -> dict[str
     """What the web supervisor at `url` gets from each device, seen as its page sees it (its
     WebSocket, wire.py): the first reply of each read it keeps for the page, by device and
     method ("GetDeviceState", ...). A read the device refused fails with the device's status.
-    Then a session and the lock on the first device, through the backend, as an operator."""
+    Then a session and the lock on the last device, through the backend, as an operator (the
+    lock ends with the page's connection)."""
     import asyncio
     import json
 
@@ -77,16 +78,16 @@ def through_the_supervisor(url: str, devices, timeout: float = 60.0) -> dict[str
                     if body["device"] in seen and method in wanted:
                         assert "reply" in body, f"{body['device']} {method}: {body['status']}"
                         seen[body["device"]].setdefault(method, body["reply"])
-                first = devices[0]
+                last = devices[-1]
                 for call_id, rpc, request in (
                         (1, "landscape.v1.SessionService/Connect",
                          {"hello": {"clientName": "compose-test"}}),
                         (2, "landscape.v1.DeviceService/Lock", {})):
-                    await ws.send_json({"device": first, "rpc": rpc, "id": call_id,
+                    await ws.send_json({"device": last, "rpc": rpc, "id": call_id,
                                         "request": request})
                     while (answer := await frame()).get("id") != call_id:
                         pass
-                    assert "reply" in answer, f"{first} {rpc}: {answer['status']}"
+                    assert "reply" in answer, f"{last} {rpc}: {answer['status']}"
         return seen
 
     return asyncio.run(asyncio.wait_for(main(), timeout))
