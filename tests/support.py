@@ -8,6 +8,8 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
+from pathlib import Path
 
 import grpc
 from google.rpc import error_details_pb2
@@ -15,11 +17,13 @@ from grpc_status import rpc_status
 
 import numpy as np
 
-from landscape.client import Session
+from landscape.cell.certs import CertFiles, make_certificates
+from landscape.cell.tokens import make_tokens
+from landscape.client import ClientTLS, Session, read_token
 from landscape.sim.kinematics import Kinematics
 from landscape.sim.recorder import read_recording
 from landscape.server.app import RunningServer, serve
-from landscape.server.config import ServerConfig
+from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
                           end_effector_pb2, event_service_pb2, event_service_pb2_grpc, motion_pb2,
                           sensing_pb2, types_pb2)
@@ -28,6 +32,35 @@ from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_servi
 def start_server(**config) -> RunningServer:
     """A device server on a free loopback port, its simulated arm on the lock-step clock."""
     return serve(ServerConfig(port=0, clock="lockstep", **config))
+
+
+@dataclass
+class Keys:
+    """A development CA and server certificate, and one token file per role."""
+    certs: CertFiles
+    tokens: Path                  # the folder of <role>.tokens
+
+    def token(self, role: str) -> str:
+        return read_token(self.tokens / f"{role}.tokens")
+
+    def token_file(self, role: str) -> Path:
+        return self.tokens / f"{role}.tokens"
+
+    def tls(self) -> ClientTLS:
+        return ClientTLS(ca=str(self.certs.ca))
+
+
+def make_keys(folder: Path, hosts=()) -> Keys:
+    certs = make_certificates(folder / "certs", hosts=hosts)
+    make_tokens(folder / "tokens")
+    return Keys(certs, folder / "tokens")
+
+
+def start_secured_server(keys: Keys, **config) -> RunningServer:
+    """start_server with TLS (the keys' server certificate) and the keys' role tokens."""
+    return start_server(security=SecurityConfig(
+        tls_cert=str(keys.certs.server_cert), tls_key=str(keys.certs.server_key),
+        tokens=str(keys.tokens)), **config)
 
 
 @contextlib.contextmanager

@@ -66,7 +66,7 @@ def test_without_npm_the_page_is_skipped_in_one_line_and_make_goes_on(tmp_path):
 
 def test_the_cell_says_why_the_web_supervisor_does_not_start_without_its_page(tmp_path):
     from landscape.cell.services import supervisor_missing
-    why = supervisor_missing(tls=False, tokens=False, page=tmp_path / "index.html")
+    why = supervisor_missing(page=tmp_path / "index.html")
     assert why.startswith("its page is not built") and "npm" in why, why
     (tmp_path / "index.html").write_text("<html></html>")
-    assert supervisor_missing(tls=False, tokens=False, page=tmp_path / "index.html") is None
+    assert supervisor_missing(page=tmp_path / "index.html") is None
