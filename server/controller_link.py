@@ -42,6 +42,9 @@ def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox
     from landscape.sim.bullet_controller import BulletController  # pybullet: only here
     from landscape.server.arm_dynamics import base_gravity
     from landscape.sim.cell import load_cell
+    # What the server runs between cycles, loaded before the loop starts: an import on the
+    # loop's thread would hold a cycle up (the panel's helpers come with BulletController).
+    import landscape.sim.world_reads  # noqa: F401
     cell = load_cell(cell_path)
     controller = BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time,
                                                         ring, cell.arm, base_gravity(cell)))
