@@ -18,12 +18,11 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from landscape.server.config import MAX_COLLISION_MARGIN, ServerConfig
+from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
 from landscape.sim.cell import CellError, _Table, load_cell
 
 DEFAULT_FILE = "cells/local.toml"
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
-CLOCKS = ("realtime", "lockstep")
 RESTART = ("no", "on-failure")
 
 

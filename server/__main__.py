@@ -46,7 +46,9 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
     parser.add_argument("--cell", default=None,
                         help="cell file (TOML) describing arm, world and I/O (default: built-in)")
     parser.add_argument("--clock", choices=CLOCKS, default="realtime",
-                        help="realtime: 4 ms cycle process; lockstep: as fast as possible")
+                        help="realtime: a 4 ms cycle process; fast: the cycle process as fast "
+                             "as it goes (long programs quickly); lockstep: a thread of this "
+                             "process as fast as it goes (for tests)")
     parser.add_argument("--paths", default="var/paths.sqlite3",
                         help="SQLite file keeping the named paths and the settings (speed, "
                              "acceleration, tool offset, world frame, units) across restarts "

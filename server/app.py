@@ -131,7 +131,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     # times on its way to the pipe: 0.2 ms instead of Python's 5 on the real-time clock
     # (bench_stop: p99 under long planning 8.4 ms, 13.9 at 1 ms). The lock-step clock's
     # thread computes too, and pays for every hand-over (bench_lockstep: 12 % slower at 0.2).
-    sys.setswitchinterval(0.0002 if config.clock == "realtime" else 0.001)
+    sys.setswitchinterval(0.001 if config.clock == "lockstep" else 0.0002)
     security = _security_layer(config.security)
     runner = _LoopThread()
     try:

@@ -5,7 +5,8 @@ from dataclasses import dataclass
 
 from landscape.server.limits import Cap
 
-CLOCKS = ("realtime", "lockstep")   # the controller's: controller_link.py
+CLOCKS = ("realtime", "fast", "lockstep")   # the controller's: controller_link.py
+PROCESS_CLOCKS = ("realtime", "fast")       # those that run the cycle in a process of its own
 DEFAULT_ADDRESS = "127.0.0.1"   # loopback unless the operator exposes the server on purpose
 DEFAULT_PORT = 50051
 MAX_COLLISION_MARGIN = 0.1      # m: a wider safety margin would keep the arm from the table
@@ -50,7 +51,9 @@ class ServerConfig:
     # chunks, so no single message needs to be big.
     max_message_bytes: int = 4 * 1024 * 1024
     # The cell file (None: the default cell) and the controller's clock: "realtime" (its own
-    # cycle process) or "lockstep" (a thread here, as fast as it goes; for tests).
+    # cycle process, a cycle every 4 ms), "fast" (the same process running cycles back to
+    # back: long programs in a fraction of their time) or "lockstep" (a thread here, as fast as
+    # it goes, which tests can hold and step; for tests).
     cell: str | None = None
     clock: str = "realtime"
     # Lock-step only: at most this many simulated seconds per wall second (None: flat out).

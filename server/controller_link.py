@@ -1,12 +1,15 @@
-"""The device server's line to its controller, on either clock (DESIGN.md section 7).
+"""The device server's line to its controller, on any of three clocks (DESIGN.md section 7).
 
 - "realtime": the controller and the Executor run in a cycle process of their own, stepped
   every cycle on wall-clock deadlines (landscape.sim.clock.RealTimeClock).
+- "fast": the same cycle process with no deadlines, cycle after cycle as fast as it goes:
+  simulated time far ahead of the wall clock, for running long programs quickly; the server
+  shares no interpreter with it, so both cores work.
 - "lockstep": they run in this process on a thread that steps cycle after cycle as fast as it
   can (landscape.sim.clock.ThreadedLockStepClock): deterministic physics, simulated time far
-  ahead of the wall clock. For tests.
+  ahead of the wall clock, a clock a test can hold and step. For tests.
 
-`ControllerLink` offers the same surface on both: `proxy` (the asynchronous LLI calls, served
+`ControllerLink` offers the same surface on all three: `proxy` (the asynchronous LLI calls, served
 between cycles), `send` (messages to the Executor), `between_cycles`, `feedback` (every
 cycle's row, feedback.py) and `share` (large arrays for the cycle, without copying them
 through the pipe). It watches the controller: the cycle process exiting, or its feedback
@@ -24,7 +27,7 @@ import threading
 import time
 from typing import Any, Callable
 
-from landscape.server.config import CLOCKS
+from landscape.server.config import CLOCKS, PROCESS_CLOCKS
 from landscape.server.executor import Executor
 from landscape.server.feedback import FeedbackRing
 from landscape.sim.clock import RealTimeClock, ThreadedLockStepClock
@@ -79,7 +82,7 @@ class ControllerLink:
         self._closing = False
         self._clock = self._start_clock()
         self._watchdog: threading.Thread | None = None
-        if clock == "realtime":
+        if clock in PROCESS_CLOCKS:
             self._watchdog = threading.Thread(target=self._watch, name="controller-watchdog",
                                               daemon=True)
             self._watchdog.start()
@@ -88,8 +91,9 @@ class ControllerLink:
         last = self.feedback.latest()   # the e-stop as the controller before this one left it
         factory = functools.partial(build_controller, self._cell_path, self.feedback,
                                     estop_pressed=last is not None and last.estop)
-        if self.clock_kind == "realtime":
+        if self.clock_kind in PROCESS_CLOCKS:
             return RealTimeClock(factory, on_message=self._on_message,
+                                 free=self.clock_kind == "fast",
                                  on_failure=lambda why: self._lose(
                                      f"the cycle process died: {why.strip().splitlines()[-1]}"
                                      if why else "the cycle process died")).start()
@@ -122,7 +126,7 @@ class ControllerLink:
     def share(self, arrays: dict) -> SharedArrays:
         """`arrays` (name -> ndarray) for the cycle: shared memory for a cycle process (the
         pipe then carries only their names), the arrays themselves on the lock-step thread."""
-        return SharedArrays.create(arrays, shared=self.clock_kind == "realtime")
+        return SharedArrays.create(arrays, shared=self.clock_kind in PROCESS_CLOCKS)
 
     def stats(self):
         return self._clock.stats() if hasattr(self._clock, "stats") else None

@@ -95,6 +95,9 @@ class RealTimeClock:
       anyway and says so in `tuning_problems`. Measured on the 2-core development VM with
       the parent busy (bench/bench_cycle.py, 60 s): late 0.006 ms at p99 with SCHED_FIFO,
       2 ms at p99 and 72 overruns in the normal policy.
+    free: no deadlines: cycles back to back, as fast as the process goes (the lock-step speed
+      of a cycle process, for long programs; the server shares no interpreter with it). Always
+      in the normal policy (a free-running loop under SCHED_FIFO would starve the machine).
 
     Thread-safe: any parent thread may call `proxy` methods, `send`, `recv` and `stats`.
     """
@@ -105,7 +108,7 @@ class RealTimeClock:
                  on_failure: Callable[[str], None] | None = None,
                  call_timeout: float = 5.0, start_timeout: float = 60.0,
                  spin: float = 0.0005, guard: float = 0.001, window: int = 1 << 16,
-                 rt_priority: int | None = 50):
+                 rt_priority: int | None = 50, free: bool = False):
         self._factory = factory
         self._cycle_time = None if cycle_time is None else cp.check_cycle_time(cycle_time)
         self._on_message = on_message
@@ -114,6 +117,7 @@ class RealTimeClock:
         self.call_timeout = call_timeout
         self._start_timeout = start_timeout
         self._spin, self._guard, self._rt_priority = spin, guard, rt_priority
+        self.free = free
         self.tuning_problems: list[str] = []  # what the child could not tune (cycle_process)
         self._stats = StatsRing(window)
         self._process = None
@@ -140,7 +144,7 @@ class RealTimeClock:
         self._process = ctx.Process(
             target=cp.child_main, name="landscape-cycle", daemon=True,
             args=(self._factory, child_end, self._stats, self._cycle_time, os.getpid(),
-                  self._spin, self._guard, self._rt_priority))
+                  self._spin, self._guard, None if self.free else self._rt_priority, self.free))
         self._process.start()
         child_end.close()  # only the child holds it now: its death reads as EOF here
         self._conn = parent_end

@@ -150,17 +150,20 @@ class CycleLoop:
     """
 
     def __init__(self, step: Callable[[], Any], cycle_time: float, stats: StatsRing,
-                 spin: float = 0.0005):
+                 spin: float = 0.0005, free: bool = False):
         self.step = step
         self.cycle_time = check_cycle_time(cycle_time)
         self.stats = stats
         self.spin = min(spin, self.cycle_time / 2)
+        self.free = free
 
     def run(self, between: Callable[[float], bool],
             wait: Callable[[float], None] | None = None) -> None:
         """wait(deadline, spin): how to pass the time up to the deadline (perf_counter s), the
         last `spin` s busy; by default a sleep, then a spin (the cycle process reads its pipe
         meanwhile)."""
+        if self.free:
+            return self._run_free(between)
         step, period, spin, stats = self.step, self.cycle_time, self.spin, self.stats
         clock, sleep = time.perf_counter, time.sleep
         deadline = clock() + period
@@ -184,6 +187,22 @@ class CycleLoop:
             previous = start
             deadline += period
             if not between(deadline):
+                return
+
+
+    def _run_free(self, between: Callable[[float], bool]) -> None:
+        """Cycle after cycle with no wait (simulated time runs ahead of the wall clock as far
+        as the machine allows); between cycles `between` serves the parent for at least one
+        message and one call, as on the deadline grid."""
+        step, stats, clock = self.step, self.stats, time.perf_counter
+        previous = float("nan")
+        while True:
+            start = clock()
+            step()
+            now = clock()
+            stats.record(start - previous, 0.0, now - start)
+            previous = start
+            if not between(now):
                 return
 
 
@@ -381,7 +400,7 @@ def _shutdown(controller) -> None:
 
 def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
                cycle_time: float | None, parent_pid: int, spin: float, guard: float,
-               rt_priority: int | None) -> None:
+               rt_priority: int | None, free: bool = False) -> None:
     """Entry point of the cycle process (see the module docstring)."""
     server: _Server | None = None
 
@@ -407,7 +426,7 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
         elif own is not None and abs(own - cycle_time) > 1e-12:
             raise ValueError(f"the clock's cycle time {cycle_time} s differs from the "
                              f"controller's {own} s")
-        loop = CycleLoop(controller.step, cycle_time, stats, spin)
+        loop = CycleLoop(controller.step, cycle_time, stats, spin, free)
         server = _Server(conn, controller, mailbox, stats, parent_pid, guard)
         problems = tune_for_latency(rt_priority)
         conn.send((READY, {"pid": os.getpid(), "cycle_time": loop.cycle_time,
