@@ -53,7 +53,7 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     ("[[devices]]\nname = 'a'\n[[devices]]\nname = 'a'\nport = 1", r"two devices are named 'a'"),
     ("[[devices]]\nname = 'a'\nworld = 'nowhere'", r"world: no built-in world is named"),
     ("[[devices]]\nname = 'a'\nworld = 'no/such.toml'", r"world: .*no/such.toml does not exist"),
-    ("[[devices]]\nname = 'a'\nclock = 'slow'", r"clock: must be one of realtime, lockstep"),
+    ("[[devices]]\nname = 'a'\nclock = 'slow'", r"clock: must be one of realtime, fast, lockstep"),
     ("[[devices]]\nname = 'a'\ncollision_margin = 0", r"collision_margin: must be positive"),
     ("[[devices]]\nname = 'a'\ncollision_margin = 0.5", r"collision_margin: must be within"),
     ("[gateway]\ndevice = 'arm9'", r"gateway\.device: no device is named 'arm9'"),
