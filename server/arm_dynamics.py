@@ -22,7 +22,7 @@ import pinocchio as pin
 
 from landscape.sim.arm import ArmModel
 from landscape.sim.cell import BoxSpec, Cell, ToolSpec
-from landscape.sim.kinematics import PinocchioModel
+from landscape.sim.pinocchio_model import PinocchioModel
 from landscape.sim.tool_shapes import tool_urdf
 
 NO_PAYLOAD = (0.0,) * 10

@@ -27,7 +27,7 @@ from landscape.server.errors import ParamError
 from landscape.server.feedback import CMD, IO, MODEL_TAU, QD, SENSORS, SEQ, TAU, TIME, WALL, Q
 from landscape.server.targets import Frame
 from landscape.server.units import Units
-from landscape.sim.kinematics import PinocchioModel
+from landscape.sim.pinocchio_model import PinocchioModel
 from landscape.v1 import state_service_pb2 as pb
 
 
