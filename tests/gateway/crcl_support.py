@@ -17,12 +17,12 @@ from landscape.gateway.schemas import SchemaSet, default_directory
 from landscape.gateway.server import Gateway
 from landscape.gateway.session import GatewayOptions
 
-EXAMPLES = Path(__file__).resolve().parents[3] / "shared" / "crcl" / "examples"
-# NIST's examples are read from beside the checkout, never copied in: without them, the tests
-# that use them skip.
+XSD = default_directory()
+# NIST's examples are read from beside the schemas (../shared/crcl/examples, or the folder
+# beside $LANDSCAPE_CRCL_SCHEMAS), never copied in: without them, the tests that use them skip.
+EXAMPLES = (XSD.parent if XSD else Path(__file__).resolve().parents[3] / "shared" / "crcl") / "examples"
 needs_examples = pytest.mark.skipif(not EXAMPLES.is_dir(),
                                     reason="NIST's CRCL examples (../shared/crcl/examples) are absent")
-XSD = default_directory()
 
 
 class RunningGateway:
