@@ -211,6 +211,7 @@ class CrclSession:
         try:
             await self.control.prepare()
             self.settings = CrclSettings()
+            await self.link.feed.watch(self, ())
             await push_rates(self)
         except BaseException:
             await self.drop_control()
@@ -238,6 +239,10 @@ class CrclSession:
         await asyncio.gather(*(t for t in (self._running, self._worker) if t),
                              return_exceptions=True)
         await self.drop_control()
+        try:
+            await self.link.feed.watch(self, ())     # its sensors, if no one else's
+        except CrclError as error:
+            log.warning("%s: %s", self.name, error)
 
     # ---- programs ----------------------------------------------------------------------------
 

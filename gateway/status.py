@@ -224,5 +224,5 @@ def _sensor(parent, tag: str, name: str, live: LiveState):
     sensor = _add(parent, tag)
     _add(sensor, "SensorID", name)
     _add(sensor, "ReadCount", str(live.sequence % 2**31))
-    _add(sensor, "LastReadTime", str(int(live.received * 1e6)))
+    _add(sensor, "LastReadTime", str(int(live.time * 1e3)))   # ms since 1970 (the schema)
     return sensor

@@ -3,7 +3,7 @@
 landscape.v1 names the mounted tool and its state (GetEndEffectorState), switches its main
 function with ActivateTool / DeactivateTool (bit 0: close the gripper, or suction on), couples
 and releases tools with the cell's "toolchanger_lock" output (DigitalIOService), reads sensors
-(GetSensorReading, and the state stream) and passes text to the vendor (SendCommand). Where
+(the state stream) and passes text to the vendor (SendCommand). Where
 the device answers UNIMPLEMENTED, the command is a CRCL_Error saying so.
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ from landscape.gateway import model as m
 from landscape.gateway.errors import CrclError
 from landscape.gateway.status import is_vacuum
 from landscape.v1 import digital_io_service_pb2 as dio
-from landscape.v1 import end_effector_pb2, sensing_pb2
+from landscape.v1 import end_effector_pb2
 
 TOOL_CHANGER_OUTPUT = "toolchanger_lock"    # the cell's output: 1 couples, 0 releases
 MAIN_FUNCTION = 1                           # bit 0 of ActivateTool's bit field
@@ -91,18 +91,17 @@ async def disable_gripper(session, cmd: m.DisableGripper) -> str:
 async def enable_sensor(session, cmd: m.EnableSensor) -> str:
     if cmd.options:
         raise CrclError("sensor options are not supported")
-    reply = await session.link.read("GetSensorReading",
-                                    sensing_pb2.GetSensorReadingRequest(sensor_type=cmd.sensor_id))
+    # The gateway's one state stream carries it from now on, once the device has accepted it.
+    await session.link.feed.watch(session, session.settings.sensors | {cmd.sensor_id})
     session.settings.sensors.add(cmd.sensor_id)
-    feed = session.link.feed
-    feed.watch_sensors(tuple(set(feed.sensors) | {cmd.sensor_id}))
-    return f"sensor {cmd.sensor_id} reported ({len(reply.current_data)} values)"
+    return f"sensor {cmd.sensor_id} reported"
 
 
 async def disable_sensor(session, cmd: m.DisableSensor) -> str:
     if cmd.sensor_id not in session.settings.sensors:
         raise CrclError(f"sensor {cmd.sensor_id} is not enabled")
     session.settings.sensors.discard(cmd.sensor_id)
+    await session.link.feed.watch(session, session.settings.sensors)
     return f"sensor {cmd.sensor_id} no longer reported"
 
 
