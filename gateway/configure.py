@@ -7,8 +7,8 @@ import numpy as np
 
 from landscape.gateway import model as m
 from landscape.gateway.errors import CrclError
-from landscape.gateway.motions import push_rates
-from landscape.gateway.settings import JOINTS, rate_si, tolerance_si
+from landscape.gateway.rates import push_rates
+from landscape.gateway.settings import DEFAULT_END_TOLERANCE, JOINTS, rate_si, tolerance_si
 from landscape.v1 import event_service_pb2, settings_pb2, types_pb2
 
 _RATE_FIELDS = {"TransSpeed": ("trans_speed", "length", "max_world_linear_velocity", "limits"),
@@ -37,7 +37,9 @@ async def set_rate(session, cmd: m.SetRate) -> str:
 
 
 async def set_end_pose_tolerance(session, cmd: m.SetEndPoseTolerance) -> str:
-    session.settings.end_tolerance = tolerance_si(cmd.tolerance, session.settings.units)
+    # An element left out keeps the default (DEFAULT_END_TOLERANCE), never "any end".
+    session.settings.end_tolerance = tolerance_si(cmd.tolerance, session.settings.units).over(
+        DEFAULT_END_TOLERANCE)
     return "end pose tolerance set"
 
 

@@ -27,7 +27,7 @@ from landscape.gateway import parse, status, xmlsafe
 from landscape.gateway.device import Control, DeviceLink, DeviceRefused
 from landscape.gateway.errors import CrclError
 from landscape.gateway.handlers import HANDLERS
-from landscape.gateway.motions import push_rates
+from landscape.gateway.rates import push_rates
 from landscape.gateway.program import expand
 from landscape.gateway.schemas import SchemaInvalid, SchemaSet
 from landscape.gateway.settings import CrclSettings
@@ -117,7 +117,7 @@ class CrclSession:
     def status(self) -> bytes:
         feed = self.link.feed
         return status.build(self.record, next(self._status_ids), self.settings, feed.latest,
-                            feed.unavailable, self.options.gripper_stroke)
+                            feed.stale(), self.options.gripper_stroke)
 
     # ---- running commands ---------------------------------------------------------------------
 

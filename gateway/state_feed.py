@@ -151,6 +151,15 @@ class StateFeed:
             return ""
         return f"the device's state is {age:.1f} s old ({self.unavailable or 'no new sample'})"
 
+    async def present(self, timeout: float = 1.0) -> LiveState | None:
+        """The newest sample if it is not old, else the next one to arrive within timeout;
+        None if none does."""
+        if not self.stale():
+            return self.latest
+        asked = time.monotonic()
+        live = await self._first(lambda s: s.received >= asked, timeout)
+        return live if live is not None and live.received >= asked else None
+
     async def taken_after(self, unix_s: float, timeout: float = 1.0) -> LiveState | None:
         """The first sample of a cycle at or after `unix_s` (an event's time); None if none
         comes within timeout."""

@@ -2,7 +2,9 @@
 the device's live state, in the units last set (spec section VIII).
 
 Elements are written in the schema's order; a part the session turned off, or that the device
-cannot say (no live state yet, no tool on the flange), is left out, as the schema allows. The
+cannot say (no live state yet, no tool on the flange), is left out, as the schema allows. A
+live state that is old (the state stream stalled or down) is still shown, and StateDescription
+says how old. The
 tests validate every status written here against CRCLStatus.xsd.
 """
 from __future__ import annotations
@@ -57,11 +59,12 @@ def _vector(parent, tag: str, values, names: str = "IJK") -> None:
 
 
 def build(record: CommandRecord, status_id: int, settings: CrclSettings,
-          live: LiveState | None, unavailable: str = "",
+          live: LiveState | None, stale: str = "",
           gripper_stroke: float = DEFAULT_GRIPPER_STROKE) -> bytes:
-    """The CRCLStatus document, with its XML declaration, as UTF-8 bytes."""
+    """The CRCLStatus document, with its XML declaration, as UTF-8 bytes. `stale`: why the
+    live state is not the device's present state (none, or old), added to StateDescription."""
     root = etree.Element("CRCLStatus", nsmap={"xsi": XSI})
-    _command_status(root, record, status_id, unavailable if live is None else "")
+    _command_status(root, record, status_id, stale)
     report, units = settings.reporting, settings.units
     if live is not None:
         if report.joints:
@@ -81,12 +84,12 @@ def build(record: CommandRecord, status_id: int, settings: CrclSettings,
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8")
 
 
-def _command_status(root, record: CommandRecord, status_id: int, unavailable: str) -> None:
+def _command_status(root, record: CommandRecord, status_id: int, stale: str) -> None:
     status = _add(root, "CommandStatus")
     _add(status, "CommandID", str(record.command_id))
     _add(status, "StatusID", str(status_id))
     _add(status, "CommandState", record.state)
-    description = "; ".join(d for d in (record.description, unavailable) if d)
+    description = "; ".join(d for d in (record.description, stale) if d)
     if description:
         _add(status, "StateDescription", description)
     if record.program_file is not None:
