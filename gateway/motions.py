@@ -29,6 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from landscape.gateway import model as m
 from landscape.gateway import poses
+from landscape.gateway.device import DeviceRefused
 from landscape.gateway.errors import CrclError
 from landscape.gateway.rates import PERCENT_ACCEL, RatesFor, motion_rates, percent, speed_percent
 from landscape.gateway.settings import DEFAULT_JOINT_TOLERANCE, ToleranceSi, tolerance_si
@@ -267,10 +268,11 @@ def _check_joints(session, cmd: m.ActuateJoints, target: np.ndarray, live: LiveS
 
 
 async def stop_motion(session, cmd: m.StopMotion) -> str:
-    """Normal: a controlled stop on the path, drives on. Fast: the same, then drives off.
-    Immediate: drives off at once; the device stops along the path at full deceleration before
-    the drives go off (landscape.v1 has no stop that cuts the drives mid-motion but the
-    e-stop)."""
+    """Spec VII StopMotion; every kind starts at once, ahead of the commands before it
+    (session.py). Immediate: drives off now, with no controlled stop asked first (the device
+    brakes at its full deceleration and cuts the drives at rest; landscape.v1 has no stop that
+    cuts them mid-motion but the operator's e-stop). Fast: a controlled stop on the path, then
+    drives off. Normal: a controlled stop on the path, drives on."""
     if cmd.condition == "Immediate":
         await _deactivate(session)
         return "stopped, drives off"
@@ -282,7 +284,9 @@ async def stop_motion(session, cmd: m.StopMotion) -> str:
 
 
 async def _deactivate(session) -> None:
-    if await session.control.state() in (types_pb2.DEVICE_STATE_RESTING,
-                                         types_pb2.DEVICE_STATE_MOVING,
-                                         types_pb2.DEVICE_STATE_PAUSED):
+    """Drives off (Deactivate stops a motion first); already off is fine."""
+    try:
         await session.control.call("Deactivate", control_pb2.DeactivateRequest())
+    except DeviceRefused:
+        if await session.control.state() != types_pb2.DEVICE_STATE_INACTIVE:
+            raise

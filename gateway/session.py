@@ -99,7 +99,8 @@ class CrclSession:
         self.submit(lambda: self.execute(command), command.MOTION or command.LASTS,
                     CommandRecord(command.command_id, WORKING, program_file=document.program_file,
                                   program_index=document.program_index,
-                                  program_length=document.program_length))
+                                  program_length=document.program_length),
+                    urgent=isinstance(command, m.StopMotion) and self.control is not None)
         await asyncio.sleep(0)   # a command done at once is Done for the next GetStatus
         return None
 
@@ -121,15 +122,21 @@ class CrclSession:
 
     # ---- running commands ---------------------------------------------------------------------
 
-    def submit(self, body, lasts: bool, record: CommandRecord) -> None:
+    def submit(self, body, lasts: bool, record: CommandRecord, urgent: bool = False) -> None:
         """Queue a command (`body()` makes its coroutine). Commands run in order; a new one
-        preempts a running command that lasts (a motion, a dwell, a program)."""
+        preempts a running command that lasts (a motion, a dwell, a program). An urgent one (a
+        stop) starts at once: the commands queued before it are dropped, and it waits neither
+        for them nor for the preempted motion's controlled stop."""
         if len(self._queue) >= MAX_QUEUED:
             self.record = CommandRecord(record.command_id, ERROR,
                                         f"more than {MAX_QUEUED} commands queued: refused")
             return
-        self._queue.append((body, lasts, record))
-        if self._running is None and len(self._queue) == 1:
+        if urgent:
+            self._queue.clear()
+            started = asyncio.ensure_future(body())
+            body = lambda: started            # noqa: E731 - the worker awaits it in turn
+        self._queue.append((body, lasts, record, urgent))
+        if urgent or (self._running is None and len(self._queue) == 1):
             self.record = record     # it runs next: status names it from now on
         if self._running is not None and self._running_lasts and not self._running.done():
             self._running.cancel()
@@ -138,13 +145,18 @@ class CrclSession:
 
     async def _work(self) -> None:
         while self._queue:
-            body, lasts, record = self._queue.popleft()
+            body, lasts, record, urgent = self._queue.popleft()
+            if lasts and self._queue and not urgent:
+                # Preempted before it began: the next command came while it waited.
+                record.state, record.description = ERROR, "preempted by the next command"
+                continue
             if self._must_halt:
                 self._must_halt = False
-                await self._halt_quietly()
+                if not urgent:                   # a stop stops the arm its own way
+                    await self._halt_quietly()
             self.record = record
             self.changed()
-            self._running, self._running_lasts = asyncio.create_task(body()), lasts
+            self._running, self._running_lasts = asyncio.ensure_future(body()), lasts
             try:
                 description = await asyncio.shield(self._running)
                 if self.record is record:
@@ -169,11 +181,8 @@ class CrclSession:
             await asyncio.gather(self._worker, return_exceptions=True)
 
     async def _halt_quietly(self) -> None:
-        """After a preempted motion: let a move request in flight land, then stop on the
-        path. A failure here is the next command's to report."""
-        if self.motion_start is not None:
-            await asyncio.gather(self.motion_start, return_exceptions=True)
-            self.motion_start = None
+        """After a preempted motion: stop on the path. A failure here is the next command's
+        to report."""
         if self.control is not None:
             try:
                 await self.halt()
@@ -181,7 +190,15 @@ class CrclSession:
                 log.warning("%s: stopping the preempted motion: %s", self.name, error)
 
     async def halt(self) -> None:
-        """Stop a motion along its path and drop it (the arm rests, drives stay on)."""
+        """Stop a motion along its path and drop it (the arm rests, drives stay on); once more
+        after a motion request still in flight has landed."""
+        await self._halt_once()
+        if self.motion_start is not None:
+            await asyncio.gather(self.motion_start, return_exceptions=True)
+            self.motion_start = None
+            await self._halt_once()
+
+    async def _halt_once(self) -> None:
         state = await self.control.state()
         if state == types_pb2.DEVICE_STATE_MOVING:
             await self.control.call("StopMotion", motion_pb2.StopMotionRequest())
