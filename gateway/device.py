@@ -62,6 +62,7 @@ class DeviceLink:
         self.event_service = event_service_pb2_grpc.EventServiceStub(self.channel)
         self.feed = StateFeed(self.channel, state_rate_hz)
         self.events = EventRouter(self.channel)
+        self.slots: dict = {}      # rack tool -> its plate in the world (tooling.py)
 
     async def start(self) -> None:
         await self.feed.start()

@@ -166,6 +166,12 @@ class StateFeed:
         live = await self._first(lambda s: s.time >= unix_s, timeout)
         return live if live is not None and live.time >= unix_s else None
 
+    async def until(self, condition, timeout: float = 1.0) -> LiveState | None:
+        """The first sample (the newest included) for which condition(sample) holds; None if
+        none comes within timeout."""
+        live = await self._first(condition, timeout)
+        return live if live is not None and condition(live) else None
+
     async def _first(self, condition, timeout: float) -> LiveState | None:
         async with self._changed:
             try:

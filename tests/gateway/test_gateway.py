@@ -171,21 +171,6 @@ def test_stop_motion_normal_stops_on_the_path_and_keeps_the_drives_on(client, se
                  "CommandState") == "CRCL_Done"
 
 
-@pytest.mark.parametrize("kind, body, rpc", [
-    ("SetEndEffector", "<Setting>1</Setting>", "GetEndEffectorState"),
-    ("CloseToolChanger", "", "ListDigitalIO"),
-    ("RunProgram", "<ProgramText>version</ProgramText>", "SendCommand"),
-    ("EnableSensor", "<SensorID>force_sensor</SensorID>", "GetSensorReading"),
-])
-def test_what_the_device_does_not_implement_is_an_error_saying_so(client, kind, body, rpc):
-    client.run("InitCanon", 1)
-    status = client.run(kind, 2, body)
-    description = field(status, "StateDescription")
-    if field(status, "CommandState") == "CRCL_Done" or "UNIMPLEMENTED" not in description:
-        pytest.skip(f"the device implements {rpc} now: {description}")
-    assert f"does not implement {rpc} yet (UNIMPLEMENTED)" in description
-
-
 def test_settings_status_reports_what_was_set_in_current_units(client):
     client.run("InitCanon", 1)
     client.run("ConfigureStatusReport", 2, "".join(
