@@ -198,3 +198,17 @@ def test_a_message_reaches_every_supervisor_on_the_device_event_stream(client, s
     subscription.close()
     assert posted and posted[0].detail.text == "check the fixture"
     assert posted[0].detail.source   # the gateway's session, which holds the lock
+
+
+def test_get_status_is_answered_without_any_device_call(proxied):
+    """GetStatus comes from the live state stream: the device hears nothing of the polls."""
+    proxy, _, client = proxied
+    client.run("Dwell", 2, "<DwellTime>0</DwellTime>")
+    before = dict(proxy.calls)
+    statuses = [client.status() for _ in range(200)]
+    assert all(field(s, "CommandID") == "2" for s in statuses)
+    assert dict(proxy.calls) == before, {k: v - before.get(k, 0) for k, v in proxy.calls.items()}
+    client.run("Dwell", 3, "<DwellTime>0</DwellTime>")     # a command is heard by the device...
+    client.run("SetTransSpeed", 4, '<TransSpeed xsi:type="TransSpeedRelativeType"><Fraction>0.3'
+                                   "</Fraction></TransSpeed>")
+    assert proxy.calls["SetSpeed"] > before.get("SetSpeed", 0)   # ...when it has to be

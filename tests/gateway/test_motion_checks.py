@@ -4,22 +4,17 @@ server (through a forwarding proxy where the state stream must stall)."""
 from __future__ import annotations
 
 import math
-import threading
 import time
 
-import grpc
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from landscape.gateway.errors import CrclError
 from landscape.gateway.motions import check_pose
 from landscape.gateway.settings import CrclSettings, ToleranceSi
 from landscape.gateway.units import CrclUnits
-from landscape.v1 import state_service_pb2, state_service_pb2_grpc, types_pb2
 
-from crcl_support import RawClient, RunningGateway, field, pose
-from grpc_proxy import GrpcProxy
+from crcl_support import RawClient, ToolWatch, field, pose
 from test_gateway import MOVE, point
 
 GOAL = np.array([0.5, 0.1, 0.6, math.pi, 0.0, 0.0])
@@ -37,20 +32,6 @@ def test_an_end_pose_off_by_more_than_the_default_tolerance_is_no_success():
     only_x = ToleranceSi(x=0.01).over(default)
     with pytest.raises(CrclError, match="off in Y"):
         check_pose(units, GOAL, only_x, GOAL + [0.005, 0.002, 0, 0, 0, 0])
-
-
-@pytest.fixture
-def proxied(server):
-    """The gateway reaching the device server through a proxy that can stall the state
-    stream."""
-    proxy = GrpcProxy(server.target)
-    gateway = RunningGateway(proxy.target)
-    client = RawClient(gateway.port)
-    assert field(client.run("InitCanon", 1), "CommandState") == "CRCL_Done"
-    yield proxy, gateway, client
-    client.close()
-    gateway.close()
-    proxy.close()
 
 
 def test_status_says_how_old_a_stalled_state_is(proxied):
@@ -92,47 +73,6 @@ def test_a_motion_is_not_judged_on_a_sample_from_before_its_end(proxied):
 
 # ---- per-command rates and tolerances ------------------------------------------------------------
 
-class ToolWatch:
-    """The device's tool pose every controller cycle (its own state stream), with the
-    controller's (simulated) time."""
-
-    def __init__(self, target: str):
-        self.channel = grpc.insecure_channel(target)
-        self.samples: list[tuple[float, np.ndarray]] = []
-        self.call = state_service_pb2_grpc.StateServiceStub(self.channel).StreamState(
-            state_service_pb2.StreamStateRequest(
-                rate_hz=0, frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
-                units=types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS,
-                                      angular=types_pb2.ANGULAR_UNIT_RADIANS)))
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self):
-        try:
-            for reply in self.call:
-                if reply.WhichOneof("message") == "sample":
-                    p = reply.sample.tool_pose
-                    self.samples.append((reply.sample.controller_time,
-                                         np.array([p.x, p.y, p.z, p.roll, p.pitch, p.yaw])))
-        except grpc.RpcError:
-            pass
-
-    def peak_turn_rate(self, since: float) -> float:
-        """The fastest the tool turned (rad/s of controller time) after `since` (its own
-        clock, s), over 10-cycle windows."""
-        times = np.array([t for t, _ in self.samples if t >= since])
-        rotations = Rotation.from_euler("xyz", [p[3:] for t, p in self.samples if t >= since])
-        step = 10
-        angles = (rotations[step:] * rotations[:-step].inv()).magnitude()
-        return float(np.max(angles / (times[step:] - times[:-step])))
-
-    def now(self) -> float:
-        return self.samples[-1][0]
-
-    def close(self):
-        self.call.cancel()
-        self.channel.close()
-
-
 @pytest.fixture
 def client(gateway):
     c = RawClient(gateway.port)
@@ -153,20 +93,16 @@ def _turned(yaw_degrees: float, settings: str = "", tag: str = "EndPosition") ->
 
 
 def test_a_pose_own_rot_speed_holds_for_its_move_only(server, client):
+    client.run("MoveTo", 2, MOVE.format("true") + _turned(0))
     watch = ToolWatch(server.target)
-    try:
-        client.run("MoveTo", 2, MOVE.format("true") + _turned(0))
-        since = watch.now()
-        slow = client.run("MoveTo", 3, MOVE.format("true") + _turned(
-            60, '<RotSpeed xsi:type="RotSpeedAbsoluteType"><Setting>0.2</Setting></RotSpeed>'))
-        assert field(slow, "CommandState") == "CRCL_Done", slow
-        slow_rate = watch.peak_turn_rate(since)
-        since = watch.now()
-        fast = client.run("MoveTo", 4, MOVE.format("true") + _turned(0))
-        assert field(fast, "CommandState") == "CRCL_Done", fast
-        fast_rate = watch.peak_turn_rate(since)
-    finally:
-        watch.close()
+    slow = client.run("MoveTo", 3, MOVE.format("true") + _turned(
+        60, '<RotSpeed xsi:type="RotSpeedAbsoluteType"><Setting>0.2</Setting></RotSpeed>'))
+    assert field(slow, "CommandState") == "CRCL_Done", slow
+    slow_rate = watch.peak_turn_rate()
+    watch = ToolWatch(server.target)
+    fast = client.run("MoveTo", 4, MOVE.format("true") + _turned(0))
+    assert field(fast, "CommandState") == "CRCL_Done", fast
+    fast_rate = watch.peak_turn_rate()
     assert 0.1 < slow_rate <= 0.2 * 1.02, slow_rate
     assert fast_rate > 2 * 0.2, fast_rate          # the session's RotSpeed is back
 
