@@ -9,8 +9,11 @@ scale; the joints get the same percent of their maxima. So:
 - RotSpeed w and RotAccel alpha are the angular caps. The percent still scales the angular
   maximum, so rotation may come out slower than asked, never faster (spec V allows less).
 
-Per-command rates (a PoseAndSetType, a waypoint) are set on the device before that command's
-motion starts and the session's put back once it has started: the device plans at the start.
+The session's rates reach the device when a motion needs them, just before it starts (only
+those that changed since last sent), not when a Set*Speed / Set*Accel sets them: a setting is
+no device round trip. Per-command rates (a PoseAndSetType, a waypoint) are set the same way
+for that command's motion and the session's put back once it has started: the device plans at
+the start.
 """
 from __future__ import annotations
 
@@ -83,14 +86,14 @@ async def push_rates(session) -> None:
 
 
 class RatesFor:
-    """Device settings for one command's motion: set before it starts, and the session's own
-    put back as soon as it has started."""
+    """The device's settings for one command's motion: the session's rates with the
+    command's own, set before it starts; the session's own put back once it has started."""
 
     def __init__(self, session, overrides: dict[tuple[str, int], float]):
         self.session, self.overrides = session, overrides
 
     async def __aenter__(self):
-        await push(self.session, self.overrides)
+        await push(self.session, {**session_rates(self.session), **self.overrides})
 
     async def __aexit__(self, *exc):
         if self.overrides:

@@ -4,6 +4,8 @@
   the typed parser; a refused document becomes a CRCL_Error status saying why, and the
   session goes on.
 - GetStatus is answered at once from the live state; it never waits behind a command.
+- Settings and reporting commands (handlers.IMMEDIATE: no device call) are carried out at
+  once when nothing else runs, so they are Done for the very next GetStatus.
 - Other commands run in the order they arrive, each the current one (CRCL_Working) while it
   runs. A new command preempts a running one that lasts (a motion, a dwell, a program: spec
   section VI): it is cancelled and the arm stops along its path before the new one starts;
@@ -26,7 +28,7 @@ from landscape.gateway import model as m
 from landscape.gateway import parse, status, xmlsafe
 from landscape.gateway.device import Control, DeviceLink, DeviceRefused
 from landscape.gateway.errors import CrclError
-from landscape.gateway.handlers import HANDLERS
+from landscape.gateway.handlers import HANDLERS, immediate
 from landscape.gateway.rates import push_rates
 from landscape.gateway.program import expand
 from landscape.gateway.schemas import SchemaInvalid, SchemaSet
@@ -96,6 +98,14 @@ class CrclSession:
         command = document.command
         if isinstance(command, m.GetStatus):
             return self.status()
+        if immediate(command) and self._running is None and not self._queue:
+            record = CommandRecord(command.command_id, WORKING, program_file=document.program_file,
+                                   program_index=document.program_index,
+                                   program_length=document.program_length)
+            self.record = record
+            await self._outcome(record, self.execute(command))   # never waits: no device
+            self.changed()
+            return None
         self.submit(lambda: self.execute(command), command.MOTION or command.LASTS,
                     CommandRecord(command.command_id, WORKING, program_file=document.program_file,
                                   program_index=document.program_index,
@@ -158,22 +168,27 @@ class CrclSession:
             self.changed()
             self._running, self._running_lasts = asyncio.ensure_future(body()), lasts
             try:
-                description = await asyncio.shield(self._running)
-                if self.record is record:
-                    record.state, record.description = DONE, description or ""
+                await self._outcome(record, asyncio.shield(self._running))
             except asyncio.CancelledError:
                 if not self._running.cancelled():
                     raise              # the worker itself is cancelled: the session closes
                 record.state, record.description = ERROR, "preempted by the next command"
                 self._must_halt = lasts
-            except (CrclError, DeviceRefused) as error:
-                record.state, record.description = ERROR, str(error)
-            except Exception as error:   # a bug must not take the connection down silently
-                log.exception("%s: command %d failed", self.name, record.command_id)
-                record.state, record.description = ERROR, f"gateway error: {error!r}"
             finally:
                 self._running = None
                 self.changed()
+
+    async def _outcome(self, record: CommandRecord, running) -> None:
+        """Await a command (its coroutine or task) and write how it ended into its record."""
+        try:
+            description = await running
+            if self.record is record:
+                record.state, record.description = DONE, description or ""
+        except (CrclError, DeviceRefused) as error:
+            record.state, record.description = ERROR, str(error)
+        except Exception as error:   # a bug must not take the connection down silently
+            log.exception("%s: command %d failed", self.name, record.command_id)
+            record.state, record.description = ERROR, f"gateway error: {error!r}"
 
     async def wait(self) -> None:
         """Until every queued command has finished (for programs and tests)."""

@@ -23,6 +23,7 @@ from landscape.gateway import model as m
 from landscape.gateway import poses
 from landscape.gateway.errors import CrclError
 from landscape.gateway.motions import SETTLE_TIMEOUT, present
+from landscape.gateway.rates import push_rates
 from landscape.gateway.status import is_vacuum
 from landscape.v1 import control_pb2
 from landscape.v1 import digital_io_service_pb2 as dio
@@ -84,6 +85,12 @@ async def _flange(session) -> np.ndarray:
     return poses.matrix(live.tool_pose) @ np.linalg.inv(offset)
 
 
+async def _ready_to_move(session) -> None:
+    """Drives on and the session's rates on the device: GetTool / PutTool move the arm."""
+    await session.control.ensure_active()
+    await push_rates(session)
+
+
 def _docking(flange: np.ndarray, plate: np.ndarray) -> float | None:
     """How far above the plate, along its axis, the flange is (0: at it), or None if it is
     not on the axis, turned as the plate, within DOCK_REACH."""
@@ -111,7 +118,7 @@ async def close_tool_changer(session, cmd: m.CloseToolChanger) -> str:
                 await _changer(session, couple=False)
                 raise CrclError(f"the changer did not couple the {name} at its plate")
             return f"tool {tool} coupled"
-        await session.control.ensure_active()
+        await _ready_to_move(session)
         await session.control.call("GetTool", end_effector_pb2.GetToolRequest(tool_id=name))
         return f"tool {name} coupled (the device docked it from {above:.3f} m above)"
     raise CrclError(f"the arm is at no tool changer: the flange must be at a rack tool's plate "
@@ -131,7 +138,7 @@ async def open_tool_changer(session, cmd: m.OpenToolChanger) -> str:
     if plate is None or above <= SLOT_REACH:   # the device checks the slot itself
         await _changer(session, couple=False)
         return f"tool {tool} released"
-    await session.control.ensure_active()
+    await _ready_to_move(session)
     await session.control.call("PutTool", end_effector_pb2.PutToolRequest(tool_id=tool))
     return f"tool {tool} released into its slot (the device docked it from {above:.3f} m above)"
 

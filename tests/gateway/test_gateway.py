@@ -208,7 +208,45 @@ def test_get_status_is_answered_without_any_device_call(proxied):
     statuses = [client.status() for _ in range(200)]
     assert all(field(s, "CommandID") == "2" for s in statuses)
     assert dict(proxy.calls) == before, {k: v - before.get(k, 0) for k, v in proxy.calls.items()}
-    client.run("Dwell", 3, "<DwellTime>0</DwellTime>")     # a command is heard by the device...
-    client.run("SetTransSpeed", 4, '<TransSpeed xsi:type="TransSpeedRelativeType"><Fraction>0.3'
-                                   "</Fraction></TransSpeed>")
-    assert proxy.calls["SetSpeed"] > before.get("SetSpeed", 0)   # ...when it has to be
+    client.run("MoveTo", 3, MOVE.format("true") + pose(0.5, 0.1, 0.6))   # a motion is heard
+    assert proxy.calls["MoveAbsolute"] == before.get("MoveAbsolute", 0) + 1
+
+
+TOLERANCE = "<Tolerance><XPointTolerance>0.001</XPointTolerance></Tolerance>"
+RATE = '<{0} xsi:type="{0}RelativeType"><Fraction>0.5</Fraction></{0}>'
+IMMEDIATE_SAMPLES = {
+    "SetAngleUnits": "<UnitName>degree</UnitName>", "SetLengthUnits": "<UnitName>millimeter</UnitName>",
+    "SetForceUnits": "<UnitName>newton</UnitName>",
+    "SetTorqueUnits": "<UnitName>newtonMeter</UnitName>",
+    "SetTransSpeed": RATE.format("TransSpeed"), "SetRotSpeed": RATE.format("RotSpeed"),
+    "SetTransAccel": RATE.format("TransAccel"), "SetRotAccel": RATE.format("RotAccel"),
+    "SetEndPoseTolerance": TOLERANCE, "SetIntermediatePoseTolerance": TOLERANCE,
+    # (the schema spells it so)
+    "SetDefaultJointPositonsTolerances": "<JointTolerances><Setting><JointNumber>1</JointNumber>"
+                                          "<JointPositionTolerance>0.01</JointPositionTolerance>"
+                                          "</Setting></JointTolerances>",
+    "SetMotionCoordination": "<Coordinated>true</Coordinated>",
+    "ConfigureJointReports": "<ResetAll>true</ResetAll>",
+    "ConfigureStatusReport": "".join(f"<Report{t}>true</Report{t}>" for t in (
+        "JointStatuses", "PoseStatus", "GripperStatus", "SettingsStatus", "SensorsStatus",
+        "GuardsStatus")),
+    "EnableRobotParameterStatus": "<RobotParameterName>ToolOffset</RobotParameterName>",
+    "DisableRobotParameterStatus": "<RobotParameterName>ToolOffset</RobotParameterName>",
+    "EnableGripper": "<GripperName>gripper</GripperName>",
+    "DisableGripper": "<GripperName>gripper</GripperName>",
+    "Dwell": "<DwellTime>0</DwellTime>",
+}
+
+
+def test_settings_are_done_for_the_very_next_get_status(client):
+    """Commands carried out without the device are Done before the next document is read:
+    a client polling at once after them needs one GetStatus (NIST's reference client's
+    pattern, and the CRCL bench's)."""
+    from landscape.gateway.handlers import IMMEDIATE
+    assert {c.KIND for c in IMMEDIATE} | {"Dwell"} == set(IMMEDIATE_SAMPLES)
+    client.run("InitCanon", 1)
+    for command_id, (kind, body) in enumerate(IMMEDIATE_SAMPLES.items(), start=2):
+        client.send(command(kind, command_id, body) + command("GetStatus", 900 + command_id))
+        status = client.read_status()
+        assert (field(status, "CommandID"), field(status, "CommandState")) == (
+            str(command_id), "CRCL_Done"), status
