@@ -30,10 +30,11 @@ _LINEAR_M = {types_pb2.LINEAR_UNIT_INCHES: 0.0254, types_pb2.LINEAR_UNIT_FEET: 0
 _ANGULAR_RAD = {types_pb2.ANGULAR_UNIT_DEGREES: np.pi / 180.0, types_pb2.ANGULAR_UNIT_RADIANS: 1.0}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class LiveState:
     """One sample of the device, SI: joints rad (6,), rad/s (6,), N*m (6,) or empty; the tool
-    tip in the world frame as x, y, z (m), roll, pitch, yaw (rad)."""
+    tip in the world frame as x, y, z (m), roll, pitch, yaw (rad). Each sample is its own
+    (compared and hashed by identity: status.py keeps what it made of the newest ones)."""
 
     sequence: int
     joint_positions: np.ndarray
