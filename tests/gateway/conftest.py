@@ -22,9 +22,10 @@ def gateway(server):
 @pytest.fixture
 def proxied(server):
     """The gateway reaching the device server through a proxy that can stall the state
-    stream."""
+    stream (at 5 samples a simulated second: the lock-step clock runs some 10 times faster than
+    the wall clock, and the proxy forwards that many with time to spare)."""
     proxy = GrpcProxy(server.target)
-    gateway = RunningGateway(proxy.target)
+    gateway = RunningGateway(proxy.target, state_rate_hz=5.0)
     client = RawClient(gateway.port)
     assert field(client.run("InitCanon", 1), "CommandState") == "CRCL_Done"
     yield proxy, gateway, client

@@ -32,18 +32,18 @@ needs_examples = pytest.mark.skipif(not EXAMPLES.is_dir(),
 class RunningGateway:
     """The gateway serving on a free loopback port, stopped by close()."""
 
-    def __init__(self, device_target: str, **options):
+    def __init__(self, device_target: str, state_rate_hz: float = 100.0, **options):
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True,
                                        name="crcl-gateway")
         self.thread.start()
         schemas = SchemaSet(XSD) if XSD else None
         self.options = GatewayOptions(schemas=schemas, **options)
-        self.link, self.gateway = self.run(self._start(device_target))
+        self.link, self.gateway = self.run(self._start(device_target, state_rate_hz))
         self.port = self.gateway.port
 
-    async def _start(self, target: str):
-        link = DeviceLink(target)
+    async def _start(self, target: str, state_rate_hz: float):
+        link = DeviceLink(target, state_rate_hz)
         await link.start()
         gateway = await Gateway(link, self.options).serve("127.0.0.1", 0)
         return link, gateway
