@@ -20,6 +20,16 @@ def gateway(server):
 
 
 @pytest.fixture
+def client(gateway):
+    """A CRCL client in a session (its InitCanon done). Modules that need one before InitCanon
+    define their own."""
+    c = RawClient(gateway.port)
+    assert field(c.run("InitCanon", 1), "CommandState") == "CRCL_Done"
+    yield c
+    c.close()
+
+
+@pytest.fixture
 def proxied(server):
     """The gateway reaching the device server through a proxy that can stall the state
     stream (at 5 samples a simulated second: the lock-step clock runs some 10 times faster than

@@ -21,6 +21,7 @@ def point(status: str) -> tuple[float, float, float]:
 
 @pytest.fixture
 def client(gateway):
+    """Here a client before its InitCanon."""
     c = RawClient(gateway.port)
     yield c
     c.close()

@@ -14,7 +14,7 @@ from landscape.gateway.motions import check_pose
 from landscape.gateway.settings import CrclSettings, ToleranceSi
 from landscape.gateway.units import CrclUnits
 
-from crcl_support import RawClient, ToolWatch, field, pose
+from crcl_support import ToolWatch, field, pose
 from test_gateway import MOVE, point
 
 GOAL = np.array([0.5, 0.1, 0.6, math.pi, 0.0, 0.0])
@@ -72,14 +72,6 @@ def test_a_motion_is_not_judged_on_a_sample_from_before_its_end(proxied):
 
 
 # ---- per-command rates and tolerances ------------------------------------------------------------
-
-@pytest.fixture
-def client(gateway):
-    c = RawClient(gateway.port)
-    c.run("InitCanon", 1)
-    yield c
-    c.close()
-
 
 def _turned(yaw_degrees: float, settings: str = "", tag: str = "EndPosition") -> str:
     """The pose (0.5, 0, 0.6) pointing down, turned about the vertical; PoseAndSetType when

@@ -18,14 +18,6 @@ from crcl_support import RawClient, RunningGateway, ToolWatch, field, pose
 from test_gateway import MOVE, point
 
 
-@pytest.fixture
-def client(gateway):
-    c = RawClient(gateway.port)
-    c.run("InitCanon", 1)
-    yield c
-    c.close()
-
-
 def _distance_to_polyline(point_: np.ndarray, line: np.ndarray) -> tuple[float, int]:
     """The distance from a point to a sampled path (K, 3), and the sample nearest it."""
     a, b = line[:-1], line[1:]

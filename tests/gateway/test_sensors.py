@@ -20,14 +20,6 @@ offset = [0.05, 0.0, 0.0]
 """
 
 
-@pytest.fixture
-def client(gateway):
-    c = RawClient(gateway.port)
-    c.run("InitCanon", 1)
-    yield c
-    c.close()
-
-
 def test_enable_sensor_then_move_the_pose_follows_and_the_sensor_is_reported(gateway, client):
     enabled = client.run("EnableSensor", 2, "<SensorID>force_sensor</SensorID>")
     assert field(enabled, "CommandState") == "CRCL_Done", enabled

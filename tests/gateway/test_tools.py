@@ -7,20 +7,12 @@ import re
 
 import pytest
 
-from crcl_support import RawClient, field, pose
+from crcl_support import field, pose
 from test_gateway import MOVE, point
 
 PLATE = (-0.1, -0.6, 0.461)      # the gripper's plate in its slot (the flange's pose to couple)
 GRIPPER_LENGTH = 0.16            # plate to finger tips
 AWAY = (0.5, 0.0, 0.6)
-
-
-@pytest.fixture
-def client(gateway):
-    c = RawClient(gateway.port)
-    assert field(c.run("InitCanon", 1), "CommandState") == "CRCL_Done"
-    yield c
-    c.close()
 
 
 def gripper(status: str) -> str | None:
