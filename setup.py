@@ -5,6 +5,29 @@ from setuptools import setup
 
 ROOT = Path(__file__).parent
 
+# The top-level folders of the repository are sub-packages of one import name, `landscape`.
+PACKAGE_DIR = {"landscape.v1": "gen/landscape/v1", "landscape.server": "server",
+               "landscape.client": "client", "landscape.sim": "sim", "landscape.gateway": "gateway",
+               "landscape.supervisor": "supervisor_gui_web", "landscape.cell": "cell"}
+PACKAGES = ["landscape.v1", "landscape.server", "landscape.server.motion",
+            "landscape.server.servicers", "landscape.server.collision", "landscape.client",
+            "landscape.client.cli", "landscape.sim", "landscape.sim.cells", "landscape.gateway",
+            "landscape.supervisor", "landscape.cell", "landscape.cell.cells"]
+# Every folder holding data files is a package of its own, or setuptools warns (at length) that
+# it "would be ignored".
+PACKAGE_DATA = {"landscape.sim.cells": ["*.toml"], "landscape.cell.cells": ["*.toml"]}
+PAGE = ROOT / "supervisor_gui_web" / "frontend" / "dist"   # the web supervisor's built page
+
+
+def page_packages() -> dict[str, list[str]]:
+    """The built page's folders as packages with all their files, {} before npm built it
+    (`make install` does; the web supervisor then says the page is not built)."""
+    if not (PAGE / "index.html").is_file():
+        return {}
+    folders = [PAGE, *(p for p in sorted(PAGE.rglob("*")) if p.is_dir())]
+    return {".".join(["landscape.supervisor", *f.relative_to(PAGE.parents[1]).parts]): ["*"]
+            for f in folders}
+
 
 def generate_stubs() -> None:
     from grpc_tools import protoc  # build requirement, see pyproject.toml
@@ -26,4 +49,6 @@ if __name__ == "__main__":
     # Every build (wheel, sdist, editable) runs this file first, and the package directory
     # gen/landscape/v1 must exist before setuptools looks for it.
     generate_stubs()
-    setup()
+    page = page_packages()
+    setup(packages=PACKAGES + list(page), package_dir=PACKAGE_DIR,
+          package_data=PACKAGE_DATA | page)

@@ -6,14 +6,18 @@ The real BulletController (default cell, vacuum cup on the flange) stepped in a 
 the time of the cyclic function alone (the Executor: messages, sensors, I/O, setpoint, ring
 row) is measured with perf_counter, and the whole step (physics included) beside it:
 
-  bare executor       the Executor with sensor and I/O reading taken out: the cost before
-                      issue 10 (same-run baseline)
+  bare executor       the Executor with sensor and I/O reading and the model torques taken
+                      out: the cost before issue 10 (same-run baseline)
   holding             what every cycle pays now: the force/torque sensor, the range sensor
-                      every 5th cycle, the I/O image of the end effector's signals
+                      every 5th cycle, the I/O image of the end effector's signals, the
+                      model torques (pinocchio's RNEA with the payload)
   + guarded move      a moveReact's threshold monitor on a straight move
   + comply            the admittance loop (pinocchio Jacobian and pose, a damped solve)
   + Cartesian jog     jog integration with its reference pose (pinocchio, a damped solve)
   + I/O watch         a signalDigitalIO watch polling unit 1 (zones: a look at the world)
+
+and, alone, the model torques' share of every cycle (the Executor's acceleration and RNEA, on
+the same controller's feedback, in a tight loop: less disturbed by a busy machine).
 
 Prints figures (microseconds, p50 / p99 / max), decides nothing; the 4 ms cycle is the budget.
 """
@@ -24,7 +28,9 @@ import math
 import time
 
 import numpy as np
+from common import record
 
+from landscape.server.arm_dynamics import tool_payload
 from landscape.server.cycle_inputs import CycleSensors, IoMonitor
 from landscape.server.executor import Executor
 from landscape.server.run_arrays import pack_run
@@ -36,7 +42,7 @@ from landscape.server.settings import MotionSettings
 from landscape.server.targets import Frame
 from landscape.sim.bullet_controller import BulletController
 from landscape.sim.cell import load_cell
-from landscape.sim.controller import EnableState
+from landscape.sim.controller import EnableState, JointFbk
 from landscape.sim.cycle_process import Mailbox
 from landscape.sim.kinematics import Kinematics
 from landscape.sim.shared_array import SharedArrays
@@ -67,7 +73,7 @@ def _controller(bare: bool):
     mailbox = Mailbox()
     executor = Executor(mailbox, cell.controller.cycle_time, FeedbackRing(), cell.arm)
     if bare:
-        executor._sensors, executor._io = _Nothing(), _Nothing()
+        executor._sensors, executor._io, executor._dynamics = _Nothing(), _Nothing(), None
     timed = []
 
     def cyclic(ctrl):
@@ -112,6 +118,22 @@ def _move(ctrl, mailbox, loops: dict) -> None:
 def _figures(label: str, executor_us: np.ndarray, step_us: np.ndarray) -> None:
     p = lambda a: f"{np.percentile(a, 50):7.1f} {np.percentile(a, 99):7.1f} {a.max():8.1f}"  # noqa
     print(f"{label:20s} executor p50/p99/max {p(executor_us)} us   whole step {p(step_us)} us")
+    record(f"cycle step p99, {label.lstrip('+ ')}", float(np.percentile(step_us, 99)), "us",
+           baseline=4000.0, baseline_name="the cycle")
+
+
+def _model_torques(cycles: int) -> np.ndarray:
+    cell = load_cell()
+    executor = Executor(Mailbox(), cell.controller.cycle_time, None, cell.arm)
+    executor._dynamics.set_payload(tool_payload(cell.world.tools[0]))
+    q = np.array(cell.controller.initial_position)
+    fbk = JointFbk(q, np.full(6, 0.5), np.zeros(6), np.zeros(6))
+    out = []
+    for k in range(cycles):
+        start = time.perf_counter()
+        executor._model_torques(fbk, q + 1e-3 * (k % 7))
+        out.append(time.perf_counter() - start)
+    return np.array(out) * 1e6
 
 
 def main() -> None:
@@ -156,6 +178,10 @@ def main() -> None:
     mailbox.inbox.append({"op": "watch", "id": "w", "unit": 1, "bits": 1 << 4, "period": 1,
                           "timeout": 0})
     _figures("+ I/O watch", *_run(ctrl, timed, n))
+
+    alone = _model_torques(n)
+    print(f"{'model torques alone':20s} p50/p99/max {np.percentile(alone, 50):7.1f} "
+          f"{np.percentile(alone, 99):7.1f} {alone.max():8.1f} us")
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ import threading
 import time
 
 import numpy as np
+from common import record
 
 from landscape.sim.cell import load_cell
 from landscape.sim.clock import LockStepClock, RealTimeClock
@@ -202,6 +203,12 @@ def main(argv=None) -> None:
           f"{'max':>7s}   {'exec p50':>7s} {'p99':>7s}")
     for name, stats in results:
         print(row(name, stats))
+        label = name.strip().replace("same, ", "TX90 moving, ")
+        record(f"cycle lateness p99, {label}", stats.late_p99 * 1e3, "ms",
+               baseline=stats.late_p50 * 1e3, baseline_name="p50")
+        record(f"cycle lateness max, {label}", stats.late_max * 1e3, "ms")
+        record(f"missed cycles, {label}", stats.missed, "cycles",
+               goal=0 if name.startswith("process") else None)
 
     wall, rate = run_lock_step(args.lock_step_seconds)
     print(f"\nlock step, TX90 moving: {args.lock_step_seconds:g} simulated s in {wall:.2f} wall s "

@@ -17,6 +17,7 @@ Run: .venv/bin/python bench/bench_events.py
 """
 from __future__ import annotations
 
+import argparse
 import asyncio
 import math
 import multiprocessing as mp
@@ -25,7 +26,7 @@ import threading
 import time
 
 import grpc
-from common import BareServer
+from common import BareServer, record
 from google.protobuf import wrappers_pb2
 
 from landscape.server import events
@@ -270,6 +271,11 @@ def pct(values: list[float], q: float) -> float:
 
 
 def main() -> None:
+    global N_EVENTS, N_LATENCY, BUS_ONLY
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer events, for CI")
+    if parser.parse_args().quick:
+        N_EVENTS, N_LATENCY, BUS_ONLY = 1_000, 200, 20_000
     served = Served()
     print(f"payload: one SubscribeResponse of {_sample_response().ByteSize()} bytes "
           f"(a command_done event)")
@@ -277,6 +283,7 @@ def main() -> None:
         print("\nbus alone (in process, no gRPC), microseconds per publish:")
         for name, us in bus_only().items():
             print(f"  {name:32s} {us:7.2f} us")
+            record(f"event bus publish, {name}", us, "us")
 
         print(f"\nthroughput, {N_EVENTS} events, events/s per subscriber (no loss: the "
               f"publisher stays within {WINDOW} of the slowest):")
@@ -286,6 +293,8 @@ def main() -> None:
             print(f"  {n:2d} subscriber(s): bus {bus_rate:7.0f}/s (lost {lost}, publish "
                   f"{publish_us:5.1f} us)   bare stream {base:7.0f}/s   "
                   f"ratio {bus_rate / base:4.2f}")
+            record(f"events/s per subscriber, {n} subscriber(s)", bus_rate, "events/s",
+                   baseline=base, baseline_name="bare stream", better="higher")
         bus_rate, lost, publish_us = bus_throughput(served, 1, stalled=True)
         print(f"   1 subscriber + 1 stalled client: bus {bus_rate:7.0f}/s (lost {lost}, "
               f"publish {publish_us:5.1f} us)")
@@ -296,6 +305,8 @@ def main() -> None:
             lat, base = bus_latency(served, n), baseline_latency(served, n)
             print(f"  {n:2d} subscriber(s): bus {pct(lat, 50):6.3f} / {pct(lat, 99):6.3f}   "
                   f"bare stream {pct(base, 50):6.3f} / {pct(base, 99):6.3f}")
+            record(f"publish to receive p99, {n} subscriber(s) at 100 ev/s", pct(lat, 99), "ms",
+                   baseline=pct(base, 99), baseline_name="bare stream")
     finally:
         served.stop()
 

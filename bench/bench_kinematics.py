@@ -16,7 +16,8 @@ import numpy as np
 from common import record
 
 from landscape.sim.arm import VARIANTS, arm_model
-from landscape.sim.kinematics import Kinematics, PinocchioModel, ReversingResult, wrap_angle
+from landscape.sim.kinematics import Kinematics, ReversingResult, wrap_angle
+from landscape.sim.pinocchio_model import PinocchioModel
 
 
 def best_time(fn, repeat: int = 3) -> float:

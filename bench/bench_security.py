@@ -15,11 +15,14 @@ server's GIL. Run: .venv/bin/python bench/bench_security.py
 """
 from __future__ import annotations
 
+import argparse
 import multiprocessing as mp
 import statistics
 import tempfile
 import time
 from pathlib import Path
+
+from common import record
 
 from landscape.cell.certs import make_certificates
 from landscape.cell.tokens import make_tokens
@@ -75,6 +78,11 @@ def measure(security: SecurityConfig, tls: ClientTLS | None, token: str | None) 
 
 
 def main() -> None:
+    global CALLS
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer calls, for CI")
+    if parser.parse_args().quick:
+        CALLS = 150
     folder = Path(tempfile.mkdtemp(prefix="bench-security-"))
     certs = make_certificates(folder / "certs")
     token_files = make_tokens(folder / "tokens")
@@ -93,11 +101,17 @@ def main() -> None:
          ClientTLS(str(certs.ca), str(client_pair[0]), str(client_pair[1])), operator),
     ]
     print(f"{CALLS} sequential unary calls on one channel, client in its own process")
+    baseline = {}
     for name, security, client_tls, token in runs:
         figures = measure(security, client_tls, token)
         for rpc, (rate, p50, p99) in figures.items():
             print(f"{name:<30} {rpc:<15} {rate:7.0f} calls/s   p50 {p50:.3f} ms   "
                   f"p99 {p99:.3f} ms")
+            if not baseline.get(rpc):
+                baseline[rpc] = p50
+            else:
+                record(f"{rpc} p50, {name.split(',')[0]}", p50, "ms", baseline=baseline[rpc],
+                       baseline_name="no security layer")
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ of the same run: how far the commanded tip itself strays from the ideal line (pl
 """
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 import tempfile
@@ -16,6 +17,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from common import record
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from support import Arm  # noqa: E402  (the tests' harness: server, lock, recorder)
@@ -47,6 +49,10 @@ def line_deviation(points, a, b) -> float:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="accepted for the report; the "
+                        "run is short already (lock-step clock)")
+    parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         arm = Arm(Path(tmp))
         try:
@@ -77,6 +83,9 @@ def main() -> None:
         cmd, meas = (f"{dev[0] * 1000:.4f}", f"{dev[1] * 1000:.4f}") if dev else ("-", "-")
         print(f"{name:28} {r['cycles']:7d} {r['wall']:7.2f} {r['joint_error']:14.2e} "
               f"{r['tip_error'] * 1000:11.4f} {cmd:>16} {meas:>17}")
+        record(f"tracking: tip error, {name}", r["tip_error"] * 1000, "mm")
+    record("straight line: measured deviation", rows[1][2][1] * 1000, "mm",
+           baseline=rows[1][2][0] * 1000, baseline_name="commanded")
     print("tip err: commanded vs measured tool tip, worst cycle; line dev cmd: the planner's own "
           "deviation (baseline); line dev meas: the arm's.")
 

@@ -23,15 +23,17 @@ REPORT_ENV = "LANDSCAPE_BENCH_JSON"
 
 
 def record(figure: str, value: float, unit: str, *, baseline: float | None = None,
-           baseline_name: str = "", goal: float | None = None, better: str = "lower") -> None:
+           baseline_name: str = "", goal: float | None = None, better: str = "lower",
+           points: list | None = None) -> None:
     """One figure for the report, beside what a bench prints: its same-run baseline and the
     goal an issue names (met when the value is at most, or with better="higher" at least,
-    the goal)."""
+    the goal); points: rows of numbers behind it, for the report's plot (report.py --plot)."""
     path = os.environ.get(REPORT_ENV)
     if not path:
         return
     row = {"figure": figure, "value": value, "unit": unit, "baseline": baseline,
-           "baseline_name": baseline_name, "goal": goal, "better": better}
+           "baseline_name": baseline_name, "goal": goal, "better": better,
+           **({"points": points} if points is not None else {})}
     with open(path, "a") as out:
         out.write(json.dumps(row) + "\n")
 

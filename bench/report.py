@@ -9,7 +9,9 @@ exits non-zero at the end; a bench that cannot run here (no Chromium, say) says 
     .venv/bin/python bench/report.py            # everything, about 10 minutes
     .venv/bin/python bench/report.py --quick    # the same code paths, shorter (CI)
     .venv/bin/python bench/report.py --markdown # the table of latest.json, for the README
+    .venv/bin/python bench/report.py --plot     # docs/bench_load.png from latest.json
     .venv/bin/python bench/report.py --only bench_stop bench_state
+    .venv/bin/python bench/report.py --soak     # with bench_soak's 10-minute run
 """
 from __future__ import annotations
 
@@ -42,7 +44,15 @@ BENCHES = {
     "bench_kinematics": ([], ["--poses", "200"]),
     "bench_crcl": ([], []),
     "bench_dashboard": (["20"], ["5"]),
+    "bench_events": ([], ["--quick"]),
+    "bench_tracking": ([], ["--quick"]),
+    "bench_security": ([], ["--quick"]),
+    "bench_cell_loops": ([], ["--cycles", "500"]),
+    "bench_soak": (["--seconds", "60"], ["--seconds", "20"]),
 }
+# Every bench_*.py is in the report: one added without an entry fails the run at once.
+_UNLISTED = sorted({p.stem for p in HERE.glob("bench_*.py")} - set(BENCHES))
+PLOT = HERE.parent / "docs" / "bench_load.png"
 TIMEOUT = 900   # s, one bench
 
 
@@ -123,8 +133,19 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="shorter runs (CI)")
     parser.add_argument("--markdown", action="store_true",
                         help="print the table of the last report as Markdown, run nothing")
+    parser.add_argument("--plot", action="store_true",
+                        help=f"plot the last report's figures that vary with load into "
+                             f"{PLOT.relative_to(HERE.parent)}, run nothing")
     parser.add_argument("--only", nargs="+", choices=sorted(BENCHES), help="these benches only")
+    parser.add_argument("--soak", action="store_true", help="bench_soak for 10 minutes")
     args = parser.parse_args()
+    if _UNLISTED:
+        sys.exit(f"bench/report.py: add {', '.join(_UNLISTED)} to BENCHES")
+    if args.plot:
+        from plot import plot_report   # matplotlib: only here
+        plot_report(json.loads(RESULTS.read_text()), PLOT)
+        print(f"wrote {PLOT.relative_to(HERE.parent)}")
+        return
     if args.markdown:
         report = json.loads(RESULTS.read_text())
         print(f"Measured {report['machine']['date']} on {report['machine']['cpu']} "
@@ -136,7 +157,8 @@ def main() -> None:
     for name in args.only or BENCHES:
         full, quick = BENCHES[name]
         print(f"== {name}", flush=True)
-        result = run(name, quick if args.quick else full)
+        result = run(name, ["--soak"] if args.soak and name == "bench_soak"
+                     else quick if args.quick else full)
         print(result["output"] + (f"\n{name} FAILED: {result['error']}" if result["error"]
                                   else ""), flush=True)
         report["benches"].append(result)

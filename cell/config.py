@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
 from landscape.sim.cell import CellError, _Table, load_cell
 
 DEFAULT_FILE = "cells/local.toml"
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
-CLOCKS = ("realtime", "lockstep")
 RESTART = ("no", "on-failure")
 
 
@@ -36,7 +36,7 @@ class DeviceSpec:
     the others reach it (default: the address, or 127.0.0.1 for a wildcard). world: its sim
     cell file (None: the built-in default). data: its folder, also its working directory:
     paths and settings (paths.sqlite3), recordings (the world's [recorder] path, relative
-    to it) and the audit log."""
+    to it) and the audit log. collision_margin (m): its --collision-margin."""
 
     name: str
     address: str
@@ -46,6 +46,7 @@ class DeviceSpec:
     data: Path
     clock: str = "realtime"
     reset_settings: bool = False
+    collision_margin: float = ServerConfig.collision_margin   # m (server/config.py)
 
     @property
     def target(self) -> str:
@@ -209,7 +210,10 @@ def _device(r: _Reader, index: int) -> DeviceSpec:
     spec = DeviceSpec(name=name, address=address, port=r.port("port", 50051 + index), host=host,
                       world=world, data=r.path("data", r.base / "var" / name, folder=True),
                       clock=r.t.string("clock", "realtime", CLOCKS),
-                      reset_settings=r.t.boolean("reset_settings", False))
+                      reset_settings=r.t.boolean("reset_settings", False),
+                      collision_margin=r.t.number("collision_margin",
+                                                  ServerConfig.collision_margin, positive=True,
+                                                  high=MAX_COLLISION_MARGIN))
     r.t.done()
     return spec
 

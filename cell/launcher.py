@@ -153,8 +153,7 @@ class Cell:
             if config.gateway.enabled:
                 self._launch(gateway_service(config, targets, workdir))
             if config.supervisor.enabled:
-                why_not = supervisor_missing(config.security.tls,
-                                             config.security.tokens is not None)
+                why_not = supervisor_missing()
                 if why_not:
                     self.out.say(f"web supervisor not started: {why_not}")
                 else:

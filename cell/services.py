@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import importlib.util
 import re
-import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +47,7 @@ def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None 
     argv = [*_python("landscape.server"), "--address", device.address,
             "--port", str(device.port if port is None else port),
             "--paths", str(device.data / "paths.sqlite3"), "--clock", device.clock,
+            "--collision-margin", f"{device.collision_margin:g}",
             "--audit-log", str(security.audit_log(device)),
             "--audit-max-bytes", str(security.audit_max_bytes),
             "--audit-backups", str(security.audit_backups),
@@ -106,25 +106,19 @@ def supervisor_service(config: CellConfig, targets: dict[str, str],
     for name in supervisor.devices:
         argv += ["--device", f"{name}={targets[name]}"]
     argv += ["--host", supervisor.address, "--port", str(supervisor.port)]
-    world = config.device(supervisor.devices[0]).world
-    if world is not None:
-        argv += ["--cell", str(world)]
     argv += client_arguments(config.security, supervisor.token)
     return ServiceSpec("supervisor", "web supervisor", argv, workdir,
                        note=f"shows {', '.join(supervisor.devices)}")
 
 
-def supervisor_missing(tls: bool, tokens: bool) -> str | None:
-    """Why the web supervisor cannot be started here, or None. With TLS or tokens on, it must
-    take the client flags (landscape.client.credentials.add_arguments) that say them."""
-    if importlib.util.find_spec(SUPERVISOR_MODULE) is None:
+def supervisor_missing(page: Path | None = None) -> str | None:
+    """Why the web supervisor cannot be started here, or None: not installed, or its page
+    (`page`, default: the installed package's frontend/dist/index.html) not built."""
+    spec = importlib.util.find_spec(SUPERVISOR_MODULE)
+    if spec is None:
         return f"{SUPERVISOR_MODULE} is not installed; the rest of the cell runs without it"
-    wanted = ["--tls-ca"] * tls + ["--token-file"] * tokens
-    if wanted:
-        help_text = subprocess.run([*_python(SUPERVISOR_MODULE), "--help"], capture_output=True,
-                                   text=True, timeout=60).stdout
-        wanted = [flag for flag in wanted if flag not in help_text]
-        if wanted:
-            return (f"this {SUPERVISOR_MODULE} takes no {' or '.join(wanted)} yet, and the "
-                    f"device servers want them")
+    page = page or Path(spec.submodule_search_locations[0]) / "frontend" / "dist" / "index.html"
+    if not page.is_file():
+        return ("its page is not built (that needs Node.js and npm: install them, then `make "
+                "install`); the rest of the cell runs without it")
     return None

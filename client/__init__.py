@@ -8,8 +8,9 @@
 `Robot` (blocking) and `AsyncRobot` (asyncio) have a method per command of the contract;
 errors are the exceptions below (module errors). `Session` and `AsyncSession` are the
 session alone, for programs that use the generated stubs directly. A device server that
-wants TLS or a role token is reached through `open_channel` / `open_aio_channel` (module
-credentials): `Robot(open_channel(target, ClientTLS(ca="ca.pem"), read_token(path)))`.
+wants TLS or a role token: `Robot(target, tls=ClientTLS(ca="ca.pem"), token=read_token(path))`
+(the same for AsyncRobot), or a channel from `open_channel` / `open_aio_channel` (module
+credentials).
 """
 from landscape.client.aio import AsyncCommand, AsyncRobot
 from landscape.client.aio_session import AsyncSession
@@ -17,7 +18,7 @@ from landscape.client.command import Command
 from landscape.client.credentials import ClientTLS, open_aio_channel, open_channel, read_token
 from landscape.client.errors import (CommandAborted, CommandFailed, CommandRefused,
                                      CommandTimeout, LandscapeError, NotImplementedByServer,
-                                     NotLockHolder, TransportError, WrongState)
+                                     NotAllowed, NotLockHolder, TransportError, WrongState)
 from landscape.client.robot import Robot, connect
 from landscape.client.session import Session
 from landscape.client.values import (AccelType, AngularUnit, DeviceState, Frame, LinearUnit,
@@ -27,7 +28,8 @@ __all__ = [
     "Robot", "AsyncRobot", "connect", "Command", "AsyncCommand", "Session", "AsyncSession",
     "Frame", "Motion", "Offset", "SpeedType", "AccelType", "LinearUnit", "AngularUnit",
     "DeviceState", "Pose", "TagPoint",
-    "LandscapeError", "CommandRefused", "WrongState", "NotLockHolder", "NotImplementedByServer",
+    "LandscapeError", "CommandRefused", "WrongState", "NotLockHolder", "NotAllowed",
+    "NotImplementedByServer",
     "TransportError", "CommandFailed", "CommandAborted", "CommandTimeout",
     "ClientTLS", "open_channel", "open_aio_channel", "read_token",
 ]

@@ -1,6 +1,6 @@
 """`AsyncRobot`: the asyncio twin of `Robot`, on a grpc.aio channel.
 
-    async with AsyncRobot("127.0.0.1:50051", "my-program") as robot:
+    async with AsyncRobot("127.0.0.1:50051", "my-program") as robot:   # or tls=, token=
         async with robot.control():
             move = await robot.move_absolute([0.5, 0, 1.57, 0, 1.57, 0], Frame.JOINT)
             await move.wait(timeout=30)
@@ -21,17 +21,18 @@ from typing import AsyncIterator, Sequence
 import grpc
 
 from landscape.client.aio_session import AsyncRsvpHandler, AsyncSession
-from landscape.client.commands import (DEVICE, IO, RELINQUISH_MAX_STEPS, RELINQUISH_STEP,
-                                       DeviceCommands)
+from landscape.client.commands import (DEVICE, EVENTS, IO, RELINQUISH_MAX_STEPS,
+                                       RELINQUISH_STEP, DeviceCommands, jog_request)
+from landscape.client.credentials import ClientTLS, open_aio_channel
 from landscape.client.errors import (CommandRefused, CommandTimeout, LandscapeError,
-                                     NotLockHolder, ServerUnavailable, SessionEnded,
+                                     NotAllowed, NotLockHolder, ServerUnavailable, SessionEnded,
                                      from_rpc_error)
 from landscape.client.streams import state_request, subscribe_request
 from landscape.client.tracking import ALARM_GRACE, CommandLog
 from landscape.client.values import DeviceState, Frame
 from landscape.v1 import (device_service_pb2_grpc, digital_io_service_pb2_grpc, event_service_pb2,
-                          event_service_pb2_grpc, state_service_pb2, state_service_pb2_grpc,
-                          types_pb2)
+                          event_service_pb2_grpc, sensing_pb2, state_service_pb2,
+                          state_service_pb2_grpc, types_pb2)
 
 log = logging.getLogger(__name__)
 
@@ -138,34 +139,50 @@ class AsyncCommand:
 
 
 class AsyncRobot(DeviceCommands):
-    """Robot for asyncio programs. on_rsvp may be a plain or an async function."""
+    """Robot for asyncio programs. target: "host:port" (with `tls` and `token` as Robot's), or
+    an open grpc.aio.Channel (then the caller closes it). on_rsvp may be a plain or an async
+    function."""
 
-    def __init__(self, target: str, client_name: str = "landscape-client", *,
-                 on_rsvp: AsyncRsvpHandler | None = None):
-        self.target = target
+    def __init__(self, target: str | grpc.aio.Channel, client_name: str = "landscape-client", *,
+                 on_rsvp: AsyncRsvpHandler | None = None, tls: ClientTLS | None = None,
+                 token: str | None = None):
+        self._own_channel = isinstance(target, str)
+        if not self._own_channel and (tls is not None or token):
+            raise ValueError("TLS and the token belong to the channel: give them to "
+                             "open_aio_channel, or give AsyncRobot a \"host:port\"")
+        self.target = target if self._own_channel else "the channel given"
+        self._credentials = (tls, token)
+        self._given = None if self._own_channel else target
         self.client_name = client_name
         self._on_rsvp = on_rsvp
         self._channel: grpc.aio.Channel | None = None
         self._session: AsyncSession | None = None
+        self._no_session: NotAllowed | None = None   # why there is no session, if refused
         self._tracker: _AsyncTracker | None = None
 
     async def open(self, timeout: float = 10.0) -> "AsyncRobot":
-        self._channel = grpc.aio.insecure_channel(self.target)
+        self._channel = (open_aio_channel(self.target, *self._credentials) if self._own_channel
+                         else self._given)
         try:
             await asyncio.wait_for(self._channel.channel_ready(), timeout)
         except asyncio.TimeoutError:
-            await self._channel.close()
+            if self._own_channel:
+                await self._channel.close()
             raise ServerUnavailable(f"no device server at {self.target} answered within "
                                     f"{timeout} s", grpc.StatusCode.UNAVAILABLE) from None
         self._events = event_service_pb2_grpc.EventServiceStub(self._channel)
-        self._session = AsyncSession(self._channel, self.client_name, self._on_rsvp)
+        session = AsyncSession(self._channel, self.client_name, self._on_rsvp)
         try:
-            await self._session.open(timeout)
+            self._session = await session.open(timeout)
         except grpc.aio.AioRpcError as error:
-            await self.close()
-            raise from_rpc_error(error) from None
+            refused = from_rpc_error(error)
+            if not isinstance(refused, NotAllowed):
+                await self.close()
+                raise refused from None
+            self._no_session = refused   # a viewer's token: reads and streams only
         self._stubs = {DEVICE: device_service_pb2_grpc.DeviceServiceStub(self._channel),
-                       IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(self._channel)}
+                       IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(self._channel),
+                       EVENTS: self._events}
         self._state = state_service_pb2_grpc.StateServiceStub(self._channel)
         return self
 
@@ -174,7 +191,7 @@ class AsyncRobot(DeviceCommands):
             await self._tracker.close()
         if self._session is not None:
             await self._session.close()
-        if self._channel is not None:
+        if self._channel is not None and self._own_channel:
             await self._channel.close()
 
     async def __aenter__(self) -> "AsyncRobot":
@@ -184,8 +201,12 @@ class AsyncRobot(DeviceCommands):
         await self.close()
 
     @property
-    def session(self) -> AsyncSession:
+    def session(self) -> AsyncSession | None:
+        """None when the role token may not open a session (see Robot.session)."""
         return self._session
+
+    def _lease(self) -> tuple[tuple[str, str], ...]:
+        return self._session.metadata() if self._session else ()
 
     def _track_commands(self, after_sequence: int | None = None) -> _AsyncTracker:
         """As Robot._track_commands: opened before the first lock or command."""
@@ -205,6 +226,8 @@ class AsyncRobot(DeviceCommands):
         return tracker
 
     async def lock(self, timeout: float = 10.0) -> str:
+        if self._session is None:
+            raise self._no_session
         self._track_commands()   # before the lock, whose event then proves it live
         try:
             return await self._session.lock(timeout)
@@ -231,7 +254,7 @@ class AsyncRobot(DeviceCommands):
                 return state
             try:
                 await getattr(self, step)()
-            except NotLockHolder:   # not (or no longer) ours to hand back
+            except (NotLockHolder, NotAllowed):   # not (or no longer) ours to hand back
                 return state
             except CommandRefused as refused:
                 log.debug("relinquish: %s refused: %s", step, refused)
@@ -266,11 +289,34 @@ class AsyncRobot(DeviceCommands):
         finally:
             call.cancel()
 
+    async def jog(self, velocities, frame: Frame) -> AsyncIterator[sensing_pb2.JogResponse]:
+        """`async for` a JogResponse (joints, pose) per message, the deadman held while
+        `velocities` (percent of each axis maximum; an async iterable paces the stream, as the
+        deadman wants a message every few cycles; a plain one is sent as fast as it goes)
+        lasts, then released. Needs manual_control(TEACHPENDANT)."""
+        async def requests():
+            if hasattr(velocities, "__aiter__"):
+                async for velocity in velocities:
+                    yield jog_request(velocity, frame)
+            else:
+                for velocity in velocities:
+                    yield jog_request(velocity, frame)
+            yield jog_request(None, frame)
+
+        call = self._stubs[DEVICE].Jog(requests(), metadata=self._lease())
+        try:
+            async for reply in call:
+                yield reply
+        except grpc.aio.AioRpcError as error:
+            raise from_rpc_error(error) from None
+        finally:
+            call.cancel()
+
     async def _invoke(self, service, rpc, request, started, timeout):
         tracker = await self._live_tracker() if started else None
         try:
             reply = await getattr(self._stubs[service], rpc)(
-                request, metadata=self._session.metadata(), timeout=timeout or DEFAULT_TIMEOUT)
+                request, metadata=self._lease(), timeout=timeout or DEFAULT_TIMEOUT)
         except grpc.aio.AioRpcError as error:
             raise from_rpc_error(error) from None
         if started:

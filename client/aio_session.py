@@ -7,7 +7,8 @@
             await device.Activate(ActivateRequest(), metadata=session.metadata())
 
 Keep-alives run as a task on the caller's event loop; RSVP questions go to `on_rsvp` (a plain
-or async function returning (choice, data)), or wait unanswered for the device's default.
+or async function returning (choice, data), or None to leave one unanswered), or wait
+unanswered for the device's default.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from landscape.v1 import session_service_pb2 as pb
 from landscape.v1 import session_service_pb2_grpc
 
 AsyncRsvpHandler = Callable[[event_service_pb2.RsvpRequest],
-                            "tuple[str, list[str]] | Awaitable[tuple[str, list[str]]]"]
+                            "tuple[str, list[str]] | None | Awaitable[tuple[str, list[str]] | None]"]
 
 
 class AsyncSession:
@@ -113,6 +114,9 @@ class AsyncSession:
         if self.on_rsvp is None:
             return   # unanswered: the device takes its default when the time is up
         answer = self.on_rsvp(request)
-        choice, data = await answer if inspect.isawaitable(answer) else answer
+        answer = await answer if inspect.isawaitable(answer) else answer
+        if answer is None:
+            return   # left to the device's timeout
+        choice, data = answer
         await self._outgoing.put(pb.ConnectRequest(rsvp_answer=event_service_pb2.RsvpAnswer(
             rsvp_id=request.rsvp_id, choice=choice, data=data)))

@@ -14,9 +14,9 @@ from typing import Iterable, Iterator, Sequence
 from landscape.client.values import (AccelType, AngularUnit, DeviceState, Frame, LinearUnit,
                                      Motion, Offset, Pose, SpeedType, TagPoint)
 from landscape.v1 import (control_pb2, digital_io_service_pb2 as io_pb2, end_effector_pb2,
-                          motion_pb2, sensing_pb2, settings_pb2, types_pb2)
+                          event_service_pb2, motion_pb2, sensing_pb2, settings_pb2, types_pb2)
 
-DEVICE, IO = "device", "io"
+DEVICE, IO, EVENTS = "device", "io", "events"
 
 # Points per PathLoad message: a stream of chunks keeps every message small (seed 3.5.1).
 PATH_CHUNK = 256
@@ -246,9 +246,20 @@ class DeviceCommands:
     def get_robot_description(self):
         return self._call(DEVICE, "GetRobotDescription", control_pb2.GetRobotDescriptionRequest())
 
+    def get_cell_description(self):
+        """The cell around the arm where the device knows it to be: fixtures, tools (in the
+        rack or on the flange), parts (where put down, or held), zones; world frame, m and
+        rad whatever the units."""
+        return self._call(DEVICE, "GetCellDescription", control_pb2.GetCellDescriptionRequest())
+
     def operate_panel(self, action: int):
         """The operator panel: control_pb2.PANEL_ACTION_PRESS_ESTOP, _RELEASE_ESTOP, ..."""
         return self._call(DEVICE, "OperatePanel", control_pb2.OperatePanelRequest(action=action))
+
+    def post_message(self, text: str):
+        """A message for the operator (at most 256 characters): every subscriber gets it as an
+        OperatorMessage event naming this lock holder. Needs the lock."""
+        return self._call(EVENTS, "PostMessage", event_service_pb2.PostMessageRequest(text=text))
 
     # ---- seed 4: digital I/O ----
 
@@ -282,13 +293,20 @@ def _path_chunks(header: motion_pb2.PathHeader,
         yield motion_pb2.PathLoadRequest(tags=tags[start:start + PATH_CHUNK])
 
 
+def jog_request(velocity: Sequence[float] | None, frame: Frame) -> sensing_pb2.JogRequest:
+    """A jog message: the deadman held at `velocity` (percent of each axis maximum,
+    -100..100), or released (None), which stops the arm."""
+    if velocity is None:   # the server checks six velocities in every message
+        return sensing_pb2.JogRequest(deadman=False, frame=Frame(frame), velocity=[0.0] * 6)
+    return sensing_pb2.JogRequest(deadman=True, frame=Frame(frame), velocity=list(velocity))
+
+
 def jog_requests(velocities: Iterable[Sequence[float]], frame: Frame,
                  ) -> Iterator[sensing_pb2.JogRequest]:
-    """Jog messages with the deadman held, one per velocity (percent of each axis maximum,
-    -100..100), then one with the deadman released, which stops the arm."""
+    """Jog messages with the deadman held, one per velocity, then the deadman released."""
     for velocity in velocities:
-        yield sensing_pb2.JogRequest(deadman=True, frame=Frame(frame), velocity=list(velocity))
-    yield sensing_pb2.JogRequest(deadman=False, frame=Frame(frame))
+        yield jog_request(velocity, frame)
+    yield jog_request(None, frame)
 
 
 # What the lock holder does, from each state, to hand the device back (seed 3.1 and 3.6): one

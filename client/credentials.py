@@ -81,23 +81,36 @@ def open_aio_channel(target: str, tls: ClientTLS | None = None, token: str | Non
     return grpc.aio.insecure_channel(target, options, interceptors=interceptors)
 
 
+# The flags every client program takes (argparse here, click in the CLI): name, help.
+FLAGS = (
+    ("--tls-ca", "TLS: PEM CA that signs the device server's certificate"),
+    ("--tls-cert", "mutual TLS: this client's PEM certificate"),
+    ("--tls-key", "mutual TLS: the PEM key of --tls-cert"),
+    ("--tls-server-name", "TLS: the name to expect in the server's certificate"),
+    ("--token-file", "file holding the role token to present"),
+)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """--tls-ca, --tls-cert, --tls-key, --tls-server-name, --token-file."""
     group = parser.add_argument_group("connecting to the device server")
-    group.add_argument("--tls-ca", help="TLS: PEM CA that signs the device server's certificate")
-    group.add_argument("--tls-cert", help="mutual TLS: this client's PEM certificate")
-    group.add_argument("--tls-key", help="mutual TLS: the PEM key of --tls-cert")
-    group.add_argument("--tls-server-name",
-                       help="TLS: the name to expect in the server's certificate")
-    group.add_argument("--token-file", help="file holding the role token to present")
+    for flag, help_text in FLAGS:
+        group.add_argument(flag, help=help_text)
 
 
 def from_arguments(args: argparse.Namespace) -> tuple[ClientTLS | None, str | None]:
-    """(tls, token) from the flags of `add_arguments`; TLS is on when any TLS flag is given."""
+    """(tls, token) from the flags of `add_arguments`."""
+    return from_values(args.tls_ca, args.tls_cert, args.tls_key, args.tls_server_name,
+                       args.token_file)
+
+
+def from_values(tls_ca=None, tls_cert=None, tls_key=None, tls_server_name=None,
+                token_file=None) -> tuple[ClientTLS | None, str | None]:
+    """(tls, token) from the FLAGS' values; TLS is on when any TLS flag is given."""
     tls = None
-    if args.tls_ca or args.tls_cert or args.tls_server_name:
-        tls = ClientTLS(args.tls_ca, args.tls_cert, args.tls_key, args.tls_server_name)
-    return tls, read_token(args.token_file) if args.token_file else None
+    if tls_ca or tls_cert or tls_server_name:
+        tls = ClientTLS(tls_ca, tls_cert, tls_key, tls_server_name)
+    return tls, read_token(token_file) if token_file else None
 
 
 class _Bearer(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClientInterceptor,

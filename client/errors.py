@@ -55,6 +55,12 @@ class NotLockHolder(CommandRefused):
     """A mutating call without this session's lease (PERMISSION_DENIED)."""
 
 
+class NotAllowed(CommandRefused):
+    """The caller's role token does not allow the call: none or unknown (UNAUTHENTICATED), or
+    a role too low for it (PERMISSION_DENIED, ROLE_TOO_LOW): a viewer commanding, an operator
+    at the panel."""
+
+
 class InvalidArgument(CommandRefused):
     """A parameter is malformed: the seed's CMD_PARAM_ERR (INVALID_ARGUMENT)."""
 
@@ -148,6 +154,8 @@ REFUSED_BY_REASON: dict[str, type[CommandRefused]] = {
     "WRONG_STATE": WrongState,
     "ESTOP_ACTIVE": EstopActive,
     "NOT_LOCK_HOLDER": NotLockHolder,
+    "UNAUTHENTICATED": NotAllowed,
+    "ROLE_TOO_LOW": NotAllowed,
     "PARAM_ERR": InvalidArgument,
     "PARAM_OUT_OF_RANGE": OutOfRange,
     "UNREACHABLE": Unreachable,

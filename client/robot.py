@@ -20,10 +20,11 @@ from typing import Iterable, Iterator, Sequence
 import grpc
 
 from landscape.client.command import Command, CommandTracker
-from landscape.client.commands import (DEVICE, IO, RELINQUISH_MAX_STEPS, RELINQUISH_STEP,
-                                       DeviceCommands, jog_requests)
-from landscape.client.errors import (CommandRefused, NotLockHolder, ServerUnavailable,
-                                     from_rpc_error)
+from landscape.client.commands import (DEVICE, EVENTS, IO, RELINQUISH_MAX_STEPS,
+                                       RELINQUISH_STEP, DeviceCommands, jog_requests)
+from landscape.client.credentials import ClientTLS, open_channel
+from landscape.client.errors import (CommandRefused, NotAllowed, NotLockHolder,
+                                     ServerUnavailable, from_rpc_error)
 from landscape.client.session import RsvpHandler, Session
 from landscape.client.streams import EventStream, StateStream, state_request, subscribe_request
 from landscape.client.values import DeviceState, Frame
@@ -40,6 +41,8 @@ class Robot(DeviceCommands):
     """A session with one device server, and every command of the contract as a method.
 
     target: "host:port", or an open grpc.Channel (then the caller closes it).
+    tls, token: with a "host:port", TLS (the CA to trust, a client certificate) and the role
+    token to present (credentials.py); plaintext and no token when unset.
     client_name: shown to other clients as the lock holder.
     on_rsvp: answers the device's RSVP questions (seed 2.2): called with a landscape.v1
     RsvpRequest on a background thread, returns (choice, data). Unset: the device waits out
@@ -47,12 +50,17 @@ class Robot(DeviceCommands):
     """
 
     def __init__(self, target: str | grpc.Channel, client_name: str = "landscape-client", *,
-                 on_rsvp: RsvpHandler | None = None):
+                 on_rsvp: RsvpHandler | None = None, tls: ClientTLS | None = None,
+                 token: str | None = None):
         self._own_channel = isinstance(target, str)
-        self._raw = grpc.insecure_channel(target) if self._own_channel else target
+        if not self._own_channel and (tls is not None or token):
+            raise ValueError("TLS and the token belong to the channel: give them to "
+                             "open_channel, or give Robot a \"host:port\"")
+        self._raw = open_channel(target, tls, token) if self._own_channel else target
         self.client_name = client_name
         self._on_rsvp = on_rsvp
         self._session: Session | None = None
+        self._no_session: NotAllowed | None = None   # why there is no session, if refused
         self._tracker: CommandTracker | None = None
 
     # ---- life cycle ----
@@ -75,11 +83,16 @@ class Robot(DeviceCommands):
         try:
             self._session = Session(channel, self.client_name, self._on_rsvp).open()
         except grpc.RpcError as error:
-            self.close()
-            raise from_rpc_error(error) from None
-        lease_channel = self._session.channel   # carries the lease once locked
+            refused = from_rpc_error(error)
+            if not isinstance(refused, NotAllowed):
+                self.close()
+                raise refused from None
+            self._no_session = refused   # a viewer's token: reads and streams only
+        # Carries the lease once locked.
+        lease_channel = self._session.channel if self._session else channel
         self._stubs = {DEVICE: device_service_pb2_grpc.DeviceServiceStub(lease_channel),
-                       IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(lease_channel)}
+                       IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(lease_channel),
+                       EVENTS: event_service_pb2_grpc.EventServiceStub(lease_channel)}
         self._events = events
         self._state = state_service_pb2_grpc.StateServiceStub(channel)
         return self
@@ -118,8 +131,9 @@ class Robot(DeviceCommands):
         self.close()
 
     @property
-    def session(self) -> Session:
-        """The underlying session: session_id, lease, rsvp_requests (every question asked)."""
+    def session(self) -> Session | None:
+        """The underlying session: session_id, lease, rsvp_requests (every question asked);
+        None when the role token may not open one (a viewer's: reads and streams only)."""
         return self._session
 
     # ---- the lock ----
@@ -127,6 +141,8 @@ class Robot(DeviceCommands):
     def lock(self, timeout: float = 10.0) -> str:
         """Seed 3.1.1: take the lock for this session; returns the lease, which every later
         call of this Robot carries."""
+        if self._session is None:
+            raise self._no_session
         self._track_commands()   # before the lock, whose event then proves it live
         try:
             return self._session.lock(timeout)
@@ -155,7 +171,7 @@ class Robot(DeviceCommands):
                 return state
             try:
                 getattr(self, step)()
-            except NotLockHolder:   # not (or no longer) ours to hand back
+            except (NotLockHolder, NotAllowed):   # not (or no longer) ours to hand back
                 return state
             except CommandRefused as refused:   # the state moved on by itself: look again
                 log.debug("relinquish: %s refused: %s", step, refused)
@@ -203,6 +219,7 @@ class Robot(DeviceCommands):
         return reply
 
 
-def connect(target: str, client_name: str = "landscape-client", **options) -> Robot:
+def connect(target: str | grpc.Channel, client_name: str = "landscape-client",
+            **options) -> Robot:
     """An open Robot; use it in a `with` block (or call close())."""
     return Robot(target, client_name, **options).open()

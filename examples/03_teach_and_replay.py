@@ -1,9 +1,10 @@
 """Teach and replay: visit a few points, record where the arm is at each, save them as a path
 file, then load that file as a named path and replay it, following its tags.
 
-Teaching here moves the arm to each point by command. With a teach pendant (ManualControl and
-Jog, being built) an operator jogs it there instead; the recording is the same: the measured
-position (GetRobotPosition) becomes a tagged point.
+Teaching here moves the arm to each point by command. An operator may jog it there instead,
+under manual control (robot.manual_control(TEACHPENDANT), then robot.jog(...); or the web
+supervisor's jog pendant and its "Teach current pose" button); the recording is the same: the
+measured position (GetRobotPosition) becomes a tagged point.
 
 Start a device server (`make run`), then:
     .venv/bin/python examples/03_teach_and_replay.py --file taught.json

@@ -1,9 +1,19 @@
 """Two robots at once: two device servers, one asyncio program, both arms moving together.
 
-Each robot has its own device server (one per robot, as in a cell). Start two:
-    make run                 # 127.0.0.1:50051
-    make run PORT=50052      # in another terminal
-then:  .venv/bin/python examples/04_two_robots.py
+Each robot has its own device server, as in a cell. A cell file of two arms on this machine
+(two.toml; cell/cells/local.toml documents every key):
+
+    [[devices]]
+    name = "left"
+    port = 50051
+
+    [[devices]]
+    name = "right"
+    port = 50052
+
+`make run CONFIG=two.toml` starts both (with the CRCL gateway and the web supervisor, which
+shows both arms), says where each listens, and stops them safely on Ctrl-C. Then:
+    .venv/bin/python examples/04_two_robots.py
 """
 import argparse
 import asyncio

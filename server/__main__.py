@@ -27,10 +27,10 @@ STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
 resource_tracker.ensure_running()
 signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 
-from landscape.server.app import StartupError, listen_address, serve  # noqa: E402
-from landscape.server.config import (DEFAULT_ADDRESS, DEFAULT_PORT, SecurityConfig,  # noqa: E402
-                                     ServerConfig)
-from landscape.server.controller_link import CLOCKS  # noqa: E402
+# Light modules only up here: a port in use is refused before the simulation loads (main).
+from landscape.server.config import (CLOCKS, DEFAULT_ADDRESS, DEFAULT_PORT,  # noqa: E402
+                                     MAX_COLLISION_MARGIN, SecurityConfig, ServerConfig)
+from landscape.server.listen import listen_address, listen_problem  # noqa: E402
 
 log = logging.getLogger("landscape.server")
 
@@ -46,13 +46,19 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
     parser.add_argument("--cell", default=None,
                         help="cell file (TOML) describing arm, world and I/O (default: built-in)")
     parser.add_argument("--clock", choices=CLOCKS, default="realtime",
-                        help="realtime: 4 ms cycle process; lockstep: as fast as possible")
+                        help="realtime: a 4 ms cycle process; fast: the cycle process as fast "
+                             "as it goes (long programs quickly); lockstep: a thread of this "
+                             "process as fast as it goes (for tests)")
     parser.add_argument("--paths", default="var/paths.sqlite3",
                         help="SQLite file keeping the named paths and the settings (speed, "
                              "acceleration, tool offset, world frame, units) across restarts "
                              "(default %(default)s)")
     parser.add_argument("--reset-settings", action="store_true",
                         help="start from the default settings instead of the stored ones")
+    parser.add_argument("--collision-margin", type=float,
+                        default=ServerConfig.collision_margin, metavar="METRES",
+                        help="no planned motion may bring two bodies of the cell closer than "
+                             "this; a jog stops there (default %(default)s m)")
     _security_arguments(parser.add_argument_group(
         "security", "plaintext is for loopback: any other --address needs TLS and tokens, or "
                     "--insecure"))
@@ -62,6 +68,8 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
     args = parser.parse_args(argv)
     if bool(args.tls_cert) != bool(args.tls_key):
         parser.error("--tls-cert and --tls-key go together")
+    if not 0.0 < args.collision_margin <= MAX_COLLISION_MARGIN:
+        parser.error(f"--collision-margin must be above 0 and at most {MAX_COLLISION_MARGIN} m")
     if args.mtls and not args.tls_ca:
         parser.error("--mtls needs --tls-ca (the CA that signs the clients' certificates)")
     security = SecurityConfig(
@@ -72,6 +80,7 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
     config = ServerConfig(address=args.address, port=args.port, cell=args.cell,
                           clock=args.clock, paths_file=args.paths,
                           reset_settings=args.reset_settings, security=security,
+                          collision_margin=args.collision_margin,
                           max_message_bytes=args.max_message_bytes)
     return config, args.log_level
 
@@ -108,12 +117,16 @@ def _security_arguments(group) -> None:
 def main(argv=None) -> None:
     config, level = parse_args(argv)
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    problem = listen_problem(config.address, config.port)
+    if problem:
+        _refuse(problem)
+    from landscape.server.app import StartupError, serve   # the simulation: seconds to load
     try:
         running = serve(config)
     except StartupError as error:
-        print(f"landscape-device-server: {error}", file=sys.stderr)
-        raise SystemExit(2) from None
+        _refuse(str(error))
     _say_what_runs(running, config)
+    # The one "listening" line, on stdout: scripts and the cell launcher wait for it.
     print(f"landscape device server listening on {listen_address(config.address, running.port)}",
           flush=True)
     received = signal.sigwait(STOP_SIGNALS)
@@ -123,12 +136,18 @@ def main(argv=None) -> None:
     log.info("stopped")
 
 
+def _refuse(problem: str):
+    print(f"landscape-device-server: {problem}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def _say_what_runs(running, config: ServerConfig) -> None:
     link = running.link
-    lines = [f"cell: {config.cell or 'built-in default'} ({running.device.arm.name})",
+    lines = [f"cell: {config.cell or 'built-in default'} ({running.device.arm.name}), "
+             f"collision margin {config.collision_margin * 1000:g} mm",
              f"controller: {config.clock} clock, {link.cycle_time * 1000:g} ms cycle",
              f"paths and settings: {config.paths_file or 'in memory'}",
-             f"listening: {listen_address(config.address, running.port)} "
+             f"gRPC: {listen_address(config.address, running.port)} "
              f"({_transport(config.security)})",
              f"audit log: {config.security.audit_log or 'none'}"]
     log.info("LandScape device server\n  " + "\n  ".join(lines))

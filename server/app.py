@@ -20,11 +20,12 @@ from landscape.server import services, tls
 from landscape.server.audit import AuditLog
 from landscape.server.auth import TokenFileError, TokenStore
 from landscape.server.collision import CollisionScene
-from landscape.server.config import IDENTITY_CAPS, SecurityConfig, ServerConfig
+from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.server.controller_link import ControllerLink
 from landscape.server.device import Device
 from landscape.server.events import EventBus
 from landscape.server.limits import StreamLimits
+from landscape.server.listen import listen_address, listen_problem
 from landscape.server.paths import PathStore
 from landscape.server.rate_limit import RateLimiter
 from landscape.server.reflection_pool import MethodResolvingPool
@@ -117,13 +118,6 @@ class RunningServer:
         self.runner.run(self.server.wait_for_termination(), timeout=None)
 
 
-def listen_address(address: str, port: int) -> str:
-    """host:port as gRPC wants it: an IPv6 literal in brackets (``::1`` -> ``[::1]``)."""
-    if ":" in address and not address.startswith("["):
-        address = f"[{address}]"
-    return f"{address}:{port}"
-
-
 def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     """Start a device server with its controller; returns once it listens (config.port 0 picks
     a free port) and, if config.start_device, once the controller is initialised. Raises
@@ -137,7 +131,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     # times on its way to the pipe: 0.2 ms instead of Python's 5 on the real-time clock
     # (bench_stop: p99 under long planning 8.4 ms, 13.9 at 1 ms). The lock-step clock's
     # thread computes too, and pays for every hand-over (bench_lockstep: 12 % slower at 0.2).
-    sys.setswitchinterval(0.0002 if config.clock == "realtime" else 0.001)
+    sys.setswitchinterval(0.001 if config.clock == "lockstep" else 0.0002)
     security = _security_layer(config.security)
     runner = _LoopThread()
     try:
@@ -177,7 +171,6 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     running = RunningServer(server, health_servicer, port, config.address, bus, device, workcell,
                             link, hub, dispatch, limits, runner, security)
     device.on_health = running.set_serving
-    log.debug("device server listening on %s", listen_address(config.address, port))
     return running
 
 
@@ -195,8 +188,7 @@ def _security_layer(security: SecurityConfig) -> SecurityInterceptor:
                            f"{error.strerror}; choose another with --audit-log") from None
     rate = (RateLimiter(security.rate_limit, security.rate_burst)
             if security.rate_limit else None)
-    return SecurityInterceptor(tokens, audit, rate,
-                               StreamLimits(security.identity_caps or IDENTITY_CAPS))
+    return SecurityInterceptor(tokens, audit, rate)
 
 
 async def _bind(config: ServerConfig,
@@ -216,9 +208,10 @@ async def _bind(config: ServerConfig,
                 else server.add_insecure_port(where))
     except RuntimeError:
         port = 0
-    if port == 0:
-        raise StartupError(f"cannot listen on {where}: the port is in use or the address is not "
-                           f"this machine's; choose another with --port / --address")
+    if port == 0:   # gRPC does not say why: a trial bind does (or did, just before)
+        raise StartupError(listen_problem(config.address, config.port) or
+                           f"cannot listen on {where}: the port is in use or the address is "
+                           f"not this machine's; choose another with --port / --address")
     return server, port
 
 

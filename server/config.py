@@ -5,8 +5,11 @@ from dataclasses import dataclass
 
 from landscape.server.limits import Cap
 
+CLOCKS = ("realtime", "fast", "lockstep")   # the controller's: controller_link.py
+PROCESS_CLOCKS = ("realtime", "fast")       # those that run the cycle in a process of its own
 DEFAULT_ADDRESS = "127.0.0.1"   # loopback unless the operator exposes the server on purpose
 DEFAULT_PORT = 50051
+MAX_COLLISION_MARGIN = 0.1      # m: a wider safety margin would keep the arm from the table
 
 
 @dataclass(frozen=True)
@@ -25,13 +28,10 @@ class SecurityConfig:
     audit_log: str | None = None
     audit_max_bytes: int = 10 * 1024 * 1024
     audit_backups: int = 5
-    # Calls per second one client (an identity with tokens, else a connection) may make on
+    # Calls per second one client (its token's identity, else its IP address) may make on
     # average, and at once; stops are never limited. None: no limit.
     rate_limit: float | None = None
     rate_burst: int = 200
-    # Open streams one identity may hold, per kind, when tokens are on (limits.py); None:
-    # IDENTITY_CAPS. Each connection also keeps its own caps (ServerConfig.stream_caps).
-    identity_caps: dict[str, Cap] | None = None
     # Listen on a non-loopback address without TLS and tokens all the same.
     insecure: bool = False
 
@@ -40,23 +40,20 @@ class SecurityConfig:
         return self.tls_cert is not None
 
 
-# One identity (a token) may be several programs: room for a few connections' worth.
-IDENTITY_CAPS = {"session": Cap(per_client=32, total=1_000_000),
-                 "watch": Cap(per_client=256, total=1_000_000)}
-
-
 @dataclass(frozen=True)
 class ServerConfig:
     address: str = DEFAULT_ADDRESS
     port: int = DEFAULT_PORT          # 0 picks a free port
-    # Open streams a client, and the server, may hold, per kind ("session", "watch"); None:
-    # limits.DEFAULT_CAPS.
+    # Open streams a client (its token's identity, else its IP address), and the server, may
+    # hold, per kind ("session", "watch"); None: limits.DEFAULT_CAPS.
     stream_caps: dict[str, Cap] | None = None
     # Largest request accepted; larger ones fail with RESOURCE_EXHAUSTED. Paths stream in
     # chunks, so no single message needs to be big.
     max_message_bytes: int = 4 * 1024 * 1024
     # The cell file (None: the default cell) and the controller's clock: "realtime" (its own
-    # cycle process) or "lockstep" (a thread here, as fast as it goes; for tests).
+    # cycle process, a cycle every 4 ms), "fast" (the same process running cycles back to
+    # back: long programs in a fraction of their time) or "lockstep" (a thread here, as fast as
+    # it goes, which tests can hold and step; for tests).
     cell: str | None = None
     clock: str = "realtime"
     # Lock-step only: at most this many simulated seconds per wall second (None: flat out).
@@ -65,7 +62,8 @@ class ServerConfig:
     paths_file: str | None = None
     # Start from the default settings instead of the stored ones (and store the defaults).
     reset_settings: bool = False
-    # m: no planned motion may bring two bodies of the cell closer than this (collision/).
+    # m: no planned motion may bring two bodies of the cell closer than this (collision/);
+    # (0, MAX_COLLISION_MARGIN].
     collision_margin: float = 0.005
     # Initialise the controller at start-up (False leaves the device Idle, for tests).
     start_device: bool = True

@@ -1,17 +1,23 @@
-"""The device server's line to its controller, on either clock (DESIGN.md section 7).
+"""The device server's line to its controller, on any of three clocks (DESIGN.md section 7).
 
 - "realtime": the controller and the Executor run in a cycle process of their own, stepped
   every cycle on wall-clock deadlines (landscape.sim.clock.RealTimeClock).
+- "fast": the same cycle process with no deadlines, cycle after cycle as fast as it goes:
+  simulated time far ahead of the wall clock, for running long programs quickly; the server
+  shares no interpreter with it, so both cores work.
 - "lockstep": they run in this process on a thread that steps cycle after cycle as fast as it
   can (landscape.sim.clock.ThreadedLockStepClock): deterministic physics, simulated time far
-  ahead of the wall clock. For tests.
+  ahead of the wall clock, a clock a test can hold and step. For tests.
 
-`ControllerLink` offers the same surface on both: `proxy` (the asynchronous LLI calls, served
+`ControllerLink` offers the same surface on all three: `proxy` (the asynchronous LLI calls, served
 between cycles), `send` (messages to the Executor), `between_cycles`, `feedback` (every
 cycle's row, feedback.py) and `share` (large arrays for the cycle, without copying them
 through the pipe). It watches the controller: the cycle process exiting, or its feedback
-falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. `restart()`
-starts a fresh controller (after a loss); the feedback ring survives, so cycle numbers go on.
+falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. A silent
+process is killed before it is reported: one that was only stalled must never wake up and
+go on commanding the arm after the device has said it is lost. `restart()` starts a fresh
+controller (after a loss); the feedback ring survives, so cycle numbers go on, and so does
+the e-stop: a button pressed in the cell stays pressed for the new controller.
 """
 from __future__ import annotations
 
@@ -21,6 +27,7 @@ import threading
 import time
 from typing import Any, Callable
 
+from landscape.server.config import CLOCKS, PROCESS_CLOCKS
 from landscape.server.executor import Executor
 from landscape.server.feedback import FeedbackRing
 from landscape.sim.clock import RealTimeClock, ThreadedLockStepClock
@@ -29,16 +36,24 @@ from landscape.sim.shared_array import SharedArrays
 
 log = logging.getLogger(__name__)
 
-CLOCKS = ("realtime", "lockstep")
 
-
-def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox):
-    """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function."""
+def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox,
+                     estop_pressed: bool = False):
+    """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function.
+    `estop_pressed`: the cell's e-stop button is down (a latch outside the controller: a
+    controller started afresh finds it as it was left)."""
     from landscape.sim.bullet_controller import BulletController  # pybullet: only here
+    from landscape.server.arm_dynamics import base_gravity
     from landscape.sim.cell import load_cell
+    # What the server runs between cycles, loaded before the loop starts: an import on the
+    # loop's thread would hold a cycle up (the panel's helpers come with BulletController).
+    import landscape.sim.world_reads  # noqa: F401
     cell = load_cell(cell_path)
-    return BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time, ring,
-                                                  cell.arm))
+    controller = BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time,
+                                                        ring, cell.arm, base_gravity(cell)))
+    if estop_pressed:
+        controller.panel.press_estop()
+    return controller
 
 
 class ControllerLink:
@@ -67,15 +82,18 @@ class ControllerLink:
         self._closing = False
         self._clock = self._start_clock()
         self._watchdog: threading.Thread | None = None
-        if clock == "realtime":
+        if clock in PROCESS_CLOCKS:
             self._watchdog = threading.Thread(target=self._watch, name="controller-watchdog",
                                               daemon=True)
             self._watchdog.start()
 
     def _start_clock(self):
-        factory = functools.partial(build_controller, self._cell_path, self.feedback)
-        if self.clock_kind == "realtime":
+        last = self.feedback.latest()   # the e-stop as the controller before this one left it
+        factory = functools.partial(build_controller, self._cell_path, self.feedback,
+                                    estop_pressed=last is not None and last.estop)
+        if self.clock_kind in PROCESS_CLOCKS:
             return RealTimeClock(factory, on_message=self._on_message,
+                                 free=self.clock_kind == "fast",
                                  on_failure=lambda why: self._lose(
                                      f"the cycle process died: {why.strip().splitlines()[-1]}"
                                      if why else "the cycle process died")).start()
@@ -102,13 +120,13 @@ class ControllerLink:
     def send(self, msg: Any) -> None:
         self._clock.send(msg)
 
-    def between_cycles(self, func, *args, timeout: float | None = None):
-        return self._clock.between_cycles(func, *args, timeout=timeout)
+    def between_cycles(self, func, *args, timeout: float | None = None, urgent: bool = False):
+        return self._clock.between_cycles(func, *args, timeout=timeout, urgent=urgent)
 
     def share(self, arrays: dict) -> SharedArrays:
         """`arrays` (name -> ndarray) for the cycle: shared memory for a cycle process (the
         pipe then carries only their names), the arrays themselves on the lock-step thread."""
-        return SharedArrays.create(arrays, shared=self.clock_kind == "realtime")
+        return SharedArrays.create(arrays, shared=self.clock_kind in PROCESS_CLOCKS)
 
     def stats(self):
         return self._clock.stats() if hasattr(self._clock, "stats") else None
@@ -132,11 +150,13 @@ class ControllerLink:
         except Exception:
             log.exception("stopping the controller failed")
 
-    def _lose(self, reason: str) -> None:
+    def _lose(self, reason: str, kill: bool = False) -> None:
         with self._lost_lock:
             if self.lost is not None or self._closing:
                 return
             self.lost = reason
+            if kill:   # before anyone hears of the loss (a stalled process may resume)
+                self._clock.kill()
         log.error("controller lost: %s", reason)
         self._on_lost(reason)
 
@@ -153,5 +173,5 @@ class ControllerLink:
             elif now - since > limit and head >= 0:
                 alive = self._clock.alive
                 self._lose(f"the cycle process sent no feedback for {now - since:.3f} s"
-                           + ("" if alive else " and exited"))
+                           + (" (killed)" if alive else " and exited"), kill=True)
 

@@ -10,7 +10,7 @@ import numpy as np
 from google.protobuf import timestamp_pb2
 
 from landscape.server import bounds, events
-from landscape.server.errors import CommandError, OutOfRange, ParamError
+from landscape.server.errors import OutOfRange, ParamError
 from landscape.server.path_planning import PointSpec, at_point
 from landscape.server.settings import Kind
 from landscape.server.states import State
@@ -80,6 +80,33 @@ PANEL_ACTIONS = {control_pb2.PANEL_ACTION_PRESS_ESTOP: "press_estop",
                  control_pb2.PANEL_ACTION_RELEASE_ESTOP: "release_estop",
                  control_pb2.PANEL_ACTION_OPEN_DOOR: "open_door",
                  control_pb2.PANEL_ACTION_CLOSE_DOOR: "close_door"}
+
+
+# What a setter's reply says it set, in the units the client speaks.
+SYMBOLS = {LinearUnit.INCHES: "in", LinearUnit.FEET: "ft", LinearUnit.METERS: "m",
+           LinearUnit.CENTIMETERS: "cm", LinearUnit.MILLIMETERS: "mm",
+           AngularUnit.DEGREES: "deg", AngularUnit.RADIANS: "rad"}
+
+
+def rate_text(what: str, kind: Kind, value: float, units: Units) -> str:
+    """'speed 40 %', 'linear speed 200 mm/s', 'angular acceleration 90 deg/s^2': `what` is
+    "speed" or "acceleration", `value` as the client sent it."""
+    per = "/s" if what == "speed" else "/s^2"
+    unit = {Kind.PERCENT: " %", Kind.LINEAR: f" {SYMBOLS[units.linear]}{per}",
+            Kind.ANGULAR: f" {SYMBOLS[units.angular]}{per}"}[kind]
+    name = what if kind is Kind.PERCENT else f"{kind.value} {what}"
+    return f"{name} {value:g}{unit}"
+
+
+def pose_text(what: str, pose: types_pb2.Pose, units: Units) -> str:
+    """'tool offset x 0, y 0, z 100 mm; roll 0, pitch 0, yaw 90 deg', as the client sent it."""
+    return (f"{what} x {pose.x:g}, y {pose.y:g}, z {pose.z:g} {SYMBOLS[units.linear]}; "
+            f"roll {pose.roll:g}, pitch {pose.pitch:g}, yaw {pose.yaw:g} "
+            f"{SYMBOLS[units.angular]}")
+
+
+def units_text(units: Units) -> str:
+    return f"units {units.linear.name.lower()} and {units.angular.name.lower()}"
 
 
 def units_from_pb(linear: int, angular: int) -> Units:
@@ -157,15 +184,32 @@ OFFSETS = {types_pb2.OFFSET_TYPE_ABSOLUTE_DATA: False, types_pb2.OFFSET_TYPE_REL
 PATH_FRAMES = {k: v for k, v in FRAMES.items() if v is not Frame.TOOL}
 
 
-def point_spec(tag: types_pb2.TagStruct, frame: Frame, units: Units) -> PointSpec:
-    """A tag_struct in SI: joint_values for JOINT_FRAME, else x, y, z, roll, pitch, yaw."""
+def point_specs(tags, frame: Frame, units: Units, first: int = 0) -> list[PointSpec]:
+    """The tag_structs of one PathLoad message in SI (joint_values for JOINT_FRAME, else x, y,
+    z, roll, pitch, yaw), converted together: a message holds up to 10,000 of them. An error
+    names its point, numbered from `first`."""
     if frame is Frame.JOINT:
-        values = np.asarray(tag.joint_values, dtype=float)
+        for index, tag in enumerate(tags):
+            if len(tag.joint_values) != 6:
+                raise at_point(first + index, ParamError(
+                    f"a move needs 6 values, got {len(tag.joint_values)}"))
+        values = np.array([tag.joint_values for tag in tags], dtype=float).reshape(-1, 6)
     else:
-        values = np.array([tag.x, tag.y, tag.z, tag.roll, tag.pitch, tag.yaw])
-    return PointSpec(move_values(frame, values, units), tag.tag_name, tag.tag_index,
-                     tag.time_delay, tag.transition_speed, tag.speed, tag.accel,
-                     tuple(tag.aux_commands))
+        values = np.array([(t.x, t.y, t.z, t.roll, t.pitch, t.yaw) for t in tags],
+                          dtype=float).reshape(-1, 6)
+    finite = np.isfinite(values).all(axis=1)
+    if not finite.all():
+        index = int(np.argmin(finite))
+        raise at_point(first + index, ParamError(
+            f"move values must be finite, got {values[index].tolist()}"))
+    if frame is Frame.JOINT:
+        values = units.angle_to_si(values)
+    else:
+        values = np.concatenate([units.length_to_si(values[:, :3]),
+                                 units.angle_to_si(values[:, 3:])], axis=1)
+    return [PointSpec(row, tag.tag_name, tag.tag_index, tag.time_delay, tag.transition_speed,
+                      tag.speed, tag.accel, tuple(tag.aux_commands))
+            for row, tag in zip(values, tags)]
 
 
 class PathLoadStream:
@@ -191,11 +235,7 @@ class PathLoadStream:
             raise ParamError(f"message {self._messages} of the PathLoad stream carries a "
                              f"second header")
         self._messages += 1
-        for tag in request.tags:
-            try:
-                self.specs.append(point_spec(tag, self.frame, self.units))
-            except CommandError as error:
-                raise at_point(len(self.specs), error) from None
+        self.specs.extend(point_specs(request.tags, self.frame, self.units, len(self.specs)))
 
     def finish(self):
         """(header, frame, specs) once the stream has ended."""

@@ -9,6 +9,8 @@ Concurrency:
 - Every state change is a compare-and-set against the states it may come from
   (`_transition`, under the short `_state_lock`), and its event is published under the same
   lock, so the events come in the order of the changes and no change overwrites another.
+  Nothing that may wait (a file, the controller) happens under that lock: settings are
+  stored under a lock of their own.
 - Mutating commands run one at a time under `_command_lock` (`command()`); the state and the
   lease are checked (again) once it is held. Commands that stop the arm (`immediate`:
   StopMotion, AbortMotion, Deactivate) do not wait for that lock.
@@ -40,6 +42,7 @@ from landscape.server.safety import SafetyActions, SafetyWorker
 from landscape.server.sessions import Session, SessionRegistry
 from landscape.server.settings import MotionSettings
 from landscape.server.states import Lease, State
+from landscape.sim import panel
 from landscape.sim.arm import ArmModel
 from landscape.sim.controller import EnableState, InitState, Status
 from landscape.sim.clock import CycleProcessError
@@ -97,6 +100,7 @@ class Device(SafetyActions):
         self._estop = False
         self._controller_changed = threading.Condition()
         self._state_lock = threading.RLock()
+        self._settings_lock = threading.Lock()   # one settings change at a time
         self._command_lock = threading.Lock()
         self.motions = MotionControl(self, self._store, set(outputs))
         self.manual_control = "off"        # seed 3.7.3: "teachpendant", "spaceball" or "off"
@@ -119,13 +123,18 @@ class Device(SafetyActions):
         if self._estop:
             self._error = "e-stop pressed"
 
-    def _start_controller(self, timeout: float) -> None:
+    def _start_controller(self, timeout: float, after: int = -1) -> None:
+        """Initialise the controller and wait for its first cycle's feedback (a row after
+        cycle `after`: the ring outlives a controller); power and e-stop are then its own."""
         self.controller.plug_event_func(self._controller_event)
         if self.controller.state().init is not InitState.INITIALIZED:
             if self.controller.init() is not Status.OK:
                 raise ControllerFailure("the controller did not initialise")
-        if not self._wait_controller(lambda: self.link.feedback.head >= 0, timeout):
+        if not self._wait_controller(lambda: self.link.feedback.head > after, timeout):
             raise ControllerFailure("no feedback from the controller")
+        sample = self.link.feedback.latest()
+        with self._controller_changed:
+            self._power, self._estop = sample.enable, sample.estop
         for started in self.on_controller_start:
             started()
 
@@ -262,24 +271,32 @@ class Device(SafetyActions):
             self.manual_control = "off"
 
     def activate(self) -> None:
-        self._command_controller("enable")
-        self._wait_controller(lambda: self._power is EnableState.ENABLED or self._estop
-                              or self.link.lost is not None, self.enable_timeout)
-        if self._power is not EnableState.ENABLED:
-            why = self._error or ("e-stop pressed" if self._estop else "timed out")
+        """Drives on, then Resting; if anything fails on the way (the e-stop, the controller,
+        the lock holder leaving meanwhile), the drives are turned off again."""
+        epoch = self._epoch
+        try:
+            self._command_controller("enable")
+            self._wait_controller(lambda: self._power is EnableState.ENABLED or self._estop
+                                  or self.link.lost is not None or self._epoch != epoch,
+                                  self.enable_timeout)
+            with self._state_lock:
+                self.check_epoch()
+                if self._power is not EnableState.ENABLED:
+                    why = self._error or ("e-stop pressed" if self._estop else "timed out")
+                    raise ControllerFailure(f"the drives did not come on ({why})")
+                self._transition({State.INACTIVE}, State.RESTING, "activated")
+        except BaseException:
             with contextlib.suppress(Exception):
                 self.controller.disable()
-            raise ControllerFailure(f"the drives did not come on ({why})")
-        with self._state_lock:
-            self.check_epoch()
-            self._transition({State.INACTIVE}, State.RESTING, "activated")
+            raise
 
     def deactivate(self) -> None:
         """Stop along the path (at the arm's full deceleration) if moving, then drives off."""
         self._power_down("deactivated")
 
     def _power_down(self, reason: str, timeout: float = SAFETY_STOP_TIMEOUT) -> None:
-        """Stop any motion (no new one can start meanwhile), disable, wait, then Inactive."""
+        """Stop any motion (no new one can start meanwhile), disable, wait, then Inactive.
+        Drives that do not go off are a fault: Error and ControllerFailure, never Inactive."""
         with self.motions.no_new_motion():
             stopped = self.motions.stop_for_safety(timeout)
             if not stopped:
@@ -288,6 +305,12 @@ class Device(SafetyActions):
             self._command_controller("disable")
             self._wait_controller(lambda: self._power is EnableState.DISABLED
                                   or self.link.lost is not None, self.enable_timeout)
+            if self.link.lost is not None:
+                raise ControllerFailure(f"the controller is lost: {self.link.lost}")
+            if self._power is not EnableState.DISABLED:
+                why = f"the drives did not go off within {self.enable_timeout:g} s ({reason})"
+                self.fault(alarms.CONTROLLER, why)
+                raise ControllerFailure(why)
             with self._state_lock:
                 if self._state in states.ACTIVE:
                     self._transition(states.ACTIVE, State.INACTIVE, reason)
@@ -296,9 +319,12 @@ class Device(SafetyActions):
         """Leave Error once its cause is cleared; a lost controller is started afresh."""
         if self.link.lost is not None:
             self.bus.alarm(Severity.INFO, alarms.CONTROLLER_LOST, "restarting the controller")
+            last = self.link.feedback.head
             self.link.restart()
-            self._start_controller(30.0)
+            self._start_controller(30.0, after=last)
             self.on_health(True)
+            if self._estop:   # the new controller found the button as it was left
+                self._error = "e-stop pressed"
         if self._estop:
             raise EstopActive("the e-stop is still pressed: release it, then reset")
         with self._state_lock:
@@ -318,7 +344,10 @@ class Device(SafetyActions):
         """Press or release the e-stop, open or close the door, as a person at the cell would
         (`action` names a Panel method); returns (e-stop pressed, door open)."""
         log.warning("operator panel: %s", action)
-        estop, door_open = self.link.between_cycles(_operate_panel, action)
+        try:
+            estop, door_open = self.link.between_cycles(panel.operate, action, urgent=True)
+        except (CycleProcessError, TimeoutError) as error:
+            raise ControllerFailure(f"the operator panel did not answer: {error}") from None
         # Returns once the device has seen the e-stop as it is now (the next cycle's report).
         self._wait_controller(lambda: self._estop == estop or self.link.lost is not None, 1.0)
         return estop, door_open
@@ -340,7 +369,7 @@ class Device(SafetyActions):
     def update_settings(self, change) -> MotionSettings:
         """Apply `change(settings) -> settings`: validated, stored, then in force; a validation
         or storage error leaves them as they were."""
-        with self._state_lock:
+        with self._settings_lock:   # not the state lock: the file may keep us waiting
             settings = change(self._settings)
             self._store.save_settings(stored_settings.to_record(settings))
             self._settings = settings
@@ -359,11 +388,3 @@ class Device(SafetyActions):
                 return states.ROBOT_STOPPED_ON_ERROR, states.CONTROLLER_ERROR
             power = states.POWER_ON if self._power is EnableState.ENABLED else states.POWER_OFF
             return self.motions.motion_state, power
-
-
-def _operate_panel(controller, action: str) -> tuple[bool, bool]:
-    """Runs between two cycles, where the simulator's panel lives (picklable: top level)."""
-    panel = controller.panel
-    getattr(panel, action)()
-    return panel.estop_pressed, not panel.door_closed
-

@@ -8,10 +8,13 @@ A motion is a timed trajectory played one sample per cycle, stopped and resumed 
 within the acceleration limits (playback.py).
 
 A motion may carry a sensor loop (force_control.py): a guard (moveReact) that stops it when a
-sensor crosses a threshold, a compliance (comply) that shifts its setpoints to hold a force.
+sensor crosses a threshold (on a force, the stop then settles the force near the threshold), a
+compliance (comply) that shifts its setpoints to hold a force.
 Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. Sensors,
 the I/O image and the I/O watches are read every cycle (cycle_inputs.py), so the loops see
-this cycle's readings.
+this cycle's readings. The arm model's joint torques for the motion the drives just followed
+(arm_dynamics.py: pinocchio's RNEA at the measured position and velocity and the commanded
+acceleration, with the payload the server declared) go into every row beside the measured ones.
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
@@ -22,6 +25,8 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                     when its sample is passed
                    {"op": "comply", "id", "spec": ComplySpec}: compliance for the running motion
                    {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
+                   {"op": "payload", "parameters": (10,)}: what the flange carries now
+                    (arm_dynamics.py)
                    the jog messages (jog_control.py) and the I/O ones (cycle_inputs.py)
   cycle -> server  {"op": "controller", "enable": EnableState value, "estop": bool} on change
                    {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label",
@@ -29,7 +34,9 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                    {"op": "paused", "id"}  {"op": "resumed", "id"}  {"op": "done", "id"}
                    {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
                    a guarded motion's end adds "guard": {"event": "triggered" | "envelope" |
-                   "full distance", "values": (3,), "position": (6,) rad}; a compliant one's
+                   "full distance", "values": (3,), "position": (6,) rad} (at the trigger),
+                   once triggered "rest": (3,) (the reading at rest) and "settle": why the
+                   force did not settle, if it did not; a compliant one's
                    "comply": {"offset": (3,) m, "force": (3,) N, "panic": code or None}
 """
 from __future__ import annotations
@@ -39,9 +46,10 @@ import time
 import numpy as np
 
 from landscape.server.cycle_inputs import CycleSensors, IoMonitor
-from landscape.server.feedback import (CMD, ENABLE, ESTOP, IO, QD, SENSORS, SEQ, TAU, TIME, WALL,
-                                       WIDTH, Q, FeedbackRing)
-from landscape.server.force_control import RANGE_KIND, Admittance, ThresholdMonitor, vector
+from landscape.server.feedback import (CMD, ENABLE, ESTOP, IO, MODEL_TAU, QD, SENSORS, SEQ, TAU,
+                                       TIME, WALL, WIDTH, Q, FeedbackRing)
+from landscape.server.force_control import (RANGE_KIND, Admittance, ForceSettle, ThresholdMonitor,
+                                            vector)
 from landscape.server.jog_control import JogIntegrator
 from landscape.server.playback import Motion, brake
 from landscape.server.run_arrays import Segments
@@ -61,10 +69,11 @@ SETTLE_TIMEOUT = 1.0
 class Executor:
     """The cyclic function. `ring` receives every cycle's feedback (feedback.py); reports go to
     the server through `mailbox`, in order, after that cycle's row. `arm`: the arm model for
-    the loops that need its Jacobian (jog, comply); without it they are refused."""
+    the loops that need its Jacobian (jog, comply), refused without it, and for the model
+    torques (`gravity`: m/s^2 in the arm's base frame)."""
 
     def __init__(self, mailbox, cycle_time: float, ring: FeedbackRing | None = None,
-                 arm: ArmModel | None = None):
+                 arm: ArmModel | None = None, gravity=(0.0, 0.0, -9.81)):
         self.mailbox = mailbox
         self.cycle_time = cycle_time
         self.ring = ring
@@ -79,10 +88,14 @@ class Executor:
         self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
         self._sensors = CycleSensors()
         self._io = IoMonitor()
-        self._tip = None
+        self._tip = self._dynamics = None
+        self._setpoints: np.ndarray | None = None   # (3, 6): the last three cycles', newest first
         if arm is not None:
-            from landscape.server.tip_model import TipModel   # pinocchio: only where it runs
+            # pinocchio: only where it runs
+            from landscape.server.arm_dynamics import ArmDynamics
+            from landscape.server.tip_model import TipModel
             self._tip = TipModel(arm)
+            self._dynamics = ArmDynamics(arm, gravity)
 
     @property
     def sequence(self) -> int:
@@ -113,6 +126,7 @@ class Executor:
         else:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
+        model = self._model_torques(fbk, pos)
 
         key = (state.enable, state.estop)
         if key != self._last_state:   # first, so the server knows the power before the rest
@@ -120,13 +134,29 @@ class Executor:
             self._reports.insert(0, {"op": "controller", "enable": int(state.enable),
                                      "estop": state.estop is EstopState.ESTOP})
         if self.ring is not None:
-            self._write_row(ctrl, fbk, pos, state)
+            self._write_row(ctrl, fbk, pos, state, model)
         for report in self._reports:
             self.mailbox.post(report)
         self._reports.clear()
         return True
 
-    def _write_row(self, ctrl, fbk, pos, state) -> None:
+    def _model_torques(self, fbk, pos: np.ndarray) -> np.ndarray | float:
+        """The arm model's torques for the cycle the drives just played: they went from the
+        setpoint of two cycles ago to last cycle's (linearly, LLI 5.3.12), so the commanded
+        acceleration is the second difference of the last three setpoints. Then `pos` (this
+        cycle's) becomes the newest."""
+        past = self._setpoints
+        if past is None:
+            past = self._setpoints = np.tile(fbk.pos, (3, 1))
+        model = np.nan
+        if self._dynamics is not None:
+            acceleration = (past[0] - 2.0 * past[1] + past[2]) / (self.cycle_time ** 2)
+            model = self._dynamics.torques(fbk.pos, fbk.vel, acceleration)
+        past[1:] = past[:2].copy()
+        past[0] = pos
+        return model
+
+    def _write_row(self, ctrl, fbk, pos, state, model) -> None:
         row = self._row
         row[SEQ] = self._sequence
         row[TIME] = getattr(ctrl, "time", 0.0)
@@ -136,6 +166,7 @@ class Executor:
         row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
         row[SENSORS] = self._sensors.values
         row[IO] = self._io.image
+        row[MODEL_TAU] = model
         self.ring.write(self._sequence, row)
         self._sequence += 1
 
@@ -156,11 +187,13 @@ class Executor:
             elif motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused:
                 motion.settling = motion.end_as or ("aborted" if motion.abort_when_paused
                                                     else "paused")
+            if motion.settling == "done" and self._settling_force(motion):
+                motion.settling = None
             if motion.settling is None:
                 # outlives the motion's arrays
                 self._hold = self._shifted(motion, sensors, running and motion.settling is None)
                 velocity = motion.sample(motion.velocities) * motion.rate
-                if motion.compliance is not None:
+                if motion.compliance is not None or motion.force_settle is not None:
                     velocity = velocity + (self._hold - self._last_setpoint) / self.cycle_time
                 self._last_setpoint = self._hold
                 return self._hold, velocity
@@ -183,6 +216,8 @@ class Executor:
                     note["message"] = f"{motion.outcome['message']}; {note['message']}"
                 if motion.compliance is not None:
                     motion.outcome["comply"] = motion.compliance.summary(sensors)
+                if motion.stopped_by is not None:
+                    motion.outcome["guard"]["rest"] = motion.stopped_by.reading(sensors).tolist()
                 self._end(motion.settling, **{**motion.outcome, **note})
         return self._hold, np.zeros_like(self._hold)
 
@@ -191,12 +226,16 @@ class Executor:
     def _watch(self, motion: Motion, fbk, sensors) -> None:
         """A running motion's sensor loops: a guard that fires, or a compliance that must stop,
         brake the motion at the arm's full deceleration."""
-        if motion.guard is not None:
-            verdict = motion.guard.check(sensors)
+        guard = motion.guard
+        if guard is not None:
+            verdict = guard.check(sensors)
             if verdict is not None:
                 event, values = verdict
                 motion.guard = None
-                self._sensors.watch_range = False
+                if event == "triggered":
+                    motion.stopped_by = guard
+                else:
+                    self._sensors.watch_range = False
                 motion.outcome["guard"] = {"event": event, "values": values.tolist(),
                                            "position": fbk.pos.tolist()}
                 if event == "envelope":
@@ -208,9 +247,28 @@ class Executor:
             motion.outcome["message"] = compliance.problem
             brake(motion, "failed")
 
+    def _settling_force(self, motion: Motion) -> bool:
+        """Whether a motion braked on a force threshold settles its force now (starting
+        that once it is at a stop: ForceSettle)."""
+        settle, guard = motion.force_settle, motion.stopped_by
+        if guard is None or self._tip is None or not ForceSettle.wanted(guard.spec):
+            return False
+        if settle is None and not motion.unsettled:
+            settle = motion.force_settle = ForceSettle(guard.spec, self._tip, self.cycle_time)
+            self._last_setpoint = self._hold
+        if settle is not None and not settle.finished and motion.unsettled:
+            settle.stop(motion.unsettled)
+        note = settle.note if settle is not None else motion.unsettled
+        if note:
+            motion.outcome["guard"]["settle"] = note
+        return settle is not None and not settle.finished
+
     def _shifted(self, motion: Motion, sensors, active: bool) -> np.ndarray:
-        """The motion's setpoint now: planned, shifted by its compliance if it has one."""
+        """The motion's setpoint now: planned, shifted by its compliance or its force settling
+        if it has one."""
         planned = motion.sample(motion.positions)
+        if motion.force_settle is not None:
+            return motion.force_settle.shift(planned, sensors)
         compliance = motion.compliance
         if compliance is None:
             return planned.copy()
@@ -233,6 +291,9 @@ class Executor:
         op, motion = msg.get("op"), self._motion
         if op in ("io_image", "watch", "unwatch"):
             self._io.handle(msg)
+        elif op == "payload":
+            if self._dynamics is not None:
+                self._dynamics.set_payload(msg["parameters"])
         elif op in ("jog", "jog_velocity", "jog_clearance", "jog_end"):
             self._handle_jog(msg, fbk)
         elif op == "run":
@@ -252,6 +313,8 @@ class Executor:
                 self._attach(motion, {"comply": msg["spec"]})
         elif self._jog is not None and op in ("stop", "abort"):
             self._jog.end("aborted", f"{op} while jogging")
+        elif op in ("stop", "abort") and motion is not None and motion.stopped_by is not None:
+            motion.unsettled = f"{op} before the force settled"   # a guarded stop's: no more
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
             motion.limit = motion.stop_limit   # stops brake at the arm's full deceleration
             motion.target_rate = 0.0
@@ -280,7 +343,7 @@ class Executor:
             start = self._hold if self._hold is not None else fbk.pos
             self._jog = JogIntegrator(msg["id"], start, msg["limits"], self._tip,
                                       np.asarray(msg["tool_offset"], dtype=float),
-                                      self.cycle_time)
+                                      self.cycle_time, msg.get("guarded", False))
         elif jog is not None and op == "jog_velocity":
             jog.command(msg)
         elif jog is not None and op == "jog_clearance":

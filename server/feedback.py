@@ -10,9 +10,11 @@ A wake-up byte goes down a pipe after a row is written, at most once per `tick_p
 time, so the server's event loop can sleep on the pipe instead of polling.
 
 Row layout (float64): see the column constants below. Angles rad, velocities rad/s, torques
-N*m, times s. The sensor columns hold the cell's first force/torque sensor (read every cycle)
-and its first range sensor (read every RANGE_PERIOD cycles, every cycle while a guarded move
-watches it; between two reads the last one stays); `ring_sensors` says which sensors those are.
+N*m, times s. The model torques are the arm model's (arm_dynamics.py): what the cycle's motion
+takes with the payload the server declared; NaN when the cycle has no arm model. The sensor
+columns hold the cell's first force/torque sensor (read every cycle) and its first range
+sensor (read every RANGE_PERIOD cycles, every cycle while a guarded move watches it; between
+two reads the last one stays); `ring_sensors` says which sensors those are.
 The I/O columns mirror up to IO_UNITS units of digital I/O, each read every cycle through the
 mask the server asked for (executor "io_image"): a bit field as a float, exact to 2**53.
 """
@@ -38,7 +40,8 @@ FORCE_TORQUE = slice(0, 6)  # ... within SENSORS: flange frame, about the flange
 RANGE = 6                  # ... m along the tool axis from the tip; NaN: nothing in range
 IO = slice(36, 40)         # I/O image: one unit's masked bits per column, NaN when not mirrored
 IO_UNITS = 4
-WIDTH = 40
+MODEL_TAU = slice(40, 46)  # the arm model's joint torques for this cycle's motion (N*m)
+WIDTH = 46
 RANGE_PERIOD = 5           # cycles between two reads of the range sensor (20 ms at 4 ms)
 
 
@@ -57,12 +60,13 @@ class Sample:
     estop: bool
     sensors: np.ndarray    # (7,): fx, fy, fz (N), tx, ty, tz (N*m), range (m); NaN if unread
     io: np.ndarray         # (IO_UNITS,): the mirrored units' masked bits, NaN if not mirrored
+    model_torque: np.ndarray   # N*m, the arm model's (arm_dynamics.py); NaN without a model
 
     @classmethod
     def of(cls, row: np.ndarray) -> "Sample":
         return cls(int(row[SEQ]), float(row[TIME]), float(row[WALL]), row[Q], row[QD],
                    row[CMD], row[TAU], EnableState(int(row[ENABLE])), bool(row[ESTOP]),
-                   row[SENSORS], row[IO])
+                   row[SENSORS], row[IO], row[MODEL_TAU])
 
 
 def ring_sensors(sensors) -> dict[str, slice | int]:

@@ -11,15 +11,26 @@ What the seed leaves open, decided as a cell integrator would expect:
   frame, N; range sensor: the distance, first component only). Thresholds are signed: a move
   stops when a watched (non-zero) component reaches its threshold from the side it started
   on (pressing down on a table with the tool pointing down: fz falls, a threshold of -20 N).
-  It stops at the arm's full deceleration and is done; the done event says whether it
-  triggered, the tip's position (world frame) and the reading. With no crossing it runs its
-  full distance and says so. `gains[0]` in [0, 1] filters the readings (the newest one's
-  weight; 0 and 1: none); the others are ignored, as in the seed. `envelope_max[i] > 0`: a
+  It stops at the arm's full deceleration; on a force threshold it then settles the force
+  near the threshold (force_control.ForceSettle: along the watched axes it approached on,
+  within 5 % of the threshold, at most 5 mm and 2 s, no faster than the approach), so that at
+  rest the force is the threshold's whatever the approach speed. Then it is done; the done
+  event says whether it triggered, the reading and the tip's position (world frame) at the
+  trigger, and the reading at rest. With no crossing it runs its full distance and says so.
+  `gains[0]` in [0, 1] filters the readings (the newest one's weight; 0 and 1: none); the
+  others are ignored, as in the seed. `envelope_max[i] > 0`: a
   component beyond it ends the move as failed (an alarm); `envelope_min` is ignored, as in the
   seed. The compliance vector and speed must be zero ("mov-til-touch"; Comply complies).
-- Both are meant to touch something: the collision check before they start leaves out the
-  bodies the tool, or the part it holds, would meet on the way (the surface searched for, the
-  table slid along); the arm's links stay checked against everything.
+- Both are meant to touch something: the collision check before they start allows the tool,
+  or the part it holds, to meet the bodies it would meet on the way (the surface searched for,
+  the table slid along), and only those two; the arm's links stay checked against everything,
+  those bodies included. Comply from rest is also checked with its compliance: the tool
+  offset by the compliance distances (each corner of the box they span, along the tool's
+  axes) at the start and at the end of its motion, reached by a straight line from there.
+  Not checked: the offset's path between those corners (it follows the force, unknown before),
+  corners the arm cannot reach (the travel limits and the envelope bound the offset there),
+  and Comply joining a running motion (that motion was checked when it started, with no
+  contact allowed; the compliance it adds is bounded by its distances and envelope only).
 - comply controls the force along the tool axes where `compliance` is non-zero (hybrid force /
   position control; |compliance| is the furthest the tool may give along that axis) and
   follows `motion` along the others (it must be zero on the compliant axes). Set-points are
@@ -36,14 +47,16 @@ What the seed leaves open, decided as a cell integrator would expect:
 """
 from __future__ import annotations
 
+import itertools
 import math
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from landscape.server import alarms
-from landscape.server.collision import check_motion
-from landscape.server.errors import OutOfRange, ParamError, WrongState
+from landscape.server.collision import AllowedContact, check_motion
+from landscape.server.collision.shapes import ARM_LINKS
+from landscape.server.errors import OutOfRange, ParamError, Unreachable, WrongState
 from landscape.server.force_control import (FORCE, PANIC_DRIVES_OFF, PANIC_HOLD, ComplySpec,
                                             GuardSpec, vector)
 from landscape.server.motion.trajectory import Trajectory
@@ -55,7 +68,8 @@ if TYPE_CHECKING:
     from landscape.server.device import Device
 
 MAX_COMPLY_TIMEOUT = 600.0    # s
-MAX_TOUCHED = 3               # bodies a guarded or compliant motion may be meant to touch
+OFFSET_SPEED = 10.0           # %: the offset moves checked (the speed changes nothing there)
+MAX_CONTACTS = 6              # (tool or held part, body) a guarded or compliant motion may make
 PANIC_CODES = {PANIC_HOLD: "stop and hold", PANIC_DRIVES_OFF: "stop, then drives off"}
 
 
@@ -86,13 +100,15 @@ class GuardedMotion:
             raise OutOfRange(f"envelope maxima are magnitudes, 0 or more; got {envelope_max}")
         trajectory = self._tool_move(motion, speed)
         settings = self.device.settings
+        limits = self.device.motions.planner.limits(settings, speed)
         guard = GuardSpec(kind, tuple(thresholds), tuple(envelope_max),
-                          float(gains[0]) or 1.0, settings.tool_offset)
-        exclude = self._meant_to_touch(trajectory)
+                          float(gains[0]) or 1.0, settings.tool_offset, tuple(motion),
+                          limits.linear_velocity, limits.linear_acceleration)
+        allow = self._meant_to_touch([trajectory])
         if kind == FORCE:
             self.sensors.tare(sensor)
         return self.device.motions.start(
-            "MoveReact", sensor, [trajectory], exclude=exclude, loops={"guard": guard},
+            "MoveReact", sensor, [trajectory], allow=allow, loops={"guard": guard},
             finish=lambda report: self._react_outcome(report, kind))
 
     def _react_outcome(self, report: dict, kind: str) -> str:
@@ -101,8 +117,12 @@ class GuardedMotion:
         if event == "triggered":
             values = guard["values"][:3 if kind == FORCE else 1]
             unit = "N" if kind == FORCE else "m"
+            rest = (f"; at rest {vector(guard['rest'][:len(values)])} {unit}"
+                    if "rest" in guard else "")
+            settle = f" ({guard['settle']})" if "settle" in guard else ""
             return (f"triggered: reading {vector(values)} {unit} with the tip at "
-                    f"{vector(self._tip_in_world(guard['position']))} m (world frame)")
+                    f"{vector(self._tip_in_world(guard['position']))} m (world frame)"
+                    f"{rest}{settle}")
         if event == "full distance" and report["op"] == "done":
             return "not triggered: moved the full distance"
         return report.get("message", "")
@@ -170,12 +190,32 @@ class GuardedMotion:
         finish = self._comply_outcome
         if moving:
             return self._join_running(spec, finish)
-        trajectory = (Trajectory(dt, self.device.motions.planning_start()[None, :].copy(),
-                                 np.zeros((1, 6))) if hold_only
+        start = self.device.motions.planning_start()
+        trajectory = (Trajectory(dt, start[None, :].copy(), np.zeros((1, 6))) if hold_only
                       else self._tool_move(motion, speed))
-        return self.device.motions.start("Comply", sensor, [trajectory],
-                                         exclude=self._meant_to_touch(trajectory),
+        offsets = self._offset_moves(trajectory, spec)
+        allow = self._meant_to_touch([trajectory, *offsets])
+        for offset in offsets:
+            self.device.motions.check_collisions([offset], "Comply with its compliance offset",
+                                                 allow=allow)
+        return self.device.motions.start("Comply", sensor, [trajectory], allow=allow,
                                          loops={"comply": spec}, finish=finish)
+
+    def _offset_moves(self, trajectory, spec: ComplySpec) -> list:
+        """Straight tool moves from the motion's start and end to each corner of the box the
+        compliance may offset the tool within; corners out of the arm's reach are left out."""
+        axes = np.flatnonzero(spec.axes)
+        ends = trajectory.positions[[0, -1] if len(trajectory) > 1 else [0]]
+        moves = []
+        for signs in itertools.product((-1.0, 1.0), repeat=len(axes)):
+            corner = np.zeros(3)
+            corner[axes] = np.array(signs) * np.array(spec.reach)[axes]
+            for q in ends:
+                try:
+                    moves.append(self._tool_move(corner, OFFSET_SPEED, q))
+                except Unreachable:
+                    continue      # unreachable: see the module docstring
+        return moves
 
     def _join_running(self, spec: ComplySpec, finish) -> str:
         """Comply from Moving: compliance for the running motion."""
@@ -209,20 +249,24 @@ class GuardedMotion:
 
     # ---- helpers ----------------------------------------------------------------------------
 
-    def _meant_to_touch(self, trajectory) -> tuple[str, ...]:
-        """The bodies a guarded or compliant motion is meant to touch, left out of its collision
-        check: each one the tool, or the part it holds, would come within the margin of, in
-        the order met. The arm's own links never are: their contacts are refused as usual."""
+    def _meant_to_touch(self, trajectories) -> tuple[AllowedContact, ...]:
+        """The contacts a guarded or compliant motion is meant to make, allowed in its collision
+        check: the tool, or the part it holds, with each body it would come within the margin
+        of, in the order met (at most MAX_CONTACTS). Nothing else: the arm's links stay checked
+        against everything, and the tool and the part against every other body."""
         scene = self.device.collisions
         carried = {scene.mounted, scene.held} - {None}
-        model, exclude = scene.model(), []
-        for _ in range(MAX_TOUCHED):
-            contact = check_motion(model, trajectory.positions, trajectory.dt,
-                                   exclude=exclude).contact
-            if contact is None or not carried & set(contact.bodies):
-                break
-            exclude += [b for b in contact.bodies if b not in carried]
-        return tuple(exclude)
+        model, allowed = scene.model(), []
+        for trajectory in trajectories:
+            while len(allowed) < MAX_CONTACTS:
+                contact = check_motion(model, trajectory.positions, trajectory.dt,
+                                       allow=allowed).contact
+                if contact is None or contact.bodies[0] not in carried \
+                        or contact.bodies[1] in ARM_LINKS:
+                    break
+                allowed.append(AllowedContact(f"meant to touch {contact.bodies[1]}",
+                                              *contact.bodies))
+        return tuple(allowed)
 
     def _ring_sensor(self, sensor: str) -> str:
         info = self.sensors.info(sensor)
@@ -231,11 +275,11 @@ class GuardedMotion:
                              f"use the sensors the cycle reads")
         return info.kind
 
-    def _tool_move(self, motion: np.ndarray, speed: float):
+    def _tool_move(self, motion: np.ndarray, speed: float, start: np.ndarray | None = None):
         values = np.concatenate([motion, np.zeros(3)])
         motions = self.device.motions
-        return motions.planner.move(motions.planning_start(), self.device.settings,
-                                    Frame.TOOL, values, True, True, speed)
+        return motions.planner.move(motions.planning_start() if start is None else start,
+                                    self.device.settings, Frame.TOOL, values, True, True, speed)
 
 
 def _finite(what: str, *arrays) -> None:

@@ -20,10 +20,13 @@ Near obstacles (a velocity damper): the server's clearance guard (jog_guard.py) 
 gradient of the arm's clearance in joint space (m/rad) and the rate (m/s) at which the arm may
 still close it; every cycle a motion whose approach (-gradient . qd) exceeds that rate is
 scaled down to it, within the arm's full deceleration, while any motion that keeps or opens the
-clearance stays free.
+clearance stays free. The guard's figures hold for STALE_CYCLES only: a late guard (its thread
+stalled) allows no approach at all, and with no figures of its own (far from everything, or
+none yet) the arm is held until it speaks again.
 
 Messages (executor.py routes them):
-  server -> cycle  {"op": "jog", "id", "limits": JogLimits, "tool_offset": (4, 4)}
+  server -> cycle  {"op": "jog", "id", "limits": JogLimits, "tool_offset": (4, 4),
+                    "guarded": bool (a clearance guard reports every few cycles)}
                    {"op": "jog_velocity", "frame": "joint" | "base" | "world" | "tool",
                     "velocity": (6,) rad/s or (m/s, rad/s), "deadman": bool,
                     "world_rotation": (3, 3) world axes in base}
@@ -46,6 +49,7 @@ MANUAL_TIP_SPEED = 0.25   # m/s, reduced speed for manual jogging (ISO 10218-1, 
 RANGE_MARGIN = 1e-3       # rad: jogging stops this far inside the joint range
 TRACKING = 0.2            # of the tip's distance to its reference made good per cycle
 HEADROOM = 0.98           # of the speed limits a Cartesian jog asks for: the rest corrects
+STALE_CYCLES = 10         # a clearance older than this is not trusted (the guard sends every 2)
 
 
 @dataclass(frozen=True)
@@ -69,12 +73,13 @@ class JogLimits:
 
 class JogIntegrator:
     def __init__(self, id: str, q: np.ndarray, limits: JogLimits, tip: TipModel,
-                 tool_offset: np.ndarray, dt: float):
+                 tool_offset: np.ndarray, dt: float, guarded: bool = False):
         self.id, self.limits, self.tip, self.dt = id, limits, tip, dt
         self.tool_offset = tool_offset
         self.q = np.array(q, dtype=float)
         self.qd = np.zeros(6)
         self._clearance: tuple[np.ndarray, float] | None = None   # gradient (6,) m/rad, m/s
+        self._clearance_age = 0 if guarded else None   # cycles since the guard's figures
         self.ending: tuple[str, str] | None = None   # (report, message) once it must stop
         self._frame = "joint"
         self._velocity = np.zeros(6)
@@ -95,6 +100,7 @@ class JogIntegrator:
         gradient = msg["gradient"]
         self._clearance = None if gradient is None else (
             np.asarray(gradient, dtype=float), max(0.0, float(msg["rate"])))
+        self._clearance_age = 0
 
     def end(self, how: str, message: str = "") -> None:
         if self.ending is None:
@@ -128,10 +134,18 @@ class JogIntegrator:
     def _clear_of_obstacles(self, qd: np.ndarray) -> np.ndarray:
         """qd scaled down as a whole (its direction holds: the arm does not slide along what
         it nears) so that its approach to the nearest obstacle is at most the rate allowed,
-        reached within the arm's full deceleration."""
-        if self._clearance is None:
+        reached within the arm's full deceleration. Figures older than STALE_CYCLES allow no
+        approach; no figures from a late guard hold the arm."""
+        clearance = self._clearance
+        if self._clearance_age is not None:
+            self._clearance_age += 1
+            if self._clearance_age > STALE_CYCLES:
+                if clearance is None:
+                    return self.qd + _limited(-self.qd, self.limits.stop_acceleration * self.dt)
+                clearance = (clearance[0], 0.0)
+        if clearance is None:
             return qd
-        gradient, rate = self._clearance
+        gradient, rate = clearance
         approach = -float(gradient @ qd)
         if approach <= rate:
             return qd

@@ -9,7 +9,9 @@ clearance's gradient in joint space (finite differences, m/rad) and the rate at 
 may still close it, (clearance - margin) / TAU: the approach slows in proportion to the room
 left and stops at the margin; jog_control.py applies this every cycle. TAU is long beside the
 guard's delay (a few cycles), so what the arm travels before the next figure arrives is a
-small fraction of the room left. Beyond the zone the guard sends nothing and the jog is free.
+small fraction of the room left. Beyond the zone it sends "no gradient" and the jog is free.
+It sends every tick: figures that stop coming (this thread stalled) hold the arm in the cycle
+(jog_control.STALE_CYCLES).
 """
 from __future__ import annotations
 
@@ -49,20 +51,12 @@ class JogGuard:
         from landscape.server.motion_control import ENDED
         device, ring = self.device, self.device.link.feedback
         period = PERIOD_CYCLES * device.link.cycle_time
-        acting = False
         while not self._stop.wait(period) and self.motion.phase not in ENDED:
             row = ring.row(ring.head)
             if row is None:
                 continue
-            figures = self._figures(np.array(row[CMD], dtype=float))
-            if figures is None:
-                if acting:
-                    device.motions.send({"op": "jog_clearance", "gradient": None, "rate": 0.0})
-                acting, self.held = False, ""
-                continue
-            gradient, rate = figures
+            gradient, rate = self._figures(np.array(row[CMD], dtype=float)) or (None, 0.0)
             device.motions.send({"op": "jog_clearance", "gradient": gradient, "rate": rate})
-            acting = True
 
     def _figures(self, q: np.ndarray) -> tuple[np.ndarray, float] | None:
         """(gradient (6,) m/rad, approach rate allowed m/s) at joints q, or None out of reach."""
@@ -71,6 +65,7 @@ class JogGuard:
         limit = margin + SLOW_ZONE
         near = clearance(model, q, limit=limit)
         if math.isinf(near.distance):
+            self.held = ""
             return None
         d = near.distance
         # Pairs beyond `limit` count as at `limit`: a step never makes the clearance jump.

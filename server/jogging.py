@@ -62,8 +62,8 @@ class ManualControl:
                            np.asarray(arm.max_acceleration), arm.lower, arm.upper,
                            cartesian * settings.accel_percent / 100.0, cartesian,
                            MANUAL_TIP_SPEED, math.ceil(timeout / device.link.cycle_time))
-        motion = device.motions.start_jog({"limits": limits,
-                                           "tool_offset": settings.tool_offset})
+        motion = device.motions.start_jog({"limits": limits, "tool_offset": settings.tool_offset,
+                                           "guarded": True})   # JogSession starts the guard
         return JogSession(device, motion)
 
 

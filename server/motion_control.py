@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from landscape.server import alarms, aux_commands, path_planning, states
-from landscape.server.collision import check_motion
+from landscape.server.collision import CheckResult, check_motion
 from landscape.server.errors import (Collision, ControllerFailure, ManualControlMode, NotFound,
                                      WrongState)
 from landscape.server.events import Phase, Severity
@@ -31,6 +31,7 @@ from landscape.server.moves import Planner
 from landscape.server.paths import PathLibrary, PathStore
 from landscape.server.states import State
 from landscape.server.targets import Frame
+from landscape.server.world_parts import WorldParts
 from landscape.sim.controller import DoutValue, Status
 from landscape.sim.clock import CycleProcessError
 from landscape.sim.shared_array import SharedArrays
@@ -74,6 +75,7 @@ class MotionControl:
         self._changed = threading.Condition()
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
+        self.parts = WorldParts(device)  # the collision scene's parts follow the world
 
     @property
     def running_id(self) -> str:
@@ -85,6 +87,7 @@ class MotionControl:
         return self._motion
 
     def close(self) -> None:
+        self.parts.close()
         self.paths.close()
 
     # ---- 3.4 single motions ----------------------------------------------------------------
@@ -147,38 +150,45 @@ class MotionControl:
     # ---- starting ----------------------------------------------------------------------------
 
     def check_collisions(self, trajectories: list, what: str = "the motion", *,
-                         allow=(), exclude=()) -> None:
+                         allow=(), model=None) -> CheckResult:
         """Refuse trajectories (played back to back) that would bring two bodies of the cell
-        within the safety margin (collision/); `allow` names contacts meant to happen (a tool
-        coupling), `exclude` bodies the motion is meant to touch (a guarded move's surface)."""
-        model = self.device.collisions.model()
-        offset = 0.0
+        within the safety margin (collision/); `allow` names contacts meant to happen (a
+        guarded move's surface); `model`: what to check against (default: the cell
+        as it is now). A piece that comes again (the cycles of a path run) is checked once. A
+        refusal says where in the whole motion. Returns the counts of the check."""
+        model = model or self.device.collisions.model()
+        samples = sum(len(t) for t in trajectories)
+        checked: set[int] = set()
+        first = configurations = pair_checks = bound_checks = 0
         for trajectory in trajectories:
-            result = check_motion(model, trajectory.positions, trajectory.dt, trajectory.marks,
-                                  allow=allow, exclude=exclude)
-            contact = result.contact
-            if contact is not None:
-                where = contact.metadata()
-                where["time"] = f"{offset + contact.time:.3f}"
-                raise Collision(f"{what} would collide: {contact}", **where)
-            offset += trajectory.duration
+            if id(trajectory) not in checked:
+                checked.add(id(trajectory))
+                result = check_motion(model, trajectory.positions, trajectory.dt,
+                                      trajectory.marks, allow=allow)
+                configurations += result.configurations
+                pair_checks += result.pair_checks
+                bound_checks += result.bound_checks
+                if result.contact is not None:
+                    contact = result.contact.within(first, samples, trajectory.dt)
+                    raise Collision(f"{what} would collide: {contact}", **contact.metadata())
+            first += len(trajectory)
+        return CheckResult(None, configurations, pair_checks, bound_checks)
 
     def start(self, command: str, point_name: str, trajectories: list,
-              tags: dict | None = None, aux: dict | None = None, *, allow=(), exclude=(),
+              tags: dict | None = None, aux: dict | None = None, *, allow=(),
               loops: dict | None = None, finish: Callable[[dict], str] | None = None) -> str:
         """Hand planned trajectories to the executor, to play back to back; Resting -> Moving.
         `tags` maps mark labels to (tag name, tag index) for tag events, `aux` to the aux
-        commands run there; `allow` and `exclude` as in check_collisions, which runs first;
+        commands run there; `allow` as in check_collisions, which runs first;
         `loops` adds the sensor loops of the run message (executor.py: "guard", "comply") and
         `finish(report) -> message` words its end. Returns the command id that the started /
         tag / done / failed events name (seed: CMD_STARTED_OK)."""
         return self._start(command, point_name, trajectories, tags, aux, allow=allow,
-                           exclude=exclude, loops=loops, finish=finish).command_id
+                           loops=loops, finish=finish).command_id
 
     def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
-               exclude=(), loops=None, finish=None) -> RunningMotion:
-        self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow,
-                              exclude=exclude)
+               loops=None, finish=None) -> RunningMotion:
+        self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
         arrays = self.device.link.share(pack_run(trajectories, self.planner.dt))
         motion = RunningMotion(f"{command}-{next(self._ids)}", command, point_name, tags or {},
                                aux or {}, arrays, finish=finish)
@@ -196,11 +206,10 @@ class MotionControl:
         self._begin(motion, {**message, "op": "jog", "id": motion.command_id})
         return motion
 
-    def play(self, command: str, point_name: str, trajectory, timeout: float, *,
-             allow=()) -> RunningMotion:
+    def play(self, command: str, point_name: str, trajectory, timeout: float) -> RunningMotion:
         """Start one planned motion and wait until it ends or pauses (for commands that move
         the arm in steps, tooling.py); the motion says how it ended."""
-        motion = self._start(command, point_name, [trajectory], allow=allow)
+        motion = self._start(command, point_name, [trajectory])
         self._wait(motion, AT_REST, timeout)
         return motion
 

@@ -6,11 +6,12 @@ import math
 import numpy as np
 
 from landscape.server.errors import OutOfRange, ParamError, Unreachable
-from landscape.server.motion.cartesian import arc, straight_line, tool_pose
+from landscape.server.motion.cartesian import MAX_SAMPLES, arc, circle, straight_line, tool_pose
 from landscape.server.motion.timing import duration_lower_bound, time_path
 from landscape.server.motion.trajectory import Limits, PlanningError, Reason, Trajectory
 from landscape.server.settings import MAX_MOTION_SECONDS, MIN_PERCENT, MotionSettings
-from landscape.server.targets import Frame, check_joints, check_pose_values, goal_tip
+from landscape.server.targets import (Frame, check_joints, check_pose_values, check_reach,
+                                     goal_tip, reach)
 from landscape.sim.kinematics import Config, Kinematics, PosNeg, Shoulder
 
 SAME_CONFIG = Config(Shoulder.SAME, PosNeg.SAME, PosNeg.SAME)
@@ -52,6 +53,7 @@ class Planner:
             tip_now = self.kinematics.forward(q_now) @ tcp
             tip_goal = goal_tip(frame, check_pose_values(values), relative, tip_now, settings)
         if straight:
+            check_reach(self.arm, tip_goal @ np.linalg.inv(tcp), "values")
             return self.straight_move(q_now, tip_goal, limits, tcp)
         if frame is not Frame.JOINT:
             goal_q = self.pose_goal_joints(q_now, tip_goal @ np.linalg.inv(tcp))
@@ -68,15 +70,37 @@ class Planner:
             tips = [self.kinematics.forward(check_joints(self.arm, q_now + v if relative else v))
                     @ tcp for v in (via, goal)]
         else:
-            tips = [goal_tip(frame, check_pose_values(v), relative, tip_now, settings)
-                    for v in (via, goal)]
+            tips = [goal_tip(frame, check_pose_values(v, field), relative, tip_now, settings)
+                    for v, field in ((via, "arc_value"), (goal, "goal_value"))]
+        inv_tcp = np.linalg.inv(tcp)
+        for tip, field in zip(tips, ("arc_value", "goal_value")):
+            check_reach(self.arm, tip @ inv_tcp, field)
+        self.check_arc_reach(tip_now, tips[0], tips[1], tcp)
         return self.arc_move(q_now, tips[0], tips[1], limits, tcp)
+
+    def check_arc_reach(self, tip_now, tip_via, tip_goal, tcp) -> None:
+        """Unreachable naming arc_value if the arc is longer than any arc within the tip's
+        reach (2 pi times its radius): nearly collinear points with the arc point beyond the
+        goal make a huge circle, which no sampling should attempt."""
+        try:
+            _, radius, _, _, sweep = circle(tip_now[:3, 3], tip_via[:3, 3], tip_goal[:3, 3])
+        except PlanningError as error:
+            raise _unreachable(error) from None
+        longest = 2.0 * math.pi * (reach(self.arm)[1] + float(np.linalg.norm(tcp[:3, 3])))
+        if radius * sweep > longest:
+            raise Unreachable(f"arc_value: the arc through it is not reachable: it is "
+                              f"{radius * sweep:.4g} m long, and an arc within the arm's reach "
+                              f"is at most {longest:.4g} m long", reason_code="OUT_OF_WORKSPACE",
+                              field="arc_value", maximum=f"{longest:.4g} m")
 
     def joint_move(self, q_now, q_goal, limits: Limits) -> Trajectory:
         return self.timed(np.array([q_now, check_joints(self.arm, q_goal)]), limits)
 
-    def pose_goal_joints(self, q_now, flange_goal: np.ndarray) -> np.ndarray:
-        """Joints reaching `flange_goal` in q_now's configuration, nearest q_now."""
+    def pose_goal_joints(self, q_now, flange_goal: np.ndarray, field: str = "values"
+                         ) -> np.ndarray:
+        """Joints reaching `flange_goal` in q_now's configuration, nearest q_now; a goal beyond
+        reach is Unreachable naming the request's `field`."""
+        check_reach(self.arm, flange_goal, field)
         q, result = self.kinematics.reverse(flange_goal, q_now, SAME_CONFIG)
         if q is None:
             raise Unreachable(f"the target pose is not reachable: {result.name}",
@@ -129,6 +153,8 @@ def _unreachable(error: PlanningError) -> OutOfRange:
     if error.reason is Reason.TOO_LONG:
         return OutOfRange(f"{error}; a motion lasts at most {MAX_MOTION_SECONDS:g} s",
                           field="duration", maximum=f"{MAX_MOTION_SECONDS:g} s")
+    if error.reason is Reason.TOO_MANY_SAMPLES:
+        return OutOfRange(str(error), field="path", maximum=f"{MAX_SAMPLES} samples")
     where = {}
     if error.index is not None:
         where["index"] = str(error.index)

@@ -115,9 +115,9 @@ def resolve(planner: Planner, path: StoredPath, q_prev: np.ndarray, frame: Frame
                 q = check_joints(planner.arm, q_prev + spec.values if relative else spec.values)
                 tip = kin.forward(q) @ tcp
             else:
-                tip = goal_tip(frame, check_pose_values(spec.values), relative,
+                tip = goal_tip(frame, check_pose_values(spec.values, "tags"), relative,
                                kin.forward(q_prev) @ tcp, settings)
-                q = planner.pose_goal_joints(q_prev, tip @ np.linalg.inv(tcp))
+                q = planner.pose_goal_joints(q_prev, tip @ np.linalg.inv(tcp), "tags")
             if path.straight and (points or path.points):   # the approach is a joint move
                 try:
                     q = straight_path(kin, q_prev, [tip], tcp=tcp)[0][-1]

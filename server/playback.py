@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from landscape.server.force_control import Admittance, ThresholdMonitor
+    from landscape.server.force_control import Admittance, ForceSettle, ThresholdMonitor
 
 
 class Motion:
@@ -43,6 +43,9 @@ class Motion:
         self.outcome: dict = {}            # what the loops add to the final report
         self.guard: ThresholdMonitor | None = None
         self.compliance: Admittance | None = None
+        self.stopped_by: ThresholdMonitor | None = None   # the guard that fired
+        self.force_settle: ForceSettle | None = None      # after its stop (force_control.py)
+        self.unsettled = ""   # why the force is not settled after all (a stop or an abort)
 
     def _load(self, index: int) -> None:
         if index == 0 or self.before is None:

@@ -87,8 +87,14 @@ class SafetyActions:
                            f"disconnect handler for {session.client_name}")
 
     def _disconnect_handler(self, session: Session, reason: str) -> None:
-        if self._state in states.ACTIVE:
-            self._power_down(f"lock holder {session.client_name} gone")
+        if self._state in states.ACTIVE or self._drives_may_be_on():
+            try:
+                self._power_down(f"lock holder {session.client_name} gone")
+            except ControllerFailure as failure:   # in Error now, its alarm raised
+                self.bus.alarm(Severity.ERROR, alarms.LOCK_HOLDER_LOST,
+                               f"lock holder {session.client_name} gone: {failure}; lock "
+                               f"released")
+                return
         with self._state_lock:
             if self._state is State.INACTIVE:
                 self._transition({State.INACTIVE}, State.UNLOCKED,
@@ -97,16 +103,32 @@ class SafetyActions:
                        f"lock holder {session.client_name} gone: motion stopped, drives off, "
                        f"lock released")
 
+    def _drives_may_be_on(self) -> bool:
+        """The drives are on, or coming on (an Activate that was under way), as far as the
+        controller says (or last reported, if it cannot say)."""
+        try:
+            power = self.controller.state().enable
+        except (CycleProcessError, TimeoutError):
+            power = self._power
+        return power is not EnableState.DISABLED
+
     def _fault(self, code: int, message: str) -> bool:
-        """Into Error (from any state but Idle and Error); False if it was there already."""
+        """Into Error (from any state but Idle) with an alarm; True if it entered it now. In
+        Error already, a new cause (the controller lost during an e-stop) still raises its
+        alarm and becomes the error; the same cause again (an e-stop seen by both the
+        controller's event and its report) is said once."""
         with self._state_lock:
-            if self._state in (State.ERROR, State.IDLE):
+            if self._state is State.IDLE:
+                return False
+            entered = self._state is not State.ERROR
+            if not entered and message == self._error:
                 return False
             self._error = message
-            self._transition(set(State), State.ERROR, message)
+            if entered:
+                self._transition(set(State), State.ERROR, message)
         self.bus.alarm(Severity.CRITICAL if code in (alarms.ESTOP, alarms.CONTROLLER_LOST)
                        else Severity.ERROR, code, message)
-        return True
+        return entered
 
     def fault(self, code: int, message: str) -> None:
         """Into Error with an alarm and the drives off (a fault found above the controller,

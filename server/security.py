@@ -6,11 +6,10 @@ servicers/guard.py) sees it:
 1. who: the bearer token's identity (auth.py), UNAUTHENTICATED without a known one; with
    tokens off, the peer (its certificate's common name under mutual TLS), with every right;
 2. may they: the method's role (auth.required_role), PERMISSION_DENIED for a role too low;
-3. not too often: a token bucket per client (rate_limit.py), RESOURCE_EXHAUSTED beyond it;
-   the calls that stop the arm are never limited;
-4. not too many streams: with tokens on, each identity's open streams are capped (limits.py)
-   on top of each connection's own caps in the guard;
-5. written down: every call that needs more than a viewer, and every refused token, goes to
+3. not too often: a token bucket per client (rate_limit.py; a client is its token's identity,
+   else its IP address: limits.client_of), RESOURCE_EXHAUSTED beyond it; the calls that stop
+   the arm are never limited. The identity is also what the guard's stream caps count;
+4. written down: every call that needs more than a viewer, and every refused token, goes to
    the audit log (audit.py) with its result.
 
 The health service passes untouched: probes need no secret.
@@ -28,7 +27,7 @@ from landscape.server import states
 from landscape.server.audit import AuditLog, describe
 from landscape.server.auth import Identity, Role, RoleTooLow, TokenStore, required_role
 from landscape.server.errors import CommandError, ResourceExhausted
-from landscape.server.limits import StreamLimits
+from landscape.server.limits import TOKEN_IDENTITY, client_of
 from landscape.server.rate_limit import RateLimiter
 from landscape.server.servicers.guard import end_call
 
@@ -60,6 +59,7 @@ class _Call:
         layer, context = self.layer, self.context
         if layer.tokens is not None:
             self.identity = layer.tokens.identify(context.invocation_metadata())
+            TOKEN_IDENTITY.set(self.identity.name)   # this call's task: the guard sees it
         else:
             self.identity = Identity(_peer_name(context), Role.ADMIN)
         if self.identity.role < self.role:
@@ -67,8 +67,7 @@ class _Call:
                              f"{self.identity.name} is a {self.identity.role.label}",
                              role=self.identity.role.label, needs=self.role.label)
         if layer.rate is not None and self.name not in UNLIMITED:
-            key = self.identity.name if layer.tokens is not None else context.peer()
-            if not layer.rate.allow(key):
+            if not layer.rate.allow(client_of(context.peer())):
                 raise RateLimited(f"more than {layer.rate.rate:g} calls a second (bursts of "
                                   f"{layer.rate.burst}) from this client: slow down")
 
@@ -114,9 +113,8 @@ class _Call:
 
 class SecurityInterceptor(grpc.aio.ServerInterceptor):
     def __init__(self, tokens: TokenStore | None = None, audit: AuditLog | None = None,
-                 rate: RateLimiter | None = None, identity_limits: StreamLimits | None = None):
+                 rate: RateLimiter | None = None):
         self.tokens, self.audit, self.rate = tokens, audit, rate
-        self.identity_limits = identity_limits if tokens is not None else None
 
     @property
     def idle(self) -> bool:
@@ -163,11 +161,8 @@ class SecurityInterceptor(grpc.aio.ServerInterceptor):
     def _streaming(self, method: str, role: Role, behavior):
         async def stream(request, context):
             record = _Call(self, method, role, context)
-            slot = None
             try:
                 record.admit(request)
-                if self.identity_limits is not None:
-                    slot = self.identity_limits.acquire(record.name, record.identity.name)
             except CommandError as error:
                 await record.refuse(error, request)
             failure = None
@@ -184,8 +179,6 @@ class SecurityInterceptor(grpc.aio.ServerInterceptor):
                 failure = exc
                 raise
             finally:
-                if slot is not None:
-                    slot.release()
                 if record.audited:
                     record.write(record.outcome(_unexpected(failure)))
         return stream

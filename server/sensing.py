@@ -9,8 +9,8 @@ What a reading is, in SI (convert.py gives it in the client's units):
 - force_torque: (fx, fy, fz, tx, ty, tz) at the tool tip in the tool frame (the tool offset's
   frame): forces in N, torques about the tip in N*m. The sensor measures the load the tool side
   puts on the flange, so a tool hanging down reads +m*g along its z and pressing the tip into
-  a surface reads fz < 0. Zeroed by a tare (SendCommand "tare force_sensor"; MoveReact and
-  Comply tare it when they start).
+  a surface reads fz < 0. Zeroed by a tare (SendCommand "tare force_sensor"; MoveReact tares
+  it when it starts; Comply does not: it usually starts in contact, guarded.py).
 - laser_range: (distance,) in m from the tool tip along its z to the first surface; NaN when
   nothing is within the sensor's range.
 """

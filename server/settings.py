@@ -137,9 +137,10 @@ class MotionSettings:
 def _checked_frame(name: str, matrix: np.ndarray, max_offset: float) -> np.ndarray:
     m = np.asarray(matrix, dtype=float)
     finite(name, *m.ravel())
-    distance = float(np.linalg.norm(m[:3, 3]))
+    distance = math.hypot(*m[:3, 3])     # no overflow (and no warning) for huge offsets
     if distance > max_offset:
-        raise OutOfRange(f"{name} is {distance:g} m from its origin; at most {max_offset:g} m")
+        raise OutOfRange(f"{name} is {distance:g} m from its origin; at most {max_offset:g} m",
+                         field=name.replace(" ", "_"), maximum=f"{max_offset:g} m")
     m = m.copy()
     m.flags.writeable = False
     return m

@@ -24,10 +24,10 @@ import numpy as np
 
 from landscape.server import convert
 from landscape.server.errors import ParamError
-from landscape.server.feedback import CMD, IO, QD, SENSORS, SEQ, TAU, TIME, WALL, Q
+from landscape.server.feedback import CMD, IO, MODEL_TAU, QD, SENSORS, SEQ, TAU, TIME, WALL, Q
 from landscape.server.targets import Frame
 from landscape.server.units import Units
-from landscape.sim.kinematics import PinocchioModel
+from landscape.sim.pinocchio_model import PinocchioModel
 from landscape.v1 import state_service_pb2 as pb
 
 
@@ -182,5 +182,7 @@ class StateHub:
                 values = sensors.from_row(name, row[SENSORS])
                 sample.sensors.add(name=name, values=convert.sensor_to_pb(
                     sensors.info(name).kind, values, units))
+        if not np.isnan(row[MODEL_TAU]).any():
+            sample.model_torques.extend(row[MODEL_TAU].tolist())
         sample.time.FromNanoseconds(round(float(row[WALL]) * 1e9))
         return pb.StreamStateResponse(sample=sample)

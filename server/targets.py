@@ -9,12 +9,21 @@ Cartesian moves add the offset along the frame's axes and turn about them
 from __future__ import annotations
 
 import enum
+import math
 
 import numpy as np
 
-from landscape.server.errors import OutOfRange, ParamError
+from landscape.server.errors import OutOfRange, ParamError, Unreachable
 from landscape.server.settings import MotionSettings
 from landscape.server.units import pose_matrix
+
+
+# A pose value's bounds. No target of this cell lies further out: the world frame is at most
+# settings.MAX_WORLD_OFFSET from the base and the arm reaches about a metre. Far beyond them,
+# the arithmetic of a path (its length, its sample count) stops meaning anything.
+MAX_POSITION = 1000.0          # m, each of x, y, z
+MAX_ANGLE = 2.0 * math.pi      # rad, each of roll, pitch, yaw: one turn
+_POSE_NAMES = ("x", "y", "z", "roll", "pitch", "yaw")
 
 
 class Frame(enum.Enum):
@@ -35,12 +44,39 @@ def check_joints(arm, joints: np.ndarray) -> np.ndarray:
     return joints
 
 
-def check_pose_values(values: np.ndarray) -> np.ndarray:
+def check_pose_values(values: np.ndarray, field: str = "values") -> np.ndarray:
+    """values (6,) SI, each finite and within MAX_POSITION / MAX_ANGLE; OutOfRange naming
+    `field` (the request's) and the bound if not."""
     values = np.asarray(values, dtype=float)
     if values.shape != (6,) or not np.all(np.isfinite(values)):
         raise ParamError(f"a Cartesian target needs 6 finite values (x, y, z, roll, pitch, yaw), "
-                         f"got {values.tolist()}")
+                         f"got {values.tolist()}", field=field)
+    for i, (name, value) in enumerate(zip(_POSE_NAMES, values)):
+        bound, unit = (MAX_POSITION, "m") if i < 3 else (MAX_ANGLE, "rad")
+        if abs(value) > bound * (1.0 + 1e-12):    # 360 degrees in rad may round above 2 pi
+            raise OutOfRange(f"{field}: {name} {value:.6g} {unit} is beyond the bound of "
+                             f"{bound:.6g} {unit} either way", field=field,
+                             maximum=f"{bound:.6g} {unit}")
     return values
+
+
+def reach(arm) -> tuple[np.ndarray, float]:
+    """The shoulder (3,), m in the base frame (J2's height on the J1 axis), and a distance
+    from it (m) the flange never passes: the sum of the link lengths beyond it."""
+    return (np.array([0.0, 0.0, arm.c1]),
+            arm.a1 + abs(arm.b) + arm.c2 + math.hypot(arm.a2, arm.c3) + arm.c4)
+
+
+def check_reach(arm, flange: np.ndarray, field: str) -> None:
+    """Unreachable (OUT_OF_RANGE) naming `field` and the reach if the flange pose (4, 4) in
+    the base frame, m, is beyond it: refused before anything samples the way there."""
+    shoulder, furthest = reach(arm)
+    distance = float(np.linalg.norm(flange[:3, 3] - shoulder))
+    if not distance <= furthest:
+        raise Unreachable(f"{field}: the target is not reachable: it puts the flange "
+                          f"{distance:.4g} m from the arm's shoulder, and the arm reaches "
+                          f"{furthest:.4g} m at most", reason_code="OUT_OF_WORKSPACE",
+                          field=field, maximum=f"{furthest:.4g} m")
 
 
 def goal_tip(frame: Frame, values: np.ndarray, relative: bool, tip_now: np.ndarray,

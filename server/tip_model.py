@@ -13,7 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from landscape.sim.arm import ArmModel
-from landscape.sim.kinematics import PinocchioModel
+from landscape.sim.pinocchio_model import PinocchioModel
 
 
 def wrench_at_tip(wrench: np.ndarray, tool_offset: np.ndarray) -> np.ndarray:

@@ -13,16 +13,21 @@ approach point APPROACH above the plate, straight down (at most TOOL_CHANGE_SPEE
 the changer locks, the id inputs must name the tool, then straight up clear of the rack
 (the tool's length plus CLEARANCE). The tool offset becomes the tool's tip (plate to tip
 along z). PutTool reverses it: down into the slot, functions off, unlock, the id inputs must
-read 0, straight up; the tool offset becomes the flange. Each step is a motion of its own,
-planned and started like any move (the same events, stops and aborts, and the same collision
-check once the planner has one); a step that does not end "done" fails the command, naming
-the step, and leaves the arm where that step left it. A tool already on the flange is not
-fetched again; another one must be put away first.
+read 0, straight up; the tool offset becomes the flange. All the steps are planned, each from
+where the one before ends, and checked against the cell before the first one moves (the last
+one against the cell as the coupling or uncoupling leaves it), so a blocked slot refuses the
+command with the arm where it was. Each step then runs as a motion of its own (the same
+events, stops and aborts as any move, checked again as it starts); a step that does not end
+"done" fails the command, naming the step, and leaves the arm where that step left it. A tool
+already on the flange is not fetched again; another one must be put away first.
 
 ActivateTool closes the gripper (blocking until `gripper_closed` reads 1, on a part or empty)
 or switches the cup's suction on (blocking for two cycles; `vacuum_ok` then says whether a part
 is held). DeactivateTool opens the gripper (blocking for its rated opening time: there is no
 "open" input) or switches the suction off.
+
+Whenever the flange's load changes (a tool coupled or released, a part taken or let go) the
+cycle is told its mass properties (arm_dynamics.py), for the model torques it reports.
 
 The state (GetEndEffectorState, state streams) is read from the ring's I/O image, at most a
 cycle old: the tool from its id inputs, and per kind: gripper "open", "closing" or "closed";
@@ -36,6 +41,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from landscape.server.arm_dynamics import NO_PAYLOAD, part_payload, tool_payload
 from landscape.server.errors import ControllerFailure, OutOfRange, ParamError, WrongState
 from landscape.server.units import pose_matrix
 from landscape.sim.cell import Pose, ToolSpec
@@ -82,6 +88,8 @@ class Tooling:
                        for t in tools}
         self._signals: dict[str, tuple[int, int]] = {}   # name -> (unit, bit)
         self._image: list[tuple[int, int]] = []          # (unit, mask) per ring I/O column
+        self._payloads = {t.name: tool_payload(t) for t in tools}
+        self._carried: tuple = (None, None)   # the tool on the flange, its part's payload
 
     # ---- the I/O image ----------------------------------------------------------------------
 
@@ -96,6 +104,7 @@ class Tooling:
                 masks[unit] = masks.get(unit, 0) | 1 << bit
         self._image = sorted(masks.items())
         self.device.link.send({"op": "io_image", "units": self._image})
+        self._carry(*self._carried)   # a fresh cycle knows no payload
 
     def changer_bits(self, unit: IoUnit) -> int:
         """The bits of `unit` that drive the tool changer (its lock)."""
@@ -148,19 +157,21 @@ class Tooling:
         if mounted is not None:
             raise WrongState(f"the {mounted.name} is on the flange: PutTool it first",
                              tool=mounted.name)
-        slot, scene = self._slots[name], self.device.collisions
-        coupling = scene.coupling(name)      # the flange on the plate, the tool on its rack
+        slot = self._slots[name]
+        approach, into, out = self._steps("GetTool", name, [
+            ("approach", _above(slot, APPROACH), True), ("into the slot", slot, False),
+            ("out of the rack", _above(slot, tool.length + CLEARANCE), False)],
+            after=lambda scene, q: scene.mount_tool(name))
         self._write(FUNCTIONS[tool.kind].output, False)
-        self._move("GetTool", f"{name}: approach", _above(slot, APPROACH), joint=True)
-        self._move("GetTool", f"{name}: into the slot", slot, allow=coupling)
+        self._play("GetTool", *approach)
+        self._play("GetTool", *into)
         self._write(LOCK, True)
         if not self._wait(lambda: self.mounted() is tool, COUPLE_TIMEOUT):
             self._write(LOCK, False)
             raise ControllerFailure(f"the tool changer did not report the {name} coupled "
                                     f"within {COUPLE_TIMEOUT:g} s; the lock is released")
         self.follow_changer()
-        self._move("GetTool", f"{name}: out of the rack", _above(slot, tool.length + CLEARANCE),
-                   allow=coupling)
+        self._play("GetTool", *out)
         return f"the {name} is on the flange"
 
     def put_tool(self, name: str) -> str:
@@ -169,18 +180,20 @@ class Tooling:
         if mounted is not tool:
             what = f"the {mounted.name} is" if mounted else "no tool is"
             raise WrongState(f"{what} on the flange, not the {name}", tool=name)
-        slot, scene = self._slots[name], self.device.collisions
-        coupling = scene.coupling(name)
-        self._move("PutTool", f"{name}: above the slot", _above(slot, tool.length + CLEARANCE),
-                   joint=True)
-        self._move("PutTool", f"{name}: into the slot", slot, allow=coupling)
+        slot = self._slots[name]
+        above, into, away = self._steps("PutTool", name, [
+            ("above the slot", _above(slot, tool.length + CLEARANCE), True),
+            ("into the slot", slot, False), ("away", _above(slot, APPROACH), False)],
+            after=lambda scene, q: _let_go(scene, q, unmount=True))
+        self._play("PutTool", *above)
+        self._play("PutTool", *into)
         self._switch(tool, False)
         self._write(LOCK, False)
         if not self._wait(lambda: self.mounted() is None, COUPLE_TIMEOUT):
             raise ControllerFailure(f"the tool changer still reports the {name} after "
                                     f"{COUPLE_TIMEOUT:g} s")
         self.follow_changer()
-        self._move("PutTool", f"{name}: away", _above(slot, APPROACH), allow=coupling)
+        self._play("PutTool", *away)
         return f"the {name} is in the rack"
 
     # ---- the changer written directly (setDigitalIO) -----------------------------------------
@@ -202,14 +215,13 @@ class Tooling:
         self._wait_cycles(2)
         mounted, scene = self.mounted(), self.device.collisions
         if scene.mounted is not None and (mounted is None or mounted.name != scene.mounted):
-            if scene.held is not None:
-                scene.forbid(f"grasp {scene.held}")
-                scene.release_part(self.device.feedback().position)
-            scene.unmount_tool()
+            _let_go(scene, self.device.feedback().position, unmount=True)
             self._set_tool_offset(np.eye(4))
         if mounted is not None and scene.mounted is None:
             scene.mount_tool(mounted.name)
             self._set_tool_offset(_along_z(mounted.length))
+        if mounted is not self._carried[0]:
+            self._carry(mounted)
 
     # ---- seed 3.8.1 activateTool / deactivateTool -------------------------------------------
 
@@ -245,8 +257,9 @@ class Tooling:
         q = self.device.feedback().position
         if not on:
             if scene.held is not None:
-                scene.forbid(f"grasp {scene.held}")
-                scene.release_part(q)
+                _let_go(scene, q)
+                self._carry(tool)
+                self.device.motions.parts.settle()   # where it lands, not where it was let go
             if tool.kind == "parallel_gripper":
                 scene.set_finger_gap(tool.stroke)
             return None
@@ -255,9 +268,21 @@ class Tooling:
         if tool.kind == "parallel_gripper":   # closed on the part, or all the way
             scene.set_finger_gap(min(self._parts[part].size[:2]) if part else 0.0)
         if part is not None and scene.held is None:
+            flange = self._world_base @ self.device.kinematics.forward(q)
+            in_flange = np.linalg.inv(flange) @ self.device.collisions.part_pose(part)
             scene.allow(scene.grasp(part))
             scene.attach_part(part, q)
+            self._carry(tool, part_payload(self._parts[part], in_flange))
         return part
+
+    def _carry(self, tool: ToolSpec | None, part: np.ndarray | None = None) -> None:
+        """Tell the cycle what the flange carries: `tool` and the part it holds (its dynamic
+        parameters, arm_dynamics.py), if any."""
+        self._carried = (tool, part)
+        payload = np.array(NO_PAYLOAD) if tool is None else self._payloads[tool.name]
+        if part is not None:
+            payload = payload + part
+        self.device.link.send({"op": "payload", "parameters": tuple(payload.tolist())})
 
     def _part_at_tip(self, q: np.ndarray, tool: ToolSpec) -> str | None:
         """The part of the collision scene whose centre is nearest the tool's tip, within
@@ -297,21 +322,37 @@ class Tooling:
         if status is not Status.OK:
             raise ControllerFailure(f"the controller refused to set {signal} to {int(on)}")
 
-    def _move(self, command: str, step: str, flange_goal: np.ndarray, joint: bool = False,
-              allow=()) -> None:
-        """One step of a tool change: the flange to `flange_goal` (4x4 in base_link)."""
+    def _steps(self, command: str, tool: str, steps, after) -> list[tuple]:
+        """Plan the moves of a tool change, each from where the one before ends, and check
+        them all before any runs: (step, flange goal (4x4 in base_link), joint move?). The
+        last one is checked against what `after(scene, q)` makes of a copy of the scene (the
+        coupling or uncoupling made, from the joints q it starts at). The fine moves into and
+        out of the slot stay in the tool's docking corridor, where the flange may meet the
+        tool and the tool its rack (collision/docking.py). Returns (step, trajectory)."""
         motions = self.device.motions
         planner, settings = motions.planner, self.device.settings
-        q_now = motions.planning_start()
-        if joint:
-            limits = planner.limits(settings, None)
-            trajectory = planner.joint_move(q_now, planner.pose_goal_joints(q_now, flange_goal),
-                                            limits)
-        else:
-            limits = planner.limits(settings, min(settings.speed_percent, TOOL_CHANGE_SPEED))
-            trajectory = planner.straight_move(q_now, flange_goal, limits, np.eye(4))
-        motion = motions.play(command, step, trajectory, trajectory.duration + 10.0,
-                              allow=allow)
+        model = self.device.collisions.model()
+        q, out = motions.planning_start(), []
+        for k, (step, flange_goal, joint) in enumerate(steps):
+            if k == len(steps) - 1:
+                changed = self.device.collisions.copy()
+                after(changed, q)
+                model = changed.model()
+            if joint:
+                trajectory = planner.joint_move(q, planner.pose_goal_joints(q, flange_goal),
+                                                planner.limits(settings, None))
+            else:
+                limits = planner.limits(settings, min(settings.speed_percent, TOOL_CHANGE_SPEED))
+                trajectory = planner.straight_move(q, flange_goal, limits, np.eye(4))
+            step = f"{tool}: {step}"
+            motions.check_collisions([trajectory], f"{command} {step}", model=model)
+            out.append((step, trajectory))
+            q = trajectory.positions[-1]
+        return out
+
+    def _play(self, command: str, step: str, trajectory) -> None:
+        """One step of a tool change, planned by _steps."""
+        motion = self.device.motions.play(command, step, trajectory, trajectory.duration + 10.0)
         if motion.phase != "done":
             why = motion.report.get("message", "")
             raise ControllerFailure(f"{command} stopped at the step '{step}' ({motion.phase}"
@@ -346,3 +387,13 @@ def _along_z(length: float) -> np.ndarray:
 def _above(slot: np.ndarray, height: float) -> np.ndarray:
     """The slot pose moved `height` against its z (tools hang down: up, away from the rack)."""
     return slot @ _along_z(-height)
+
+
+def _let_go(scene, q: np.ndarray, unmount: bool = False) -> None:
+    """The collision scene after the tool let its part go at joints q (and, unmount, after
+    the changer let the tool go)."""
+    if scene.held is not None:
+        scene.forbid(f"grasp {scene.held}")
+        scene.release_part(q)
+    if unmount:
+        scene.unmount_tool()

@@ -22,8 +22,9 @@ or the e-stop disable at once, with an error event. While not ENABLED, set() is 
 ignored: there is nothing to command.
 
 Feedback (`get()`): measured position, velocity, following error (command, or the held
-position, minus measured) and torque (motor plus feed-forward; the torque command in torque
-mode; 0 while DISABLED: the drives are off and the brakes carry the load).
+position, minus measured) and torque (motor, averaged over the cycle's substeps, plus
+feed-forward; the torque command in torque mode; 0 while DISABLED: the drives are off and the
+brakes carry the load).
 
 Single-threaded: call everything from the thread that steps (the cycle process).
 """
@@ -42,6 +43,19 @@ from landscape.sim.native_output import silenced
 with silenced():   # pybullet's banner
     import pybullet as pb
     from pybullet_utils.bullet_client import BulletClient
+
+
+class _BoundClient(BulletClient):
+    """pybullet's client wrapper with each function bound to the client once, on first use:
+    BulletClient binds it again on every call (a partial and an inspect per call: a third of
+    what the world's per-cycle reads cost)."""
+
+    def __getattr__(self, name: str):
+        attribute = super().__getattr__(name)
+        if name != "disconnect":   # (which also marks the client gone)
+            self.__dict__[name] = attribute
+        return attribute
+
 
 from landscape.sim.cell import PANEL_WIRES, Cell
 from landscape.sim.controller import (
@@ -89,7 +103,7 @@ class BulletController(Controller):
         self._event_func: EventFunc | None = None
 
         with silenced():   # "argv[0]="
-            self._bc = BulletClient(pb.DIRECT)
+            self._bc = _BoundClient(pb.DIRECT)
         self._bc.setPhysicsEngineParameter(fixedTimeStep=spec.cycle_time / spec.substeps,
                                            deterministicOverlappingPairs=1)
         self.world = World(self._bc, cell)
@@ -171,6 +185,7 @@ class BulletController(Controller):
             start = self._start
             delta = [e - s for s, e in zip(start, self._cmd_list)]
             tau = self._tau_list if self._ffw else None
+            applied = [0.0] * 6   # the motors' torques summed over the substeps
             for f in self._fractions:
                 target = [s + f * d for s, d in zip(start, delta)]
                 motors(pb.POSITION_CONTROL, targetPositions=target, targetVelocities=self._zeros,
@@ -179,6 +194,8 @@ class BulletController(Controller):
                 if tau is not None:
                     motors(pb.TORQUE_CONTROL, forces=tau)
                 physics()
+                states = self._joint_states()
+                applied = [a + s[3] for a, s in zip(applied, states)]
             self._start = self._cmd_list
         elif drive is _Drive.TORQUE:
             for _ in self._fractions:
@@ -189,13 +206,18 @@ class BulletController(Controller):
                 physics()
 
         # Feedback, in plain lists until the arrays are built: numpy is slow on 6 values.
-        states = self._joint_states()
+        if drive is not _Drive.POSVEL:   # (following, the last substep has read them)
+            states = self._joint_states()
         pos = [s[0] for s in states]
         vel = [s[1] for s in states]
         speed = max(map(abs, vel))
         if drive is _Drive.POSVEL:
-            torque = ([s[3] + t for s, t in zip(states, self._tau_list)] if self._ffw
-                      else [s[3] for s in states])
+            # Averaged over the cycle, as a drive's current filtered at the cycle rate: the
+            # dead-beat motors change speed in the first substep, so the last one alone would
+            # miss the inertial torque.
+            n = len(self._fractions)
+            torque = ([a / n + t for a, t in zip(applied, self._tau_list)] if self._ffw
+                      else [a / n for a in applied])
         elif drive is _Drive.TORQUE:
             torque = self._tau_list
         elif drive is _Drive.HOLDING:

@@ -28,7 +28,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from landscape.sim.kinematics import Config, ReversingResult
+from landscape.sim.configurations import Config, ReversingResult
 
 
 class Status(enum.IntEnum):

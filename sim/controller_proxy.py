@@ -14,7 +14,7 @@ import numpy as np
 
 from landscape.sim.controller import (Controller, DioStatus, DoutValue, EventFunc, IoctrlCode, IoId,
                                       IoUnit, JointCmd, JointFbk, SensorInfo, State, Status)
-from landscape.sim.kinematics import Config, ReversingResult
+from landscape.sim.configurations import Config, ReversingResult
 
 if TYPE_CHECKING:
     from landscape.sim.clock import RealTimeClock

@@ -8,7 +8,8 @@ alone wakes up tens to hundreds of microseconds late), step the controller (phys
 cyclic function), send what the cyclic function posted, then read and serve the parent's
 requests, in order, for as long as the time budget before the next deadline allows. Calls that
 take long (SLOW_CALLS: storing a recording) run on a thread of their own, the LLI's
-asynchronous task, and the calls after them wait; the cycle never does.
+asynchronous task, and the calls after them wait (except the urgent lane, RUN_URGENT: the
+operator panel); the cycle never does.
 
 Wire protocol over one duplex multiprocessing Pipe; every item is a tuple whose first element
 is its tag:
@@ -59,8 +60,12 @@ CONTROLLER_CALLS = frozenset({
 SLOW_CALLS = frozenset({"rec_store"})
 # Calls the cycle process answers itself. RUN: (func, args) -> func(controller, *args), for
 # what the LLI has no call for (the simulator's panel, its sensors); func must pickle.
-PLUG_EVENT_FUNC, RESET_STATS, SIM_TIME, RUN = (
-    "plug_event_func", "_reset_stats", "_sim_time", "_run")
+# RUN_URGENT: the same in a lane of its own, served before the other calls even while a slow
+# one runs (the operator panel: a person at the cell never waits for a file being written).
+# LATE_IMPORTS: the modules imported since the loop started (none should be: an import on the
+# loop thread, such as unpickling a function of a module not yet loaded, costs cycles).
+PLUG_EVENT_FUNC, RESET_STATS, SIM_TIME, RUN, RUN_URGENT, LATE_IMPORTS = (
+    "plug_event_func", "_reset_stats", "_sim_time", "_run", "_run_urgent", "_late_imports")
 
 
 class Steppable(Protocol):
@@ -85,7 +90,9 @@ class Mailbox:
     `poll()` returns the oldest message the parent sent, or None. `post(msg)` queues a message
     for the parent; it leaves at the end of this cycle. Nothing posted is ever dropped (reports
     of completions, faults and tags must arrive): if the parent stops reading, the queue grows,
-    and passing `high_water` items is said once, as an event, for the parent to alarm on.
+    and passing `high_water` items is said as an event for the parent to alarm on, put first
+    (not behind the backlog it is about); said again each time the queue grows past it after
+    having drained to half of it.
     """
 
     def __init__(self, high_water: int = 10_000):
@@ -106,10 +113,13 @@ class Mailbox:
 
     def _queue(self, item: tuple) -> None:
         self.outbox.append(item)
-        if len(self.outbox) > self.high_water and not self._warned:
+        waiting = len(self.outbox)
+        if waiting > self.high_water and not self._warned:
             self._warned = True
-            self.outbox.append((EVENT, f"the cycle's outbox holds over {self.high_water} "
-                                       f"reports: the server is not reading them"))
+            self.outbox.appendleft((EVENT, f"the cycle's outbox holds over {self.high_water} "
+                                           f"reports: the server is not reading them"))
+        elif self._warned and waiting <= self.high_water // 2:
+            self._warned = False
 
 
 def serve_call(controller, mailbox: Mailbox, method: str, args: tuple) -> Any:
@@ -121,7 +131,7 @@ def serve_call(controller, mailbox: Mailbox, method: str, args: tuple) -> Any:
     if method == PLUG_EVENT_FUNC:
         (plug,) = args
         return controller.plug_event_func(mailbox.event if plug else None)
-    if method == RUN:
+    if method in (RUN, RUN_URGENT):
         func, func_args = args
         return func(controller, *func_args)
     raise AttributeError(f"{method!r} is not a call served between cycles")
@@ -140,17 +150,20 @@ class CycleLoop:
     """
 
     def __init__(self, step: Callable[[], Any], cycle_time: float, stats: StatsRing,
-                 spin: float = 0.0005):
+                 spin: float = 0.0005, free: bool = False):
         self.step = step
         self.cycle_time = check_cycle_time(cycle_time)
         self.stats = stats
         self.spin = min(spin, self.cycle_time / 2)
+        self.free = free
 
     def run(self, between: Callable[[float], bool],
             wait: Callable[[float], None] | None = None) -> None:
         """wait(deadline, spin): how to pass the time up to the deadline (perf_counter s), the
         last `spin` s busy; by default a sleep, then a spin (the cycle process reads its pipe
         meanwhile)."""
+        if self.free:
+            return self._run_free(between)
         step, period, spin, stats = self.step, self.cycle_time, self.spin, self.stats
         clock, sleep = time.perf_counter, time.sleep
         deadline = clock() + period
@@ -174,6 +187,22 @@ class CycleLoop:
             previous = start
             deadline += period
             if not between(deadline):
+                return
+
+
+    def _run_free(self, between: Callable[[float], bool]) -> None:
+        """Cycle after cycle with no wait (simulated time runs ahead of the wall clock as far
+        as the machine allows); between cycles `between` serves the parent for at least one
+        message and one call, as on the deadline grid."""
+        step, stats, clock = self.step, self.stats, time.perf_counter
+        previous = float("nan")
+        while True:
+            start = clock()
+            step()
+            now = clock()
+            stats.record(start - previous, 0.0, now - start)
+            previous = start
+            if not between(now):
                 return
 
 
@@ -232,9 +261,11 @@ class _Server:
         self.parent_pid = parent_pid
         self.guard = guard
         self.calls: deque = deque()   # (call_id, method, args) not served yet
+        self.urgent: deque = deque()  # the same, RUN_URGENT: served first, never held back
         self.async_task = _AsyncTask()
         self.running = True
         self.cycles = 0
+        self.modules: frozenset[str] = frozenset()   # what the loop starts with
 
     def between(self, deadline: float) -> bool:
         self.cycles += 1
@@ -276,11 +307,14 @@ class _Server:
             if tag == MSG:
                 self.mailbox.inbox.append(item[1])
             elif tag == CALL:
-                self.calls.append(item[1:])
+                (self.urgent if item[2] == RUN_URGENT else self.calls).append(item[1:])
             elif tag == STOP:
                 self.running = False
 
     def _serve(self, deadline: float) -> None:
+        # The urgent lane first (its calls are short), whatever the asynchronous task does.
+        while self.urgent:
+            self._answer(*self.urgent.popleft())
         # In order; a slow call goes to the asynchronous task and holds the later ones back.
         clock, count = time.perf_counter, 0
         while self.calls and not self.async_task.busy:
@@ -291,12 +325,15 @@ class _Server:
             if method in SLOW_CALLS:
                 self.async_task.submit(call_id, getattr(self.controller, method), args)
                 return
-            try:
-                value = self._call(method, args)
-            except Exception as exc:  # the parent re-raises it
-                self._reply(call_id, False, exc)
-            else:
-                self._reply(call_id, True, value)
+            self._answer(call_id, method, args)
+
+    def _answer(self, call_id: int, method: str, args: tuple) -> None:
+        try:
+            value = self._call(method, args)
+        except Exception as exc:  # the parent re-raises it
+            self._reply(call_id, False, exc)
+        else:
+            self._reply(call_id, True, value)
 
     def _flush(self) -> None:
         outbox = self.mailbox.outbox
@@ -317,6 +354,8 @@ class _Server:
             return self.stats.reset()
         if method == SIM_TIME:
             return getattr(self.controller, "time", None)
+        if method == LATE_IMPORTS:
+            return sorted(set(sys.modules) - self.modules)
         return serve_call(self.controller, self.mailbox, method, args)
 
     def _reply(self, call_id: int, ok: bool, value: Any) -> None:
@@ -361,7 +400,7 @@ def _shutdown(controller) -> None:
 
 def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
                cycle_time: float | None, parent_pid: int, spin: float, guard: float,
-               rt_priority: int | None) -> None:
+               rt_priority: int | None, free: bool = False) -> None:
     """Entry point of the cycle process (see the module docstring)."""
     server: _Server | None = None
 
@@ -387,7 +426,7 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
         elif own is not None and abs(own - cycle_time) > 1e-12:
             raise ValueError(f"the clock's cycle time {cycle_time} s differs from the "
                              f"controller's {own} s")
-        loop = CycleLoop(controller.step, cycle_time, stats, spin)
+        loop = CycleLoop(controller.step, cycle_time, stats, spin, free)
         server = _Server(conn, controller, mailbox, stats, parent_pid, guard)
         problems = tune_for_latency(rt_priority)
         conn.send((READY, {"pid": os.getpid(), "cycle_time": loop.cycle_time,
@@ -402,6 +441,7 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
     gc.freeze()
     # The asynchronous thread must hand the GIL back quickly when the loop wakes up.
     sys.setswitchinterval(0.0001)
+    server.modules = frozenset(sys.modules)
     code = 0
     try:
         loop.run(server.between, server.wait)

@@ -34,73 +34,26 @@ Invalid input: `reverse` returns INVALID_ORIENTATION for a pose whose rotation i
 which holds NaN/inf; `solutions` raises ValueError for such a pose; `solve_batch` returns NaN
 rows. Arrays of the wrong shape, or non-finite q_near or joint ranges, raise ValueError.
 
-`PinocchioModel` is the same arm in pinocchio (from the generated URDF): a cross-check, the
-flange Jacobian, and a damped-least-squares IK for comparison. pinocchio is imported lazily.
+The names of configurations and reversing results are the LLI's (configurations.py); the same
+arm in pinocchio, for cross-checks, Jacobians and dynamics, is pinocchio_model.py.
 """
 from __future__ import annotations
 
-import enum
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from landscape.sim.arm import JOINT_AXES, ArmModel, urdf
+from landscape.sim.arm import JOINT_AXES, ArmModel
+from landscape.sim.configurations import BRANCHES, Config, PosNeg, ReversingResult, Shoulder
 
 __all__ = ["Shoulder", "PosNeg", "Config", "ReversingResult", "BRANCHES", "Kinematics",
-           "PinocchioModel", "wrap_angle", "ORTHONORMAL_TOL", "SINGULAR_EPS"]
+           "wrap_angle", "ORTHONORMAL_TOL", "SINGULAR_EPS"]
 
 _TWO_PI = 2.0 * math.pi
 ORTHONORMAL_TOL = 1e-6   # max |R^T R - I| element accepted as a rotation
 SINGULAR_EPS = 1e-10     # below this sin(q5) (or distance, m) a joint is free and taken from q_near
 _REACH_TOL = 1e-12       # rounding slack on the reach tests: poses on the workspace boundary solve
 _RANGE_TOL = 1e-10       # rad: a joint this far past its limit is clipped onto it, not rejected
-
-
-class Shoulder(enum.IntEnum):
-    """LLI_ShoulderConfig."""
-    SAME = 0
-    LEFTY = 1
-    RIGHTY = 2
-    FREE = 3
-
-
-class PosNeg(enum.IntEnum):
-    """LLI_PositiveNegativeConfig (elbow and wrist)."""
-    SAME = 0
-    POSITIVE = 1
-    NEGATIVE = 2
-    FREE = 3
-
-
-@dataclass(frozen=True)
-class Config:
-    """LLI_RxConfig. As a request, SAME means "as q_near" and FREE "any"."""
-    shoulder: Shoulder = Shoulder.FREE
-    elbow: PosNeg = PosNeg.FREE
-    wrist: PosNeg = PosNeg.FREE
-
-
-class ReversingResult(enum.IntEnum):
-    """LLI_ReversingResult."""
-    OK = 0
-    NO_CONVERGENCE = 1
-    OUT_OF_JNT_RANGE = 2
-    OUT_OF_WORKSPACE = 3
-    INVALID_CONFIG = 4
-    INVALID_ORIENTATION = 5
-    UNSUPPORTED_KINEMATICS = 6
-    UNCONSTRAINT_FRAME = 7
-    INVALID_ERROR_CODE = 8
-
-
-# The 8 branches of the closed form, in the order of `solve_batch`'s second axis:
-# index = 4 * shoulder + 2 * elbow + wrist, with 0 = RIGHTY / POSITIVE and 1 = LEFTY / NEGATIVE.
-BRANCHES: tuple[Config, ...] = tuple(
-    Config(s, e, w)
-    for s in (Shoulder.RIGHTY, Shoulder.LEFTY)
-    for e in (PosNeg.POSITIVE, PosNeg.NEGATIVE)
-    for w in (PosNeg.POSITIVE, PosNeg.NEGATIVE))
 
 
 def _allowed(request: Config) -> frozenset[int]:
@@ -573,56 +526,3 @@ def _fit_range(q, near, lower, upper) -> tuple[list[float], float] | None:
             a = out[j] = min(max(a + _TWO_PI * k, lo), hi)
         dist += (a - n) * (a - n)
     return out, dist
-
-
-class PinocchioModel:
-    """The same arm in pinocchio, built from `urdf(arm)`: cross-checks, Jacobian, numeric IK.
-
-    The joint vector q (6,) is pinocchio's configuration (all joints revolute, nq = 6).
-    """
-
-    def __init__(self, arm: ArmModel):
-        import pinocchio as pin   # heavy; only the users of this class pay for it
-
-        self._pin = pin
-        self.model = pin.buildModelFromXML(urdf(arm))
-        self.data = self.model.createData()
-        self.flange = self.model.getFrameId("tool0")
-
-    def forward(self, q) -> np.ndarray:
-        """Flange (tool0) pose in base_link, (4, 4)."""
-        self._pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
-        return self.data.oMf[self.flange].homogeneous.copy()
-
-    def jacobian(self, q) -> np.ndarray:
-        """(6, 6) flange Jacobian, world-aligned at the flange origin: rows (vx, vy, vz) in m/rad
-        then (wx, wy, wz) in rad/rad, expressed in base_link axes; columns joints 1..6."""
-        pin = self._pin
-        return pin.computeFrameJacobian(self.model, self.data, np.asarray(q, dtype=float),
-                                        self.flange, pin.LOCAL_WORLD_ALIGNED).copy()
-
-    def ik_dls(self, pose, q0, tol: float = 1e-10, max_iter: int = 1000, step: float = 1.0,
-               damping: float = 1e-12) -> tuple[np.ndarray, bool, int]:
-        """Closed-loop damped-least-squares IK (pinocchio's documented CLIK scheme) for the flange.
-
-        Iterates q <- q + step * J^T (J J^T + damping I)^-1 e, with e = log6(oMf^-1 oMdes) the
-        flange error in its own frame and J its Jacobian, until |e| < tol. Joint ranges are
-        not enforced. Returns (q (6,), converged, iterations).
-        """
-        pin = self._pin
-        model, data, fid = self.model, self.data, self.flange
-        pose = np.asarray(pose, dtype=float)
-        target = pin.SE3(pose[:3, :3], pose[:3, 3])
-        q = np.array(q0, dtype=float)
-        eye = np.eye(6)
-        for it in range(max_iter):
-            pin.computeJointJacobians(model, data, q)   # also runs forward kinematics
-            pin.updateFramePlacement(model, data, fid)
-            error_pose = data.oMf[fid].actInv(target)
-            e = pin.log6(error_pose).vector
-            if np.linalg.norm(e) < tol:
-                return q, True, it
-            J = pin.Jlog6(error_pose.inverse()) @ pin.getFrameJacobian(model, data, fid, pin.LOCAL)
-            v = J.T @ np.linalg.solve(J @ J.T + damping * eye, e)
-            q = pin.integrate(model, q, step * v)
-        return q, False, max_iter

@@ -4,12 +4,17 @@ These inputs are not outputs anyone could write; tests and the dashboard operate
 (`BulletController.panel`). The e-stop acts at once: `on_estop(pressed)` lets the controller
 cut the drives in the same call, not a cycle later. The door is only an input (door_closed):
 what an open door means is the supervisor's policy.
+
+`operate` is how the device server reaches the panel of a controller in a cycle process: it
+lives here, in a module the cycle process has loaded already, so unpickling it there imports
+nothing on the loop thread.
 """
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from landscape.sim.world import World
+if TYPE_CHECKING:   # the device server imports this module (operate), never pybullet
+    from landscape.sim.world import World
 
 
 class Panel:
@@ -46,3 +51,11 @@ class Panel:
     def remove_part(self, name: str) -> None:
         """Take part `name` out of the cell (down on the floor, out of reach)."""
         self._world.remove_part(name)
+
+
+def operate(controller, action: str) -> tuple[bool, bool]:
+    """Run between two cycles: `action` names a Panel method (press_estop, open_door, ...);
+    returns (e-stop pressed, door open)."""
+    panel = controller.panel
+    getattr(panel, action)()
+    return panel.estop_pressed, not panel.door_closed

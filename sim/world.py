@@ -198,6 +198,17 @@ class World:
     def part_pose(self, name: str):
         return self.bc.getBasePositionAndOrientation(self.parts[name].body)
 
+    def part_states(self) -> dict[str, tuple]:
+        """Every part: (position (3,) m, quaternion xyzw, speed m/s, held by the mounted tool),
+        for the server's collision scene to follow what physics and people did."""
+        held = self.mounted.held if self.mounted is not None else None
+        out = {}
+        for name, part in self.parts.items():
+            pos, orn = self.bc.getBasePositionAndOrientation(part.body)
+            speed = float(np.linalg.norm(self.bc.getBaseVelocity(part.body)[0]))
+            out[name] = (tuple(pos), tuple(orn), speed, part.body == held)
+        return out
+
     def place_part(self, name: str, xyz, rpy=(0.0, 0.0, 0.0)) -> None:
         """Put a part down by hand at xyz (m) with fixed-axis angles rpy (rad), at rest; a
         gripper or cup holding it lets go."""

@@ -8,6 +8,7 @@ import logging
 import signal
 import socket
 
+from landscape.client import credentials
 from landscape.supervisor import app
 from landscape.supervisor.config import (DEFAULT_DISPLAY_RATE_HZ, DEFAULT_HOST, DEFAULT_PORT,
                                          DashboardConfig, parse_device)
@@ -30,13 +31,14 @@ def parse_args(argv=None) -> DashboardConfig:
     parser.add_argument("--port", type=int, default=DEFAULT_PORT, help="0 picks a free port")
     parser.add_argument("--display-rate", type=float, default=DEFAULT_DISPLAY_RATE_HZ,
                         help="state samples per second sent to the page")
-    parser.add_argument("--cell", help="the cell file the devices run (world geometry for the "
-                                       "3D view; default: the default cell)")
+    credentials.add_arguments(parser)
     args = parser.parse_args(argv)
     try:
+        tls, token = credentials.from_arguments(args)
         return DashboardConfig(devices=tuple(args.device), host=args.host, port=args.port,
-                               display_rate_hz=args.display_rate, cell=args.cell)
-    except ValueError as error:
+                               display_rate_hz=args.display_rate, tls=tls,
+                               token=token)
+    except (OSError, ValueError) as error:
         parser.error(str(error))
 
 

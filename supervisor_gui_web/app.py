@@ -1,5 +1,5 @@
-"""The web supervisor's backend: aiohttp serving the built page, the device list, the cell's
-world and one WebSocket per browser (wire.py says what travels on it).
+"""The web supervisor's backend: aiohttp serving the built page, the device list and one
+WebSocket per browser (wire.py says what travels on it).
 
 aiohttp, because one well-kept package gives the HTTP server, WebSockets and static files on
 the asyncio loop that grpc.aio already runs on: no second server process, no ASGI layer.
@@ -14,7 +14,6 @@ from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
-from landscape.supervisor.cell_world import world_description
 from landscape.supervisor.config import DashboardConfig
 from landscape.supervisor.console import Console
 from landscape.supervisor.device_link import DeviceLink
@@ -25,7 +24,6 @@ log = logging.getLogger(__name__)
 STATIC_DIR = Path(__file__).parent / "frontend" / "dist"
 LINKS = web.AppKey("links", dict)
 CONFIG = web.AppKey("config", DashboardConfig)
-WORLD = web.AppKey("world", dict)
 # WebSocket close code 1013 "try again later": the page reconnects and is sent the history.
 CLOSE_TOO_SLOW = 1013
 
@@ -37,10 +35,8 @@ def create_app(config: DashboardConfig) -> web.Application:
                                 "(`make install` builds it with npm)")
     app = web.Application()
     app[CONFIG] = config
-    app[WORLD] = world_description(config.cell)
     app.router.add_get("/ws", _websocket)
     app.router.add_get("/api/devices", _devices)
-    app.router.add_get("/api/devices/{name}/world", _world)
     async def index(request: web.Request) -> web.FileResponse:
         return web.FileResponse(static / "index.html")
 
@@ -52,7 +48,7 @@ def create_app(config: DashboardConfig) -> web.Application:
 
 async def _device_links(app: web.Application):
     config = app[CONFIG]
-    links = {d.name: DeviceLink(d, config.display_rate_hz)
+    links = {d.name: DeviceLink(d, config.display_rate_hz, config.tls, config.token)
              for d in config.devices}
     for link in links.values():
         link.start()
@@ -64,12 +60,6 @@ async def _device_links(app: web.Application):
 async def _devices(request: web.Request) -> web.Response:
     links = request.app[LINKS]
     return web.json_response([{"name": link.name, "target": link.target} for link in links.values()])
-
-
-async def _world(request: web.Request) -> web.Response:
-    if request.match_info["name"] not in request.app[LINKS]:
-        raise web.HTTPNotFound(text=f"no device named {request.match_info['name']!r}")
-    return web.json_response(request.app[WORLD])
 
 
 async def _websocket(request: web.Request) -> web.WebSocketResponse:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from landscape.client.credentials import ClientTLS
+
 DEFAULT_HOST = "127.0.0.1"   # loopback unless the operator exposes the page on purpose
 DEFAULT_PORT = 8080
 DEFAULT_DISPLAY_RATE_HZ = 30.0
@@ -30,11 +32,12 @@ class DashboardConfig:
     port: int = DEFAULT_PORT            # 0 picks a free port
     # State samples per second sent to the page (StreamState's rate_hz).
     display_rate_hz: float = DEFAULT_DISPLAY_RATE_HZ
-    # The cell file the world geometry is read from (None: the default cell). TEMPORARY: the
-    # contract has no call that describes the cell's world yet (see cell_world.py).
-    cell: str | None = None
     # The built page (None: frontend/dist beside this package).
     static_dir: str | None = None
+    # TLS to the device servers and the role token the backend presents for every browser
+    # (credentials.py); None: plaintext, no token (a device server on loopback without roles).
+    tls: ClientTLS | None = None
+    token: str | None = None
 
     def __post_init__(self):
         names = [d.name for d in self.devices]

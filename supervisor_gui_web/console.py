@@ -175,8 +175,8 @@ class Console:
         task.add_done_callback(self._tasks.discard)
 
     async def _ask_page(self, link: DeviceLink, side: _DeviceSide, request):
-        """An RSVP for this page's session: the page shows it and answers in time, or the device
-        takes its default (the answer sent after that is ignored by the device)."""
+        """An RSVP for this page's session: the page shows it and answers in time, or nothing
+        is sent and the device's own timer gives the default (its event says timed out)."""
         future = asyncio.get_running_loop().create_future()
         side.rsvp_answers[request.rsvp_id] = future
         self._send(link.name, CONNECT, side.session_call_id,
@@ -185,7 +185,7 @@ class Console:
             async with asyncio.timeout(request.timeout_ms / 1000.0):
                 return await future
         except TimeoutError:
-            return request.default_choice, list(request.data)
+            return None
         finally:
             side.rsvp_answers.pop(request.rsvp_id, None)
 

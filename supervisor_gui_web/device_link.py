@@ -1,5 +1,6 @@
 """One device server as the dashboard sees it: a grpc.aio channel, the feeds every browser
-shares (live state, events, the read-only status), and the browsers watching it.
+shares (live state, events, the read-only status, the cell around the arm), and the browsers
+watching it.
 
 One StreamState and one Subscribe per device serve every browser: the device server thins the
 state to the display rate once, and each browser's outbox keeps only the newest sample.
@@ -10,28 +11,32 @@ import asyncio
 import logging
 from collections import deque
 
-import grpc
-
+from landscape.client.credentials import ClientTLS, open_aio_channel
 from landscape.supervisor import wire
 from landscape.supervisor.config import DeviceTarget
 from landscape.supervisor.feeds import EventFeed, StatusPoll
 from landscape.supervisor.outbox import Outbox
 from landscape.supervisor.state_feed import StateFeed
+from landscape.supervisor.world_feed import WorldFeed
 
 log = logging.getLogger(__name__)
 
 
 class DeviceLink:
-    def __init__(self, target: DeviceTarget, display_rate_hz: float, history: int = 500):
+    def __init__(self, target: DeviceTarget, display_rate_hz: float, tls: ClientTLS | None = None,
+                 token: str | None = None, history: int = 500):
         self.name = target.name
         self.target = target.address
-        self.channel = grpc.aio.insecure_channel(target.address)
+        # Every call of every browser goes with this token: the device's roles decide.
+        self.channel = open_aio_channel(target.address, tls, token)
         self._watchers: set[Outbox] = set()
         self._history: deque[str] = deque(maxlen=history)   # the newest event frames, for joiners
         self._latest: dict[str, str] = {}                   # feed -> its newest frame, for joiners
         self.status_poll = StatusPoll(self)
-        self.feeds = [StateFeed(self, display_rate_hz),
-                      EventFeed(self, on_state_change=self.status_poll.kick), self.status_poll]
+        self.world = WorldFeed(self)
+        self.feeds = [StateFeed(self, display_rate_hz, on_end_effector=self.world.kick),
+                      EventFeed(self, on_state_change=self._state_changed), self.status_poll,
+                      self.world]
         self._tasks: list[asyncio.Task] = []
 
     def start(self) -> None:
@@ -43,6 +48,10 @@ class DeviceLink:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         await self.channel.close()
+
+    def _state_changed(self) -> None:
+        self.status_poll.kick()
+        self.world.kick()   # a tool change's steps, a motion's start and end
 
     # ---- browsers
     def join(self, outbox: Outbox) -> None:

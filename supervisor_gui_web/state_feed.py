@@ -4,6 +4,8 @@ The stream is asked for in meters and radians and the tool pose in the robot bas
 frames and units of the URDF the page draws (the page converts to the device's units for
 display). The force sensor rides along for the force plot; a device that cannot put sensors in
 the stream (UNIMPLEMENTED) is asked again without them, and the page says it has no readings.
+A new end effector or end effector state (a tool coupled, a part taken or let go) is told to
+`on_end_effector`: the cell around the arm may have changed.
 """
 from __future__ import annotations
 
@@ -24,10 +26,12 @@ SI_UNITS = types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS, angular=types_pb
 class StateFeed(Feed):
     rpc = STREAM_STATE
 
-    def __init__(self, link, rate_hz: float):
+    def __init__(self, link, rate_hz: float, on_end_effector=lambda: None):
         super().__init__(link)
         self.rate_hz = rate_hz
         self.sensors = SENSORS
+        self.on_end_effector = on_end_effector
+        self._end_effector: tuple[str, str] | None = None
 
     def request(self) -> pb.StreamStateRequest:
         return pb.StreamStateRequest(rate_hz=self.rate_hz, units=SI_UNITS, sensors=self.sensors,
@@ -52,5 +56,10 @@ class StateFeed(Feed):
 
     def _publish(self, reply: pb.StreamStateResponse) -> None:
         kind = reply.WhichOneof("message")
+        if kind == "sample":
+            end_effector = (reply.sample.end_effector, reply.sample.end_effector_state)
+            if end_effector != self._end_effector:
+                self._end_effector = end_effector
+                self.on_end_effector()
         # The stream's terms reach every browser; samples are latest-wins.
         self.link.publish_latest(f"state.{kind}", STREAM_STATE, reply=reply, ordered=kind == "started")

@@ -15,7 +15,8 @@ Every WebSocket frame is a JSON object about one message of one RPC of one devic
                          the browser opened: the session, a jog)
 
 The feeds the backend keeps for every browser arrive under their own RPC names
-(StateService/StreamState, EventService/Subscribe, and the read-only gets of `status_poll`).
+(StateService/StreamState, EventService/Subscribe, the read-only gets of `status_poll`, and
+DeviceService/GetCellDescription, the cell around the arm: world_feed.py).
 Nothing here is a second schema: "reply" and "status" are protobuf's own JSON mapping.
 """
 from __future__ import annotations

@@ -8,6 +8,8 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
+from pathlib import Path
 
 import grpc
 from google.rpc import error_details_pb2
@@ -15,11 +17,13 @@ from grpc_status import rpc_status
 
 import numpy as np
 
-from landscape.client import Session
+from landscape.cell.certs import CertFiles, make_certificates
+from landscape.cell.tokens import make_tokens
+from landscape.client import ClientTLS, Session, read_token
 from landscape.sim.kinematics import Kinematics
 from landscape.sim.recorder import read_recording
 from landscape.server.app import RunningServer, serve
-from landscape.server.config import ServerConfig
+from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
                           end_effector_pb2, event_service_pb2, event_service_pb2_grpc, motion_pb2,
                           sensing_pb2, types_pb2)
@@ -28,6 +32,35 @@ from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_servi
 def start_server(**config) -> RunningServer:
     """A device server on a free loopback port, its simulated arm on the lock-step clock."""
     return serve(ServerConfig(port=0, clock="lockstep", **config))
+
+
+@dataclass
+class Keys:
+    """A development CA and server certificate, and one token file per role."""
+    certs: CertFiles
+    tokens: Path                  # the folder of <role>.tokens
+
+    def token(self, role: str) -> str:
+        return read_token(self.tokens / f"{role}.tokens")
+
+    def token_file(self, role: str) -> Path:
+        return self.tokens / f"{role}.tokens"
+
+    def tls(self) -> ClientTLS:
+        return ClientTLS(ca=str(self.certs.ca))
+
+
+def make_keys(folder: Path, hosts=()) -> Keys:
+    certs = make_certificates(folder / "certs", hosts=hosts)
+    make_tokens(folder / "tokens")
+    return Keys(certs, folder / "tokens")
+
+
+def start_secured_server(keys: Keys, **config) -> RunningServer:
+    """start_server with TLS (the keys' server certificate) and the keys' role tokens."""
+    return start_server(security=SecurityConfig(
+        tls_cert=str(keys.certs.server_cert), tls_key=str(keys.certs.server_key),
+        tokens=str(keys.tokens)), **config)
 
 
 @contextlib.contextmanager
@@ -47,6 +80,31 @@ def spawned_server(*args: str):
         proc.terminate()
         code = proc.wait(timeout=20)
     assert code == 0, f"the server exited with {code}"
+
+
+@contextlib.contextmanager
+def memory_cap(headroom: int = 3 << 30):
+    """This process's address space capped at what it maps now plus `headroom` bytes while the
+    block runs (RLIMIT_AS, Linux): a runaway allocation in an in-process server fails with
+    MemoryError, which a test sees as a wrong status, instead of exhausting the machine."""
+    import resource
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    with open("/proc/self/statm") as statm:
+        mapped = int(statm.read().split()[0]) * resource.getpagesize()
+    cap = mapped + headroom if hard == resource.RLIM_INFINITY else min(mapped + headroom, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
+def assert_serving(channel) -> None:
+    """The server behind `channel` answers its health check SERVING."""
+    from grpc_health.v1 import health_pb2, health_pb2_grpc
+    health = health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(),
+                                                       timeout=5)
+    assert health.status == health_pb2.HealthCheckResponse.SERVING
 
 
 def cell_file(directory, replacements: dict[str, str]) -> str:
@@ -113,13 +171,14 @@ def activate(session: Session) -> None:
 
 
 class Arm:
-    """An active arm: server (lock-step, `pace` as in ServerConfig), lock holder, stubs, an
-    event subscription from the first event, and the recorder writing into tmp_path."""
+    """An active arm: server (lock-step, `pace` and `config` as in ServerConfig), lock holder,
+    stubs, an event subscription from the first event, and the recorder writing into
+    tmp_path."""
 
-    def __init__(self, tmp_path, pace=None):
+    def __init__(self, tmp_path, pace=None, **config):
         self.record = tmp_path / "record.mcap"
         cell = cell_file(tmp_path, {'path = "var/records/cs8.mcap"': f'path = "{self.record}"'})
-        self.server = start_server(cell=cell, lockstep_pace=pace)
+        self.server = start_server(cell=cell, lockstep_pace=pace, **config)
         self.session = locked_session(self.server)
         activate(self.session)
         self.device, _, events = stubs(self.session.channel)

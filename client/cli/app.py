@@ -13,6 +13,7 @@ from landscape.client.cli import control, crcl_run, hardware, motion, status
 from landscape.client.cli.context import (DEFAULT_TARGET, EXIT_INTERRUPTED, CliState,
                                           exit_code_for)
 from landscape.client.cli.output import show_error
+from landscape.client.credentials import FLAGS, from_values
 from landscape.client.errors import CommandRefused, LandscapeError
 
 
@@ -72,10 +73,22 @@ def _as_json(ctx: click.Context) -> bool:
 @click.version_option(package_name="landscape-grpc", prog_name="landscape")
 @click.pass_context
 def cli(ctx: click.Context, target: str, as_json: bool, client_name: str, timeout: float,
-        connect_timeout: float) -> None:
+        connect_timeout: float, **credentials) -> None:
     """Talk to a LandScape device server: status, watch, move, paths, I/O, tools, CRCL."""
     if ctx.obj is None:   # inside `landscape session` the session's state is given
-        ctx.obj = CliState(target, as_json, client_name, timeout, connect_timeout)
+        try:
+            tls, token = from_values(**credentials)
+        except (OSError, ValueError) as error:
+            raise click.BadParameter(str(error), param_hint="--token-file") from None
+        ctx.obj = CliState(target, as_json, client_name, timeout, connect_timeout, tls, token)
+
+
+# TLS and the role token, as every client program takes them (credentials.FLAGS), each also
+# from the environment: --tls-ca or LANDSCAPE_TLS_CA, --token-file or LANDSCAPE_TOKEN_FILE, ...
+for _flag, _help in FLAGS:
+    _env = "LANDSCAPE_" + _flag[2:].replace("-", "_").upper()
+    cli = click.option(_flag, envvar=_env, default=None, help=f"{_help[0].upper()}{_help[1:]} "
+                       f"(env {_env}).")(cli)
 
 
 for command in (status.status, status.watch, motion.move, motion.path, hardware.io,

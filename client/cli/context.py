@@ -14,6 +14,7 @@ from typing import Iterator
 import click
 
 from landscape.client.cli.output import Output
+from landscape.client.credentials import ClientTLS
 from landscape.client.errors import (CommandAborted, CommandFailed, CommandRefused,
                                      CommandTimeout, LandscapeError, NotImplementedByServer,
                                      RpcTimeout, TransportError)
@@ -52,6 +53,8 @@ class CliState:
     client_name: str
     timeout: float                  # seconds to wait for a started command to finish
     connect_timeout: float          # seconds to wait for the device server to answer
+    tls: ClientTLS | None = None    # TLS to the device server (credentials.py), if any
+    token: str | None = None        # the role token to present, if any
     robot: Robot | None = None      # the session's, inside `landscape session`
 
     @property
@@ -82,7 +85,8 @@ class CliState:
             yield robot
 
     def open_robot(self) -> Robot:
-        return Robot(self.target, self.client_name).open(self.connect_timeout)
+        return Robot(self.target, self.client_name, tls=self.tls,
+                     token=self.token).open(self.connect_timeout)
 
 
 pass_state = click.make_pass_decorator(CliState)

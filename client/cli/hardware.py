@@ -64,7 +64,10 @@ def sensor(state: CliState, sensor_type: str) -> None:
     with state.reader() as robot:
         reply = robot.get_sensor_reading(sensor_type)
     values = " ".join(f"{v:.4f}" for v in reply.current_data)
-    state.out.result(to_dict(reply), f"{sensor_type}: {values} ({units_names(reply.units)['linear']})")
+    # Forces and torques are in N and N*m whatever the units; a range in the linear unit.
+    unit = ("fx fy fz N, tx ty tz N*m" if sensor_type == "force_sensor"
+            else units_names(reply.units)["linear"])
+    state.out.result(to_dict(reply), f"{sensor_type}: {values} ({unit})")
 
 
 @click.group()

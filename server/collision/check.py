@@ -15,7 +15,9 @@ each check the exact distance d (coal, through pinocchio) puts the next check ma
 margin) further along the pair's motion bound. All runs advance together, the one furthest
 behind first, so the first contact found is the earliest and ends the walk.
 
-Allowed contacts (model.AllowedContact) and excluded bodies drop pairs from a check. A pair that
+Allowed contacts (model.AllowedContact) and excluded bodies drop pairs from a check; the pairs
+of a docking corridor (the bare flange and an unmounted tool, a mounted tool and its rack:
+docking.py) are checked only where the flange is out of the corridor. A pair that
 starts within the margin (the arm resting on what it touched, a part lifted off the table) may
 leave it: until it first reaches the margin it is held only to its starting distance less
 LEAVE_TOLERANCE, checked at least every LEAVE_TOLERANCE of motion.
@@ -28,7 +30,7 @@ import bisect
 import heapq
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -36,6 +38,7 @@ import pinocchio as pin
 
 from .bounds import (SphereCentres, joint_travel, lower_bounds, sphere_centres,
                      uncertain_stretches)
+from .docking import strict_stretches
 from .model import AllowedContact, CollisionModel
 
 LEAVE_TOLERANCE = 0.001   # m: how much closer a pair starting within the margin may come
@@ -76,6 +79,13 @@ class Contact:
         if self.segment is not None:
             out["segment"] = str(self.segment)
         return out
+
+    def within(self, first: int, samples: int, dt: float) -> "Contact":
+        """The contact of a piece of a longer motion (played one sample per dt), in terms of
+        the whole: the piece starts at the whole's sample `first`, which has `samples`."""
+        time = self.time + first * dt
+        return replace(self, time=time, sample=self.sample + first,
+                       fraction=time / ((samples - 1) * dt) if samples > 1 else 0.0)
 
     def __str__(self) -> str:
         where = f" (segment {self.segment})" if self.segment is not None else ""
@@ -138,8 +148,12 @@ def check_motion(model: CollisionModel, positions, dt: float, marks: Marks = (),
     bound_checks = stretches[-1]
     runs = []
     for p, s, e in _runs(*stretches[:-1]):
-        along = (travel[s:e + 1] @ table.lever[p]).tolist()
-        runs.append(_Run(p, s, e, along, float(s), along[0], margin, margin))
+        dock = model.docks.get(p)
+        parts = [(s, e)] if dock is None else strict_stretches(
+            dock.inside(model.kinematics.forward(Q[s:e + 1])), s)
+        for s, e in parts:
+            along = (travel[s:e + 1] @ table.lever[p]).tolist()
+            runs.append(_Run(p, s, e, along, float(s), along[0], margin, margin))
     walk = _Walk(model, Q, margin, allow_leaving)
     walk.walk(runs)
     contact = None

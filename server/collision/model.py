@@ -34,6 +34,7 @@ from landscape.sim.arm import JOINT_AXES, ArmModel
 from landscape.sim.kinematics import Kinematics
 
 from .bounds import PairTable, build_bounds, pair_levers
+from .docking import Dock
 from .shapes import ARM_LINKS, Geometry, arm_description
 
 DEFAULT_MARGIN = 0.005   # m: closer than this is a contact
@@ -62,12 +63,14 @@ class CollisionModel:
 
     geometries: arm links first (ARM_LINKS), then the rest; pairs (P, 2) geometry indices, the
     moving shape first; pair_bodies: their bodies. known: every body name the cell has (also
-    those absent now: a removed part, a tool on the flange), for checking requests.
+    those absent now: a removed part, a tool on the flange), for checking requests. docks:
+    contacts allowed in a docking corridor only (docking.py); `docks` maps their pairs to
+    their Dock.
     """
 
     def __init__(self, arm: ArmModel, base: np.ndarray, geometries: Sequence[Geometry],
                  known: Iterable[str], allowed: Iterable[AllowedContact] = (),
-                 margin: float = DEFAULT_MARGIN):
+                 margin: float = DEFAULT_MARGIN, docks: Iterable[Dock] = ()):
         if not margin > 0:
             raise CollisionModelError(f"the margin must be positive, got {margin!r} m")
         self.arm, self.margin = arm, float(margin)
@@ -112,6 +115,11 @@ class CollisionModel:
         b = np.array([slot[j] for _, j in pairs], dtype=int)
         fixed_b = np.array([self.geometries[j].link == 0 for _, j in pairs], dtype=bool)
         self.pair_table = PairTable(a, b, fixed_b, pair_levers(self.bounds, a, b, fixed_b))
+        # Pairs allowed in a docking corridor only (the bare flange and an unmounted tool, a
+        # mounted tool and its rack).
+        corridors = {(d.a, d.b): d for d in docks}
+        self.docks = {k: corridors[bodies] for k, bodies in enumerate(self.pair_bodies)
+                      if bodies in corridors}
         self._local = threading.local()
         self._active: dict = {}    # (exclude, allow) -> active pairs, for repeated requests
 

@@ -9,9 +9,12 @@ the loose parts and (if the cell has one) the floor. Then:
 - set_finger_gap: the mounted gripper's fingers (open: its stroke);
 - attach_part: a part moves with the tool (in its present pose relative to the flange, or a
   given one); release_part leaves it where it is; place_part puts it down at a pose (an
-  obstacle there); remove_part takes it out of the cell;
-- allow / forbid: allowed contacts kept until forbidden; `coupling` and `grasp` name the usual
-  ones for a single check.
+  obstacle there); remove_part takes it out of the cell; follow_parts takes the poses the
+  world reports for the parts lying loose (server/world_parts.py);
+- allow / forbid: allowed contacts kept until forbidden; `grasp` names the usual one for a
+  single check. Coupling a tool and putting it back need none: the model allows the bare
+  flange on an unmounted tool, and a mounted tool on its rack, in the tool's docking corridor
+  (docking.py).
 
 `model()` returns the compiled, immutable CollisionModel of the present state (cached until the
 next change); checks run on it (check.py), so a change never disturbs a check in progress.
@@ -19,20 +22,23 @@ Poses are (4, 4) in the world frame, metres; joint vectors (6,) rad. Thread-safe
 """
 from __future__ import annotations
 
+import copy
 import threading
 
 import coal
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from landscape.server.units import pose_matrix
 from landscape.sim.cell import Cell
 from landscape.sim.kinematics import Kinematics
 
+from .docking import Dock
 from .model import DEFAULT_MARGIN, AllowedContact, CollisionModel, CollisionModelError
 from .shapes import (ARM_LINKS, FLANGE_LINK, FLOOR, Geometry, arm_description, box_geometry,
                      floor_geometry, tool_geometries)
 
-FLANGE = ARM_LINKS[FLANGE_LINK]   # the body a tool's plate couples to
+MOVED, TURNED = 0.001, 0.01   # m, rad: a part that moved less stays where the scene has it
 
 
 class CollisionScene:
@@ -57,7 +63,9 @@ class CollisionScene:
                        | set(self._tools) | set(self._parts)
                        | ({FLOOR} if cell.world.floor else set()))
         self._kinematics = Kinematics(cell.arm)
+        self._rack = {t.name: self._slot_fixtures(t) for t in cell.world.tools}
         self._model: CollisionModel | None = None
+        self.version = 0        # changes so far
 
     # ---- what is where ------------------------------------------------------------------------
 
@@ -82,6 +90,16 @@ class CollisionScene:
         self._part(name)
         pose = self._part_at.get(name)
         return None if pose is None else pose.copy()
+
+    def copy(self) -> "CollisionScene":
+        """A scene in the same state, to change without changing this one (to check what a
+        tool change will make of it before it starts)."""
+        with self._lock:
+            other = copy.copy(self)
+            other._lock = threading.Lock()
+            other._gap, other._tool_at = dict(self._gap), dict(self._tool_at)
+            other._part_at, other._allowed = dict(self._part_at), list(self._allowed)
+            return other
 
     # ---- the world changes --------------------------------------------------------------------
 
@@ -152,6 +170,23 @@ class CollisionScene:
             self._changed()
             return self._part_at[name].copy()
 
+    def follow_parts(self, poses: dict[str, np.ndarray], version: int) -> bool:
+        """The parts lying loose where the world has them: `poses` (4, 4, world) read when the
+        scene was at `version`. Nothing changes if the scene changed since (the read may
+        predate that change; the next one will not), nor for a part held, nor for a pose
+        within MOVED and TURNED of the scene's (a change recompiles the model). True if
+        the poses were taken."""
+        with self._lock:
+            if version != self.version:
+                return False
+            for name, pose in poses.items():
+                self._part(name)
+                pose, now = _pose(pose, name), self._part_at.get(name)
+                if self.held != name and (now is None or not _near(now, pose)):
+                    self._part_at[name] = pose
+                    self._changed()
+            return True
+
     def place_part(self, name: str, pose: np.ndarray) -> None:
         """Put part `name` down with its centre at `pose` (4, 4, world); held, it is let go."""
         with self._lock:
@@ -189,20 +224,6 @@ class CollisionScene:
             self._allowed = kept
             self._changed()
 
-    def coupling(self, tool: str) -> tuple[AllowedContact, ...]:
-        """The contacts of taking or leaving `tool` at the changer: the flange on its plate, and
-        the tool on the fixtures its rack slot stands on (within the margin of its slot)."""
-        spec = self._tool(tool)
-        reason = f"coupling {tool}"
-        out = [AllowedContact(reason, FLANGE, tool)]
-        slot = self._world_in_base @ pose_matrix(spec.slot.xyz, spec.slot.rpy)
-        shapes = tool_geometries(spec, spec.stroke, 0, slot)
-        for f in self.cell.world.fixtures:
-            box = box_geometry(f, 0, self._world_in_base @ pose_matrix(f.pose.xyz, f.pose.rpy))
-            if min(_distance(s, box) for s in shapes) < self.margin:
-                out.append(AllowedContact(reason, tool, f.name))
-        return tuple(out)
-
     def grasp(self, part: str) -> AllowedContact:
         """The mounted tool closing on (or sucking at) `part`."""
         self._part(part)
@@ -217,8 +238,23 @@ class CollisionScene:
         with self._lock:
             if self._model is None:
                 self._model = CollisionModel(self.cell.arm, self._base, self._geometries(),
-                                             self._known, self._allowed, self.margin)
+                                             self._known, self._allowed, self.margin,
+                                             self._docks())
             return self._model
+
+    def _docks(self) -> list[Dock]:
+        """The contacts allowed in a docking corridor (docking.py): the bare flange on each
+        unmounted tool, or the mounted tool on what its own rack slot stands on."""
+        world = self.cell.world
+
+        def dock(a: str, b: str, plate: np.ndarray) -> Dock:
+            return Dock(a, b, self._world_in_base @ plate, world.lock_distance, world.lock_angle)
+        if self._mounted is None:
+            return [dock(ARM_LINKS[FLANGE_LINK], name, pose)
+                    for name, pose in self._tool_at.items()]
+        slot = self._tools[self._mounted].slot
+        return [dock(self._mounted, f, pose_matrix(slot.xyz, slot.rpy))
+                for f in self._rack[self._mounted]]
 
     def _geometries(self) -> list[Geometry]:
         _, out = arm_description(self.cell.arm)
@@ -242,8 +278,17 @@ class CollisionScene:
 
     # ---- helpers ------------------------------------------------------------------------------
 
+    def _slot_fixtures(self, spec) -> list[str]:
+        """The fixtures a tool stands on in its rack slot (within the margin of it there)."""
+        slot = self._world_in_base @ pose_matrix(spec.slot.xyz, spec.slot.rpy)
+        shapes = tool_geometries(spec, spec.stroke, 0, slot)
+        return [f.name for f in self.cell.world.fixtures
+                if min(_distance(s, box_geometry(f, 0, self._world_in_base @ pose_matrix(
+                    f.pose.xyz, f.pose.rpy))) for s in shapes) < self.margin]
+
     def _changed(self) -> None:
         self._model = None
+        self.version += 1
 
     def _flange_world(self, q) -> np.ndarray:
         q = np.asarray(q, dtype=float)
@@ -274,6 +319,12 @@ def _pose(T, name: str) -> np.ndarray:
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise CollisionModelError(f"{name} must be a finite (4, 4) pose")
     return T.copy()
+
+
+def _near(a: np.ndarray, b: np.ndarray) -> bool:
+    """Two poses within MOVED and TURNED of each other."""
+    turned = Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).magnitude()
+    return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < MOVED and turned < TURNED)
 
 
 def _distance(a: Geometry, b: Geometry) -> float:

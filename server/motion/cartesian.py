@@ -8,7 +8,9 @@ start q_start exactly. Every sample solves the pose exactly (closed form); betwe
 timed path follows the joint spline through them, which leaves the line by micrometres at the
 default steps (bench/bench_planning.py measures it).
 
-Failures raise PlanningError before anything moves, with `fraction` (0..1 along the segment)
+A line or arc needing more than MAX_SAMPLES samples raises PlanningError("TOO_MANY_SAMPLES")
+before any sample is made. Other failures raise PlanningError before anything moves, with
+`fraction` (0..1 along the segment)
 at the first sample that fails: OUT_OF_WORKSPACE (no solution at all), CONFIGURATION_CHANGE
 (solutions, but not in q_start's shoulder/elbow/wrist configuration), OUT_OF_JNT_RANGE (the
 continuous joint motion leaves a joint's range: J4/J6 are never allowed a 2*pi jump), and
@@ -27,9 +29,12 @@ from landscape.sim.kinematics import (BRANCHES, Config, Kinematics, PosNeg, Reve
 from .trajectory import PlanningError
 
 __all__ = ["tool_pose", "straight_line", "arc", "circle", "straight_path", "joint_waypoints",
-           "slerp", "WRIST_SINGULAR"]
+           "slerp", "WRIST_SINGULAR", "MAX_SAMPLES"]
 
 WRIST_SINGULAR = 1e-3     # |sin q5| below this: the wrist is (too near) singular
+# Samples of one line or arc, counted before any is made: a bound on memory (a few hundred
+# bytes each) and time. Any path within the arm's reach needs a few thousand at most.
+MAX_SAMPLES = 100_000
 _TWO_PI = 2.0 * math.pi
 _BOUNDARY_SAMPLES = 2     # a blow-up this close before a workspace failure is that failure
 
@@ -81,8 +86,7 @@ def arc(kin: Kinematics, q_start, via, goal, *, tcp=None, max_step: float = 0.00
     angle = _angle(start[:3, :3], goal[:3, :3])
     # Chord steps of max_step along the arc, and a few degrees of sweep at most, so that the
     # spline between samples stays close to the circle even on small radii.
-    n = max(_intervals(radius * sweep, angle, max_step, max_angle_step),
-            math.ceil(sweep / 0.1))
+    n = _intervals(radius * sweep, angle, max_step, max_angle_step, least=sweep / 0.1)
     f = np.linspace(0.0, 1.0, n + 1)
     phi = f * sweep
     tips = np.empty((n + 1, 4, 4))
@@ -235,11 +239,18 @@ def _label(cfg: Config) -> str:
                                              PosNeg(cfg.wrist)))
 
 
-def _intervals(distance: float, angle: float, max_step: float, max_angle_step: float) -> int:
+def _intervals(distance: float, angle: float, max_step: float, max_angle_step: float,
+               least: float = 0.0) -> int:
+    """Sample intervals (at least `least`) for steps of at most max_step (m) and max_angle_step
+    (rad); PlanningError("TOO_MANY_SAMPLES") past MAX_SAMPLES, counted in floating point."""
     if not (max_step > 0 and max_angle_step > 0):
         raise ValueError("max_step and max_angle_step must be positive")
-    return int(max(math.ceil(distance / max_step - 1e-9), math.ceil(angle / max_angle_step - 1e-9),
-                   0))
+    n = max(distance / max_step - 1e-9, angle / max_angle_step - 1e-9, least, 0.0)
+    if not n < MAX_SAMPLES:      # NaN and infinity too
+        raise PlanningError("TOO_MANY_SAMPLES", f"the path is {distance:.4g} m long and turns "
+                            f"{angle:.4g} rad: it needs more than {MAX_SAMPLES} samples",
+                            fraction=0.0)
+    return math.ceil(n)
 
 
 def _axis_angle(R: np.ndarray) -> tuple[np.ndarray, float]:

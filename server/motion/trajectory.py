@@ -141,13 +141,14 @@ class Reason(enum.StrEnum):
     LIMITS = "LIMITS"                              # the timing cannot meet the limits
     DEGENERATE = "DEGENERATE"                      # the geometry is undefined (collinear arc, ...)
     TOO_LONG = "TOO_LONG"                          # the timed motion lasts longer than allowed
+    TOO_MANY_SAMPLES = "TOO_MANY_SAMPLES"          # a Cartesian path needs more samples than allowed
 
 
 class PlanningError(ValueError):
     """Why a motion cannot be planned, with where: `index` (waypoint index) or `fraction` (0..1
     along a Cartesian segment) when known, and a `reason` code: "OUT_OF_WORKSPACE",
     "OUT_OF_JNT_RANGE", "SINGULARITY", "CONFIGURATION_CHANGE", "LIMITS", "DEGENERATE",
-    "TOO_LONG"."""
+    "TOO_LONG", "TOO_MANY_SAMPLES"."""
 
     def __init__(self, reason: str, message: str = "", *, index: int | None = None,
                  fraction: float | None = None):

@@ -49,28 +49,32 @@ class DeviceServicer(services.DEVICE.servicer_base):
         kind = convert.enum_value(convert.SPEED_KINDS, request.attribute, "attribute")
         value = convert.rate_to_si(kind, request.speed, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_speed(kind, value))
-        return settings_pb2.SetSpeedResponse(ret_val=convert.ok())
+        return settings_pb2.SetSpeedResponse(ret_val=convert.ok(convert.rate_text(
+            "speed", kind, request.speed, self.device.settings.units)))
 
     def SetAcceleration(self, request, context):
         kind = convert.enum_value(convert.ACCEL_KINDS, request.attribute, "attribute")
         value = convert.rate_to_si(kind, request.accel, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_accel(kind, value))
-        return settings_pb2.SetAccelerationResponse(ret_val=convert.ok())
+        return settings_pb2.SetAccelerationResponse(ret_val=convert.ok(convert.rate_text(
+            "acceleration", kind, request.accel, self.device.settings.units)))
 
     def SetToolOffset(self, request, context):
         offset = convert.pose_to_matrix(request.offset, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_tool_offset(offset))
-        return settings_pb2.SetToolOffsetResponse(ret_val=convert.ok())
+        return settings_pb2.SetToolOffsetResponse(ret_val=convert.ok(convert.pose_text(
+            "tool offset", request.offset, self.device.settings.units)))
 
     def SetWorldCartesianFrame(self, request, context):
         frame = convert.pose_to_matrix(request.frame, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_world_frame(frame))
-        return settings_pb2.SetWorldCartesianFrameResponse(ret_val=convert.ok())
+        return settings_pb2.SetWorldCartesianFrameResponse(ret_val=convert.ok(convert.pose_text(
+            "world frame", request.frame, self.device.settings.units)))
 
     def SetUnits(self, request, context):
         units = convert.units_from_pb(request.linear_units, request.angular_units)
         self.device.update_settings(lambda s: s.with_units(units))
-        return settings_pb2.SetUnitsResponse(ret_val=convert.ok())
+        return settings_pb2.SetUnitsResponse(ret_val=convert.ok(convert.units_text(units)))
 
     # ---- 3.3 ----
     def GetUnits(self, request, context):
@@ -166,10 +170,11 @@ class DeviceServicer(services.DEVICE.servicer_base):
     # ---- 3.5 paths ----
     async def PathLoad(self, request_iterator, context):
         # The points arrive without holding anything: stops and other commands go on while a
-        # long path streams in; only storing it takes the command lock.
+        # long path streams in; only storing it takes the command lock. Each message is
+        # parsed on the parsing thread, never on the event loop.
         stream = convert.PathLoadStream(self.device.settings.units, path_planning.MAX_POINTS)
         async for request in request_iterator:
-            stream.feed(request)
+            await self.dispatch.run(self.dispatch.parse, stream.feed, request)
         header, frame, specs = stream.finish()
         straight = convert.enum_value(convert.STRAIGHT, header.motion_type,
                                       "motion_type (JOINT or STRAIGHT)")
@@ -187,7 +192,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
 
     def PathClearPath(self, request, context):
         self.device.motions.path_clear(request.path_name)
-        return motion_pb2.PathClearPathResponse(ret_val=convert.ok())
+        return motion_pb2.PathClearPathResponse(
+            ret_val=convert.ok(f"path {request.path_name!r} cleared"))
 
     def PathMove(self, request, context):
         cycles = request.number_of_cycles if request.HasField("number_of_cycles") else 1
@@ -332,7 +338,7 @@ class DeviceServicer(services.DEVICE.servicer_base):
             lock_holder=s.lock_holder, error=s.error, estop=s.estop,
             manual_control=s.manual_control, command_id=s.command_id)
 
-    @blocking
+    @blocking(lane="panel")
     def OperatePanel(self, request, context):
         action = convert.enum_value(convert.PANEL_ACTIONS, request.action, "action")
         estop, door_open = self.device.operate_panel(action)

@@ -17,7 +17,9 @@ class DigitalIOServicer(services.DIGITAL_IO.servicer_base):
     def SetDigitalIO(self, request, context):
         self.io.set(request.type, request.unit_id, request.bits_on, request.bits_off,
                     request.description)
-        return pb.SetDigitalIOResponse(ret_val=convert.ok())
+        return pb.SetDigitalIOResponse(ret_val=convert.ok(
+            f"{request.type} unit {request.unit_id}: bits {request.bits_on:#x} on, "
+            f"{request.bits_off:#x} off"))
 
     @blocking
     def GetDigitalIO(self, request, context):

@@ -31,6 +31,7 @@ import grpc
 
 from landscape.server import bounds, states
 from landscape.server.errors import CommandError, Internal, Unimplemented, to_status
+from landscape.server.limits import client_of
 from landscape.server.states import Lease
 
 log = logging.getLogger(__name__)
@@ -45,25 +46,34 @@ def lease_of(context) -> str | None:
     return None
 
 
-def blocking(method):
-    """Marks a read-only RPC whose body waits on the controller: it runs on a thread."""
-    method.blocking = True
-    return method
+def blocking(method=None, *, lane: str = "reads"):
+    """Marks a read-only RPC whose body waits on the controller: it runs on a thread of the
+    Dispatch pool named `lane` (`@blocking`, or `@blocking(lane="panel")`)."""
+    def mark(body):
+        body.blocking = lane
+        return body
+    return mark if method is None else mark(method)
 
 
 class Dispatch:
-    """The thread pools the bodies run on, shared by every servicer of one server."""
+    """The thread pools the bodies run on, shared by every servicer of one server. The
+    operator panel (the e-stop) has a lane of its own: no slow read ever delays it. Parsing
+    the messages of PathLoad streams has one thread: however many streams send, one thread at
+    most competes with the event loop for the interpreter (a message not yet parsed when its
+    stream is cancelled is never parsed)."""
 
-    def __init__(self, commands: int = 16, immediate: int = 8, reads: int = 8):
+    def __init__(self, commands: int = 16, immediate: int = 8, reads: int = 8, panel: int = 2):
         self.commands = ThreadPoolExecutor(commands, thread_name_prefix="command")
         self.immediate = ThreadPoolExecutor(immediate, thread_name_prefix="immediate")
         self.reads = ThreadPoolExecutor(reads, thread_name_prefix="read")
+        self.panel = ThreadPoolExecutor(panel, thread_name_prefix="panel")
+        self.parse = ThreadPoolExecutor(1, thread_name_prefix="parse")
 
     async def run(self, pool: ThreadPoolExecutor, func, *args):
         return await asyncio.get_running_loop().run_in_executor(pool, func, *args)
 
     def shutdown(self) -> None:
-        for pool in (self.commands, self.immediate, self.reads):
+        for pool in (self.commands, self.immediate, self.reads, self.panel, self.parse):
             pool.shutdown(wait=False, cancel_futures=True)
 
 
@@ -73,7 +83,12 @@ PASSING = (asyncio.CancelledError, grpc.aio.AbortError, GeneratorExit)
 
 async def end_call(context, rpc: str, exc: Exception) -> None:
     """End the call with the status of `exc`: a CommandError's own, else INTERNAL (logged with
-    its traceback); either way one line in the log says who was refused and why."""
+    its traceback); either way one line in the log says who was refused and why. A call the
+    client has already left (or the server already ended) has no one to tell: noted, not
+    reported as a failure."""
+    if context.done():
+        log.debug("%s ended while the call was over already: %r", rpc, exc)
+        return
     if not isinstance(exc, CommandError):
         log.error("%s failed unexpectedly", rpc, exc_info=exc)
         exc = Internal(f"{rpc} failed inside the server: {type(exc).__name__}: {exc}")
@@ -104,9 +119,10 @@ def _unary(name: str, body):
         try:
             bounds.check(request)
             self.device.admit(name, lease)
-            if read_only and not getattr(body, "blocking", False):
+            lane = getattr(body, "blocking", None)
+            if read_only and lane is None:
                 return body(self, request, context)
-            pool = (self.dispatch.reads if read_only else
+            pool = (getattr(self.dispatch, lane) if read_only else
                     self.dispatch.immediate if rule.immediate else self.dispatch.commands)
             return await self.dispatch.run(pool, run_command, self, request, context, lease)
         except PASSING:
@@ -123,7 +139,7 @@ def _stream(name: str, body, streaming_response: bool):
         if hasattr(request, "ListFields"):
             bounds.check(request)   # streamed requests are checked message by message
         self.device.admit(name, lease_of(context))
-        return self.limits.acquire(name, context.peer()) if streaming_response else None
+        return self.limits.acquire(name, client_of(context.peer())) if streaming_response else None
 
     if streaming_response:
         @functools.wraps(body)

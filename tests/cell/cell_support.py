@@ -1,39 +1,18 @@
-"""What the cell tests share: development keys, and a move made the way a remote supervisor
-makes it (its own channel, TLS and a token, a session, the lock)."""
+"""What the cell tests share: development keys (support.make_keys), and a move made the way a
+remote supervisor makes it (its own channel, TLS and a token, a session, the lock)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from landscape.cell.certs import CertFiles, make_certificates
-from landscape.cell.tokens import make_tokens
-from landscape.client import ClientTLS, Session, open_channel, read_token
+from landscape.client import Session, open_channel
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, settings_pb2,
                           types_pb2)
+from support import Keys, make_keys  # noqa: F401 (the cell tests' keys)
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 RESTING = types_pb2.DEVICE_STATE_RESTING
-
-
-@dataclass
-class Keys:
-    certs: CertFiles
-    tokens: Path                  # the folder of <role>.tokens
-
-    def token(self, role: str) -> str:
-        return read_token(self.tokens / f"{role}.tokens")
-
-    def tls(self) -> ClientTLS:
-        return ClientTLS(ca=str(self.certs.ca))
-
-
-def make_keys(folder: Path, hosts=()) -> Keys:
-    certs = make_certificates(folder / "certs", hosts=hosts)
-    make_tokens(folder / "tokens")
-    return Keys(certs, folder / "tokens")
 
 
 def joints(device) -> np.ndarray:
@@ -70,3 +49,45 @@ def move_as_operator(target: str, keys: Keys, goal, name: str = "cell-test") -> 
         device.Deactivate(control_pb2.DeactivateRequest(), timeout=30)
         device.Release(control_pb2.ReleaseRequest(), timeout=30)
         return reached
+
+
+def through_the_supervisor(url: str, devices, timeout: float = 60.0) -> dict[str, dict]:
+    """What the web supervisor at `url` gets from each device, seen as its page sees it (its
+    WebSocket, wire.py): the first reply of each read it keeps for the page, by device and
+    method ("GetDeviceState", ...). A read the device refused fails with the device's status.
+    Then a session and the lock on the last device, through the backend, as an operator (the
+    lock ends with the page's connection)."""
+    import asyncio
+    import json
+
+    import aiohttp
+
+    wanted = {"GetDeviceState", "GetCellDescription"}
+
+    async def main():
+        seen: dict[str, dict] = {name: {} for name in devices}
+        async with aiohttp.ClientSession() as http:
+            async with http.get(url) as page:
+                assert "LandScape supervisor" in await page.text()
+            async with http.ws_connect(url + "ws") as ws:
+                async def frame():
+                    return json.loads((await ws.receive()).data)
+                while any(wanted - set(got) for got in seen.values()):
+                    body = await frame()
+                    method = body["rpc"].rsplit("/", 1)[1]
+                    if body["device"] in seen and method in wanted:
+                        assert "reply" in body, f"{body['device']} {method}: {body['status']}"
+                        seen[body["device"]].setdefault(method, body["reply"])
+                last = devices[-1]
+                for call_id, rpc, request in (
+                        (1, "landscape.v1.SessionService/Connect",
+                         {"hello": {"clientName": "compose-test"}}),
+                        (2, "landscape.v1.DeviceService/Lock", {})):
+                    await ws.send_json({"device": last, "rpc": rpc, "id": call_id,
+                                        "request": request})
+                    while (answer := await frame()).get("id") != call_id:
+                        pass
+                    assert "reply" in answer, f"{last} {rpc}: {answer['status']}"
+        return seen
+
+    return asyncio.run(asyncio.wait_for(main(), timeout))

@@ -27,6 +27,7 @@ def test_the_built_in_default_is_one_arm_the_gateway_and_the_supervisor_on_loopb
     assert not config.security.tls and config.security.tokens is None
     argv = device_service(arm, config.security).argv
     assert argv[argv.index("--port") + 1] == "50051" and "--insecure" not in argv
+    assert argv[argv.index("--collision-margin") + 1] == "0.005"
     assert argv[argv.index("--audit-log") + 1] == str(tmp_path / "var" / "arm1" / "audit.log")
 
 
@@ -52,7 +53,9 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     ("[[devices]]\nname = 'a'\n[[devices]]\nname = 'a'\nport = 1", r"two devices are named 'a'"),
     ("[[devices]]\nname = 'a'\nworld = 'nowhere'", r"world: no built-in world is named"),
     ("[[devices]]\nname = 'a'\nworld = 'no/such.toml'", r"world: .*no/such.toml does not exist"),
-    ("[[devices]]\nname = 'a'\nclock = 'slow'", r"clock: must be one of realtime, lockstep"),
+    ("[[devices]]\nname = 'a'\nclock = 'slow'", r"clock: must be one of realtime, fast, lockstep"),
+    ("[[devices]]\nname = 'a'\ncollision_margin = 0", r"collision_margin: must be positive"),
+    ("[[devices]]\nname = 'a'\ncollision_margin = 0.5", r"collision_margin: must be within"),
     ("[gateway]\ndevice = 'arm9'", r"gateway\.device: no device is named 'arm9'"),
     ("[supervisor]\ndevices = []", r"supervisor\.devices: must be a non-empty list"),
     ("[gateway]\nport = 50051", r"gateway\.port: port 50051 on 127.0.0.1 is taken by devices"),

@@ -111,13 +111,12 @@ def test_the_cell_starts_says_where_and_stops_safely(launch, tmp_path):
                   + "[security]\ntokens = 'var/tokens'\n")
     services = cell.up()
     print("\n".join(f"{name}: {kind} at {where}" for name, (kind, where, _) in services.items()))
-    assert [services[n][0] for n in ("arm1", "arm2", "gateway")] == [
-        "device server", "device server", "CRCL gateway"]
-    if "supervisor" not in services:
-        assert any("web supervisor not started:" in line for line in cell.output)
+    assert [services[n][0] for n in ("arm1", "arm2", "gateway", "supervisor")] == [
+        "device server", "device server", "CRCL gateway", "web supervisor"]
     for arm in ("arm1", "arm2"):
         assert probe.grpc_health(services[arm][1]) is None
     assert probe.tcp(services["gateway"][1]) is None
+    assert probe.http(services["supervisor"][1]) is None   # with the operator's token
 
     # A lock holder on arm1 when the cell is stopped: its device stops safely all the same.
     from landscape.client import open_channel
@@ -126,12 +125,13 @@ def test_the_cell_starts_says_where_and_stops_safely(launch, tmp_path):
     holder.lock()
     cell.process.send_signal(signal.SIGTERM)
     assert cell.finish() == 0, cell.text()
-    for name in ("gateway", "arm1", "arm2"):
+    for name in ("gateway", "supervisor", "arm1", "arm2"):
         assert f"cell       | {name} stopped (exit code 0)" in cell.output, cell.text()
     assert any(re.search(r"arm1 +\| .*SIGTERM: stopping \(motion stops, drives off, lock "
                          r"released\)", line) for line in cell.output)
     stopped = [i for i, line in enumerate(cell.output) if " stopped (exit code" in line]
-    assert "gateway" in cell.output[stopped[0]]      # the clients first
+    assert all(client in " ".join(cell.output[i] for i in stopped[:2])   # the clients first
+               for client in ("gateway", "supervisor"))
     deadline = time.monotonic() + 10
     while holder.end_status is None:
         assert time.monotonic() < deadline, "the holder's session outlived the cell"

@@ -5,8 +5,9 @@ import asyncio
 
 import pytest
 
-from landscape.client import AsyncRobot, DeviceState, Frame, WrongState
+from landscape.client import AsyncRobot, CommandTimeout, DeviceState, Frame, WrongState
 from landscape.server.states import State
+from landscape.v1 import sensing_pb2
 
 from support import start_server
 
@@ -58,3 +59,46 @@ def test_async_events_and_follow(server):
             assert "command_started" in ids
 
     run(body())
+
+
+def test_async_wait_shorter_than_the_move_raises_command_timeout():
+    server = start_server(lockstep_pace=1.0)
+
+    async def body():
+        async with AsyncRobot(server.target, "async-impatient") as robot:
+            async with robot.control():
+                move = await robot.move_absolute(AWAY, Frame.JOINT)
+                with pytest.raises(CommandTimeout, match=move.command_id):
+                    await move.wait(timeout=0.05)
+                assert server.device.state is State.MOVING
+                assert (await move.wait(timeout=60)).event_id == "command_done"
+
+    try:
+        run(body())
+    finally:
+        server.stop(grace=None)
+
+
+def test_async_jog_moves_the_joint_while_the_deadman_is_held():
+    server = start_server(lockstep_pace=1.0)
+
+    async def held(count: int):
+        for _ in range(count):
+            yield [30, 0, 0, 0, 0, 0]
+            await asyncio.sleep(0.02)   # a pendant's pace: well inside the deadman timeout
+
+    async def body():
+        async with AsyncRobot(server.target, "async-jogger") as robot:
+            async with robot.control():
+                await robot.manual_control(sensing_pb2.MANUAL_CONTROL_TYPE_TEACHPENDANT)
+                before = (await robot.get_robot_position()).joint_position[0]
+                replies = [reply async for reply in robot.jog(held(25), Frame.JOINT)]
+                after = (await robot.get_robot_position()).joint_position[0]
+        return before, after, replies
+
+    try:
+        before, after, replies = run(body())
+    finally:
+        server.stop(grace=None)
+    assert after > before + 0.01
+    assert replies and len(replies[-1].joint_position) == 6

@@ -1,6 +1,8 @@
 """The blocking client against a real device server: control(), waiting, errors, streams, RSVP."""
 from __future__ import annotations
 
+import time
+
 import grpc
 import pytest
 
@@ -8,7 +10,7 @@ from landscape.client import (CommandAborted, DeviceState, Frame, NotLockHolder,
                               TagPoint, WrongState)
 from landscape.client import errors
 from landscape.server.states import State
-from landscape.v1 import control_pb2
+from landscape.v1 import control_pb2, sensing_pb2
 
 from support import start_server, wait_until
 
@@ -166,3 +168,50 @@ def test_live_state_samples_arrive_at_the_rate_asked(server):
         assert len(samples) == 5
         assert all(len(s.joint_positions) == 6 for s in samples)
         assert samples[-1].sequence > samples[0].sequence
+
+
+def test_waiting_less_than_a_move_takes_raises_command_timeout_and_the_move_goes_on(paced_server):
+    with Robot(paced_server.target, "impatient") as robot, robot.control():
+        command = robot.move_absolute(AWAY, Frame.JOINT)
+        with pytest.raises(errors.CommandTimeout, match=command.command_id):
+            command.wait(timeout=0.05)
+        assert paced_server.device.state is State.MOVING   # still on its way
+        assert command.wait(timeout=60).event_id == "command_done"
+        assert robot.get_robot_position().joint_position == pytest.approx(AWAY, abs=1e-5)
+
+
+def test_the_cell_description_names_the_rack_tools_and_the_parts(server):
+    with Robot(server.target, "looker") as robot:
+        cell = robot.get_cell_description()
+    kinds = {body.name: control_pb2.CellBody.Kind.Name(body.kind) for body in cell.bodies}
+    assert kinds["gripper"] == "KIND_TOOL" and kinds["block_1"] == "KIND_PART"
+    block = next(body for body in cell.bodies if body.name == "block_1")
+    assert block.pose.z == pytest.approx(0.22, abs=0.01) and not block.attached_to
+
+
+def test_a_posted_message_reaches_every_subscriber_and_needs_the_lock(server):
+    with Robot(server.target, "poster") as robot, Robot(server.target, "reader") as reader:
+        with pytest.raises(NotLockHolder):
+            robot.post_message("not yet")
+        with robot.control(activate=False):
+            reply = robot.post_message("bin 3 is full")
+        with reader.events(after_sequence=reply.sequence - 1, timeout=10) as events:
+            event = next(iter(events))
+    assert event.sequence == reply.sequence
+    assert (event.operator_message.text, event.operator_message.source) == \
+        ("bin 3 is full", "poster")
+
+
+def test_jog_moves_the_joint_while_the_deadman_is_held_and_ends_cleanly(paced_server):
+    def held(count: int):
+        for _ in range(count):
+            yield [30, 0, 0, 0, 0, 0]
+            time.sleep(0.02)   # a pendant's pace: well inside the deadman timeout
+
+    with Robot(paced_server.target, "jogger") as robot, robot.control():
+        robot.manual_control(sensing_pb2.MANUAL_CONTROL_TYPE_TEACHPENDANT)
+        before = robot.get_robot_position().joint_position[0]
+        replies = list(robot.jog(held(25), Frame.JOINT))   # ends with the deadman released
+        after = robot.get_robot_position().joint_position[0]
+    assert after > before + 0.01
+    assert replies and len(replies[-1].joint_position) == 6

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from landscape.client import Robot
 from landscape.server.states import State
 
 from support import start_server
@@ -28,13 +29,28 @@ def test_first_steps_moves_waits_reads_and_releases(server):
     assert server.device.state is State.UNLOCKED
 
 
-def test_pick_and_place_stops_at_the_first_tool_command_not_built_yet(server):
+def test_pick_and_place_moves_the_block_to_the_place_zone_and_returns_the_gripper(server):
+    before = _bodies(server)
+    assert before["block_1"].pose.x == pytest.approx(0.5, abs=0.005)   # in the pick zone
     done = run_example("02_pick_and_place.py", "--target", server.target)
-    if done.returncode == 0:   # the tool commands have landed
-        return
-    assert done.returncode == 2, done.stderr
-    assert "GetTool is not implemented yet" in done.stderr
+    assert done.returncode == 0, done.stderr
+    assert "block_1 moved to the place zone" in done.stdout
+    after = _bodies(server)   # where the device knows them to be now
+    block = after["block_1"]
+    assert not block.attached_to
+    assert (block.pose.x, block.pose.y) == pytest.approx((0.73, -0.15), abs=0.01)
+    assert block.pose.z == pytest.approx(before["block_1"].pose.z, abs=0.01)   # on the table
+    gripper = after["gripper"]
+    slot = before["gripper"].pose
+    assert not gripper.attached_to   # back in its slot
+    assert (gripper.pose.x, gripper.pose.y, gripper.pose.z) == pytest.approx(
+        (slot.x, slot.y, slot.z), abs=1e-3)
     assert server.device.state is State.UNLOCKED
+
+
+def _bodies(server) -> dict:
+    with Robot(server.target, "test-looker") as robot:
+        return {body.name: body for body in robot.get_cell_description().bodies}
 
 
 def test_teach_and_replay_saves_a_path_file_and_replays_its_tags(server, tmp_path):

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from support import Arm
+from support import Arm, memory_cap
 
 
 @pytest.fixture
@@ -12,3 +12,10 @@ def arm(tmp_path):
     a = Arm(tmp_path)
     yield a
     a.close()
+
+
+@pytest.fixture
+def memory_capped():
+    """The test runs under support.memory_cap: a runaway allocation fails it, not the machine."""
+    with memory_cap():
+        yield

@@ -7,9 +7,13 @@ NOT_SERVING, a motion in flight fails with its command id, the lock stays with i
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
+import sys
+import threading
 import time
+from pathlib import Path
 
 import grpc
 import pytest
@@ -18,9 +22,9 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
 from landscape.server.states import State
-from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, types_pb2
+from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, sensing_pb2, types_pb2
 
-from support import activate, locked_session, stubs, wait_until
+from support import activate, bus_history, error_info, locked_session, stubs, wait_until
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 
@@ -44,6 +48,23 @@ def _lost_alarm(events, after: float):
         if alarm and state:
             return alarm, state
     raise AssertionError("no controller-lost alarm")
+
+
+# Where a server thread waits on the controller or on a motion's end.
+WAITS = {("clock.py", "call"), ("device.py", "_wait_controller"), ("motion_control.py", "_wait")}
+
+
+def _blocked_threads() -> list[str]:
+    """The threads of this process waiting in one of WAITS, by name."""
+    names = {thread.ident: thread.name for thread in threading.enumerate()}
+    blocked = []
+    for ident, frame in sys._current_frames().items():
+        while frame is not None:
+            if (Path(frame.f_code.co_filename).name, frame.f_code.co_name) in WAITS:
+                blocked.append(names.get(ident, str(ident)))
+                break
+            frame = frame.f_back
+    return blocked
 
 
 def _health(channel) -> int:
@@ -88,7 +109,12 @@ def test_a_killed_cycle_process_is_an_error_and_reset_brings_a_working_one(realt
             with pytest.raises(grpc.RpcError) as refused:
                 activating.result()
             assert refused.value.code() is grpc.StatusCode.ABORTED
-        # Nothing is left hanging: calls answer, and Reset starts a fresh cycle process.
+        # Nothing is left hanging: no thread waits on the dead controller, every pool runs,
+        # calls answer, and Reset starts a fresh cycle process.
+        wait_until(lambda: not _blocked_threads(), timeout=5)
+        for pool in ("commands", "immediate", "reads", "panel"):
+            assert getattr(server.dispatch, pool).submit(lambda: True).result(5)
+        assert server.device.safety.wait_idle(5)
         status = device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=2)
         assert status.state == types_pb2.DEVICE_STATE_ERROR and "cycle process" in status.error
         reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
@@ -122,18 +148,19 @@ def test_a_hung_cycle_process_is_noticed_by_its_silence(realtime):
         assert "no feedback" in alarm.alarm.message
         assert latency < 0.2
         assert server.device.state is State.ERROR
+        wait_until(lambda: not _alive(pid), timeout=5)   # killed when found silent
     finally:
-        os.kill(pid, signal.SIGCONT)
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
         stream.cancel()
         holder.close()
-    # The holder left; anyone may reset: the hung process is stopped and a fresh one started.
+    # The holder left; anyone may reset: a fresh cycle process is started.
     wait_until(lambda: server.device.status().lock_holder == "", timeout=5)
     with grpc.insecure_channel(server.target) as channel:
         device, _, _ = stubs(channel)
         reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
     assert reply.state == types_pb2.DEVICE_STATE_UNLOCKED
     assert server.link.clock.pid != pid
-    wait_until(lambda: not _alive(pid), timeout=5)
 
 
 def _alive(pid: int) -> bool:
@@ -143,3 +170,89 @@ def _alive(pid: int) -> bool:
         return False
     with open(f"/proc/{pid}/stat") as stat:
         return stat.read().split()[2] != "Z"
+
+
+def test_a_cycle_process_that_resumes_after_its_silence_never_commands_the_arm_again(realtime):
+    """A cycle process stalled long enough to be declared lost (SIGSTOP), then resumed
+    (SIGCONT), must not go on playing its motion: the README says nothing commands the arm."""
+    server = realtime
+    holder = locked_session(server, "holder")
+    device, _, _ = stubs(holder.channel)
+    pid = server.link.clock.pid
+    try:
+        activate(holder)
+        device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=JOINT, values=[2.5, 0, 1.5708, 0, 1.5708, 0], speed=10), timeout=5)
+        wait_until(lambda: abs(server.device.feedback().velocity[0]) > 0.05, timeout=10)
+        os.kill(pid, signal.SIGSTOP)
+        wait_until(lambda: server.link.lost is not None, timeout=5)
+        os.kill(pid, signal.SIGCONT)
+        wait_until(lambda: not _alive(pid), timeout=5)
+        head = server.link.feedback.head
+        time.sleep(0.3)   # 75 cycles: a live process would have written rows
+        assert server.link.feedback.head == head
+        assert server.device.state is State.ERROR
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
+        holder.close()
+
+
+def test_the_estop_on_the_real_time_clock_is_an_estop_and_the_cycle_imports_nothing(realtime):
+    """The operator panel runs in the cycle process between two cycles; nothing sent there may
+    make it import a module on its loop thread (that cost 117 ms once, tripping the silence
+    watchdog: the e-stop was reported as a lost controller, alarm 105 instead of 102)."""
+    server = realtime
+    holder = locked_session(server, "holder")
+    device, _, _ = stubs(holder.channel)
+    try:
+        activate(holder)
+        reply = device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=JOINT, values=[1.0, 0, 1.5708, 0, 1.5708, 0], speed=20), timeout=5)
+        device.GetSensorReading(sensing_pb2.GetSensorReadingRequest(sensor_type="force_sensor"),
+                                timeout=5)
+        device.OperatePanel(control_pb2.OperatePanelRequest(
+            action=control_pb2.PANEL_ACTION_PRESS_ESTOP), timeout=5)
+        wait_until(lambda: server.device.state is State.ERROR, timeout=5)
+        time.sleep(0.2)
+        alarms = [e.detail.code for e in bus_history(server) if e.event_id == "alarm"]
+        assert 102 in alarms and 105 not in alarms, alarms
+        assert server.link.lost is None and "e-stop" in server.device.error
+        assert server.link.clock.late_imports() == []
+        assert reply.ret_val.command_id
+    finally:
+        holder.close()
+
+
+def test_a_controller_lost_during_an_estop_is_alarmed_and_the_estop_outlives_it(realtime):
+    """In Error already (e-stop), the cycle process dies: alarm 105 all the same, and the
+    error names the loss. The e-stop is a latch in the cell, not in the process: Reset starts
+    a fresh controller but is refused while it stays pressed (no "e-stop released?" question
+    either); released, the holder is asked, and Reset works."""
+    server = realtime
+    holder = locked_session(server, "holder")
+    device, _, _ = stubs(holder.channel)
+    try:
+        activate(holder)
+        server.device.operate_panel("press_estop")
+        assert server.device.state is State.ERROR
+        pid = server.link.clock.pid
+        os.kill(pid, signal.SIGKILL)
+        wait_until(lambda: server.link.lost is not None, timeout=5)
+        wait_until(lambda: 105 in [e.detail.code for e in bus_history(server)
+                                   if e.event_id == "alarm"], timeout=5)
+        assert "controller lost" in server.device.error
+        with pytest.raises(grpc.RpcError) as refused:
+            device.Reset(control_pb2.ResetRequest(), timeout=60)
+        assert error_info(refused.value).reason == "ESTOP_ACTIVE"
+        assert server.link.clock.pid != pid and server.link.lost is None
+        status = device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=2)
+        assert status.state == types_pb2.DEVICE_STATE_ERROR and status.estop
+        time.sleep(0.2)
+        assert not [e for e in bus_history(server) if e.event_id == "rsvp_request"]
+        server.device.operate_panel("release_estop")
+        wait_until(lambda: [e for e in bus_history(server) if e.event_id == "rsvp_request"])
+        reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
+        assert reply.state == types_pb2.DEVICE_STATE_INACTIVE
+    finally:
+        holder.close()

@@ -11,9 +11,9 @@ import grpc
 import pytest
 
 from landscape.client import Session
-from landscape.v1 import control_pb2, settings_pb2
+from landscape.v1 import control_pb2, digital_io_service_pb2, settings_pb2, types_pb2
 
-from support import error_info, locked_session, stubs, wait_until
+from support import error_info, locked_session, start_server, stubs, wait_until
 
 SERVER = [sys.executable, "-m", "landscape.server", "--clock", "lockstep"]
 
@@ -22,18 +22,41 @@ def _start(*args, timeout=30):
     return subprocess.run([*SERVER, *args], capture_output=True, text=True, timeout=timeout)
 
 
+def _refusal(*args) -> str:
+    """The one line a server that cannot listen writes, checking that it exits 2 without a
+    traceback and before it loads the simulation (-X importtime: no sim module imported)."""
+    began = time.monotonic()
+    done = subprocess.run([sys.executable, "-X", "importtime", *SERVER[1:], *args],
+                          capture_output=True, text=True, timeout=60)
+    took = time.monotonic() - began
+    imported = [line.rsplit("|", 1)[-1].strip() for line in done.stderr.splitlines()
+                if line.startswith("import time:")]
+    lines = [line for line in done.stderr.splitlines()
+             if line.strip() and not line.startswith("import time:")]
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert "Traceback" not in done.stderr
+    assert not [m for m in imported if m.startswith(("landscape.sim", "pybullet"))], imported
+    print(f"refused in {took:.2f} s: {lines[0]}")
+    return lines[0]
+
+
 def test_a_port_in_use_is_one_line_naming_the_cause_and_exits_non_zero(tmp_path):
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
-        began = time.monotonic()
-        done = _start("--port", str(taken.getsockname()[1]), "--paths", str(tmp_path / "p.db"))
-    took = time.monotonic() - began
-    lines = [line for line in done.stderr.splitlines() if line.strip()]
-    assert done.returncode == 2 and len(lines) == 1, done.stderr
-    assert "cannot listen on 127.0.0.1:" in lines[0] and "--port" in lines[0]
-    assert "Traceback" not in done.stderr
-    print(f"refused in {took:.2f} s: {lines[0]}")
+        port = taken.getsockname()[1]
+        line = _refusal("--port", str(port), "--paths", str(tmp_path / "p.db"))
+    assert line.startswith(f"landscape-device-server: cannot listen on 127.0.0.1:{port}: "
+                           f"port {port} is in use"), line
+    assert "--port" in line
+
+
+def test_an_address_not_of_this_machine_is_told_apart_from_a_port_in_use(tmp_path):
+    """192.0.2.1 is TEST-NET-1 (RFC 5737): no machine's own address."""
+    line = _refusal("--address", "192.0.2.1", "--insecure", "--port", "0",
+                    "--paths", str(tmp_path / "p.db"))
+    assert "192.0.2.1 is not an address of this machine" in line and "--address" in line, line
+    assert "in use" not in line
 
 
 def test_an_ipv6_address_works_with_or_without_brackets(tmp_path):
@@ -86,6 +109,27 @@ def test_a_session_the_server_ends_closes_with_its_reason(server):
         assert "keep-alive" in session.end_details
 
 
+def test_a_session_the_server_shutdown_ends_is_told_so():
+    """The lock holder's session too: its stream ends UNAVAILABLE saying the server stops, so a
+    client knows to reconnect later rather than that it did something wrong."""
+    server = start_server()
+    stopped = False
+    try:
+        holder = locked_session(server, "holder")
+        with grpc.insecure_channel(server.target) as channel:
+            watcher = Session(channel, "watcher").open()
+            server.stop()
+            stopped = True
+            for session in (holder, watcher):
+                wait_until(lambda: session._closed.is_set(), timeout=10)
+                assert session.end_status is grpc.StatusCode.UNAVAILABLE, session.end_status
+                assert session.end_details == "the server is stopping"
+        holder.channel.close()
+    finally:
+        if not stopped:
+            server.stop(grace=None)
+
+
 def test_success_says_what_happened(server):
     holder = locked_session(server)
     try:
@@ -99,6 +143,37 @@ def test_success_says_what_happened(server):
             server.device.arm.max_linear_acceleration)
     finally:
         holder.close()
+
+
+def test_every_setter_says_what_it_set_in_the_clients_units(server):
+    holder = locked_session(server)
+    try:
+        device, io, _ = stubs(holder.channel)
+        said = [device.SetSpeed(settings_pb2.SetSpeedRequest(
+                    speed=40, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), timeout=5),
+                device.SetSpeed(settings_pb2.SetSpeedRequest(
+                    speed=0.2, attribute=types_pb2.SPEED_TYPE_LINEAR_SPEED), timeout=5),
+                device.SetUnits(settings_pb2.SetUnitsRequest(
+                    linear_units=types_pb2.LINEAR_UNIT_MILLIMETERS,
+                    angular_units=types_pb2.ANGULAR_UNIT_DEGREES), timeout=5),
+                device.SetAcceleration(settings_pb2.SetAccelerationRequest(
+                    accel=90, attribute=types_pb2.ACCEL_TYPE_ANGULAR_ACCEL), timeout=5),
+                device.SetAcceleration(settings_pb2.SetAccelerationRequest(
+                    accel=50, attribute=types_pb2.ACCEL_TYPE_PERCENT_ACCEL), timeout=5),
+                device.SetToolOffset(settings_pb2.SetToolOffsetRequest(
+                    offset=types_pb2.Pose(z=100)), timeout=5),
+                device.SetWorldCartesianFrame(settings_pb2.SetWorldCartesianFrameRequest(
+                    frame=types_pb2.Pose(x=-250.5, yaw=90)), timeout=5),
+                io.SetDigitalIO(digital_io_service_pb2.SetDigitalIORequest(
+                    type="output", unit_id=2, bits_on=0x5, bits_off=0x2), timeout=5)]
+    finally:
+        holder.close()
+    assert [reply.ret_val.ret_msg for reply in said] == [
+        "speed 40 %", "linear speed 0.2 m/s", "units millimeters and degrees",
+        "angular acceleration 90 deg/s^2", "acceleration 50 %",
+        "tool offset x 0, y 0, z 100 mm; roll 0, pitch 0, yaw 0 deg",
+        "world frame x -250.5, y 0, z 0 mm; roll 0, pitch 0, yaw 90 deg",
+        "output unit 2: bits 0x5 on, 0x2 off"]
 
 
 def test_an_unexpected_failure_is_internal_with_error_info_never_unknown(server):

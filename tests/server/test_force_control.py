@@ -1,5 +1,6 @@
 """The sensor loops of force_control.py on their own: the guard's crossing rule and envelope,
-and the admittance law against a simulated spring, without a controller."""
+the admittance law against a simulated spring and the force settling after a guarded stop,
+without a controller."""
 from __future__ import annotations
 
 import math
@@ -7,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.force_control import (Admittance, ComplySpec, GuardSpec,
-                                            ThresholdMonitor)
+from landscape.server.force_control import (SETTLE_BAND, SETTLE_REACH, SETTLE_TIME, Admittance,
+                                            ComplySpec, ForceSettle, GuardSpec, ThresholdMonitor)
 from landscape.server.tip_model import TipModel
 from landscape.sim.arm import arm_model
 
@@ -99,3 +100,44 @@ def test_the_admittance_loop_panics_past_its_compliance_distance():
         loop.shift(q, _force(0.0), True)
     assert loop.problem.startswith("panic") and abs(loop.offset[2]) == pytest.approx(0.002)
     assert loop.summary(_force(0.0))["panic"] == 1
+
+
+def _settle(speed: float, spring: float | None, cycles: int = 1000):
+    """A guarded stop on fz = -20 N after approaching along the tool's z at `speed` (m/s),
+    settled against a spring of `spring` N/m already pressed 0.5 mm (None: nothing there)."""
+    spec = GuardSpec("force_torque", (0, 0, -20), (0, 0, 0), 1.0, CUP, (0, 0, 0.1), speed, 5.0)
+    assert ForceSettle.wanted(spec)
+    settle = ForceSettle(spec, TipModel(arm_model()), 0.004)
+    q = np.array([0.0, 0.3, 1.4, 0.0, 1.44, 0.0])
+    for k in range(cycles):
+        depth = 0.0005 + settle.loop.offset[2]
+        settle.shift(q, _force(0.0 if spring is None else -spring * max(depth, 0.0)))
+        if settle.finished:
+            return settle, k
+    return settle, cycles
+
+
+def test_force_settling_after_a_guarded_stop_ends_near_the_threshold_or_at_its_bounds():
+    settle, cycles = _settle(0.04, 20000.0)     # 10 N at the stop: pressed on to 20 N
+    assert settle.finished and settle.note == ""
+    assert settle.loop.force[2] == pytest.approx(-20, rel=SETTLE_BAND)
+    assert cycles * 0.004 < SETTLE_TIME
+    settle, _ = _settle(0.04, None)             # nothing there: it gives up after 5 mm
+    assert settle.finished and settle.note == "the force did not settle within 5 mm"
+    assert abs(settle.loop.offset[2]) == pytest.approx(SETTLE_REACH)
+    settle, cycles = _settle(0.001, 100.0)      # too slow for a soft spring: 2 s at most
+    assert settle.note == "the force did not settle within 2 s"
+    assert cycles == pytest.approx(SETTLE_TIME / 0.004, abs=1)
+    settle, _ = _settle(0.04, 20000.0, cycles=5)
+    settle.stop("stop while settling the force")
+    offset = settle.loop.offset.copy()
+    settle.shift(np.array([0.0, 0.3, 1.4, 0.0, 1.44, 0.0]), _force(0.0))
+    assert settle.finished and np.all(settle.loop.offset == offset)   # it holds there
+
+
+def test_only_a_force_guard_on_the_approach_axis_settles():
+    def spec(kind, thresholds, approach, speed=0.04):
+        return GuardSpec(kind, thresholds, (0, 0, 0), 1.0, CUP, approach, speed, 5.0)
+    assert not ForceSettle.wanted(spec("laser_range", (0.05, 0, 0), (0, 0, 0.1)))
+    assert not ForceSettle.wanted(spec("force_torque", (-5, 0, 0), (0, 0, 0.1)))  # side hit
+    assert not ForceSettle.wanted(spec("force_torque", (0, 0, -20), (0, 0, 0.1), speed=0))

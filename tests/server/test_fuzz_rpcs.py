@@ -3,9 +3,14 @@ holding the lock. Random and boundary values (NaN, infinities, subnormals, huge 
 and unknown enums, long strings and lists) in every field: the server stays SERVING, every
 refusal is INVALID_ARGUMENT, OUT_OF_RANGE or FAILED_PRECONDITION with a message and an
 ErrorInfo (never UNKNOWN or INTERNAL), and a refused call changes nothing: not the state, the
-settings, the stored paths, nor where the arm is."""
+settings, the stored paths, nor where the arm is. Templates of Cartesian straight moves and
+paths, with six-value targets of huge magnitude, reach the planner's bounds; sequences of the
+control RPCs (Lock, Release, Activate, Deactivate, Reset, ManualControl) mixed with a move keep
+the server sound. The server runs in this process under a memory cap (support.memory_cap), so
+a request that makes it allocate without bound fails the test instead of the machine."""
 from __future__ import annotations
 
+import collections
 import math
 
 import grpc
@@ -13,30 +18,45 @@ import numpy as np
 import pytest
 from google.protobuf import message_factory
 from google.protobuf.descriptor import FieldDescriptor as F
-from grpc_health.v1 import health_pb2, health_pb2_grpc
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from landscape.server import services, stored_settings
 from landscape.server.states import RULES, Lease, State
-from landscape.v1 import motion_pb2, settings_pb2, types_pb2
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, sensing_pb2,
+                          settings_pb2, types_pb2)
 
-from support import Arm, error_info, wait_until
+from support import Arm, assert_serving, error_info, wait_until
 
+pytestmark = pytest.mark.usefixtures("memory_capped")
 REFUSALS = {grpc.StatusCode.INVALID_ARGUMENT, grpc.StatusCode.OUT_OF_RANGE,
             grpc.StatusCode.FAILED_PRECONDITION}
-# Mutating RPCs that hand over or give up control are exercised by their own tests: fuzzing
-# them would only end the session under test.
-NOT_FUZZED = {"Lock", "Release", "Activate", "Deactivate", "Reset", "Jog", "ManualControl"}
+# The control RPCs hand over or give up control: test_control_sequences drives them, each
+# sequence followed by a return to the locked, active, resting arm. Jog has its own tests.
+CONTROL = ("Lock", "Release", "Activate", "Deactivate", "Reset", "ManualControl")
+NOT_FUZZED = {*CONTROL, "Jog"}
+HUGE = st.one_of(st.sampled_from([5.0, 1e3, 1e6, 1e12, 1e300, -1e6, -1e12, -1e300, 1.7e308]),
+                 st.floats(1e3, 1e308), st.floats(-1e308, -1e3))
 DOUBLES = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
     st.sampled_from([0.0, -0.0, 5e-324, 1e-310, 1e-9, 1e-6, 0.5, 1.0, 1.5708, 3.2, 100.0,
                      100.0000001, 101.0, 1e9, 1e308, -1e308, math.nan, math.inf, -math.inf]),
-    st.floats(-4, 4))
+    st.floats(-4, 4), HUGE)
+# A target of exactly six values (joints, or x, y, z, roll, pitch, yaw), so that it passes the
+# shape check and meets the bounds behind it: small steps, huge magnitudes, anything.
+SIX = st.lists(st.one_of(st.floats(-0.2, 0.2), HUGE, DOUBLES), min_size=6, max_size=6)
 INTS = {F.TYPE_INT32: (-2**31, 2**31 - 1), F.TYPE_UINT32: (0, 2**32 - 1),
         F.TYPE_INT64: (-2**63, 2**63 - 1), F.TYPE_UINT64: (0, 2**64 - 1)}
 TEXT = st.one_of(st.text(max_size=20), st.sampled_from(["", "p", "x" * 257, "dout nope 1",
                                                         "dout gripper_close 2"]))
+
+
+def _values(field, depth: int):
+    """A repeated field's values; six of them half the time for a list of doubles."""
+    values = st.lists(_value(field, depth), max_size=8 if depth else 30)
+    if field.type == F.TYPE_DOUBLE:
+        return st.one_of(SIX, values)
+    return values
 
 
 def _value(field, depth: int):
@@ -63,7 +83,7 @@ def _message(descriptor, depth: int = 0):
     fields = {}
     for field in descriptor.fields:
         value = _value(field, depth)
-        fields[field.name] = (st.lists(value, max_size=8 if depth else 30) if field.is_repeated
+        fields[field.name] = (_values(field, depth) if field.is_repeated
                               else st.one_of(st.none(), value))
 
     @st.composite
@@ -93,12 +113,21 @@ def _message(descriptor, depth: int = 0):
 
 
 JOINT, BASE = types_pb2.REFERENCE_FRAME_JOINT_FRAME, types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
+WORLD = types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME
+STRAIGHT = types_pb2.MOTION_TYPE_STRAIGHT_MOTION
 HOME = [0.3, 0.0, 1.5708, 0.0, 1.5708, 0.0]
-# A request each RPC accepts: the fuzzer also changes a few fields of these, so that a bad
-# value meets code past the first check (tiny speeds, huge dwell times, ...).
+# The tool tip (x, y, z m; roll, pitch, yaw rad) in the base (= world) frame at HOME.
+HOME_TIP = [0.439, 0.1881, 0.803, 3.1416, 0.0, -2.8416]
+# Requests each RPC accepts: the fuzzer also changes a few fields of these, so that a bad
+# value meets code past the first check (tiny speeds, huge dwell times, targets light years
+# away, ...).
 TEMPLATES = {
-    "MoveAbsolute": motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=HOME, speed=50),
-    "MoveRelative": motion_pb2.MoveRelativeRequest(frame=JOINT, values=[0.1, 0, 0, 0, 0, 0]),
+    "MoveAbsolute": [motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=HOME, speed=50),
+                     motion_pb2.MoveAbsoluteRequest(frame=BASE, values=HOME_TIP,
+                                                    motion_type=STRAIGHT)],
+    "MoveRelative": [motion_pb2.MoveRelativeRequest(frame=JOINT, values=[0.1, 0, 0, 0, 0, 0]),
+                     motion_pb2.MoveRelativeRequest(frame=WORLD, values=[0.05, 0, 0, 0, 0, 0],
+                                                    motion_type=STRAIGHT)],
     "MoveArc": motion_pb2.MoveArcRequest(frame=BASE, offset_type=types_pb2.OFFSET_TYPE_RELATIVE_DATA,
                                          arc_value=[0.05, 0.05, 0, 0, 0, 0],
                                          goal_value=[0.1, 0, 0, 0, 0, 0]),
@@ -117,6 +146,10 @@ TEMPLATES = {
         tags=[types_pb2.TagStruct(joint_values=HOME, tag_name="a"),
               types_pb2.TagStruct(joint_values=[0.5, 0, 1.5708, 0, 1.5708, 0], tag_name="b",
                                   time_delay=0.1, transition_speed=20)]),
+    "PathLoad straight": motion_pb2.PathLoadRequest(
+        header=motion_pb2.PathHeader(path_name="fuzz", frame=BASE, motion_type=STRAIGHT,
+                                     offset_type=types_pb2.OFFSET_TYPE_RELATIVE_DATA),
+        tags=[types_pb2.TagStruct(x=0.05), types_pb2.TagStruct(y=0.05, z=-0.05)]),
     "PathMove": motion_pb2.PathMoveRequest(path_name="fuzz", number_of_cycles=1),
 }
 
@@ -133,8 +166,7 @@ def _mutated(draw, template):
     for name in draw(st.lists(st.sampled_from(names), min_size=1, max_size=3, unique=True)):
         field = target.DESCRIPTOR.fields_by_name[name]
         target.ClearField(name)
-        value = draw(st.lists(_value(field, 1), max_size=8) if field.is_repeated
-                     else _value(field, 1))
+        value = draw(_values(field, 1) if field.is_repeated else _value(field, 1))
         try:
             if field.is_repeated and field.type == F.TYPE_MESSAGE:
                 for item in value:
@@ -208,9 +240,10 @@ def test_random_requests_are_refused_cleanly_or_done(arm, spec, method):
             pytest.skip(f"{method.name} is not built yet")
     _back_to_rest(arm)
 
-    template = TEMPLATES.get(method.name)
-    requests = (st.one_of(_message(method.input_type), _mutated(template), _mutated(template))
-                if template is not None else _message(method.input_type))
+    templates = [t for name, t in TEMPLATES.items() if name.split()[0] == method.name]
+    templates = [t for item in templates for t in (item if isinstance(item, list) else [item])]
+    requests = st.one_of(_message(method.input_type),
+                         *(_mutated(t) for t in templates for _ in range(2)))
 
     @settings(max_examples=60, deadline=None, derandomize=True,
               suppress_health_check=list(HealthCheck))
@@ -225,9 +258,103 @@ def test_random_requests_are_refused_cleanly_or_done(arm, spec, method):
             after = _snapshot(arm)
             assert after[:4] == before[:4], request
             assert np.allclose(after[4], before[4], atol=1e-9), request
+        assert_serving(arm.session.channel)
         _back_to_rest(arm)
 
     fuzz()
-    health = health_pb2_grpc.HealthStub(arm.session.channel).Check(
-        health_pb2.HealthCheckRequest(), timeout=5)
-    assert health.status == health_pb2.HealthCheckResponse.SERVING
+
+
+def _control_step(arm):
+    """A strategy for one (RPC name, request) of a control sequence."""
+    session = arm.session
+    own = st.builds(lambda: control_pb2.LockRequest(session_id=session.session_id,
+                                                    session_secret=session.session_secret))
+    lock = st.one_of(
+        _message(control_pb2.LockRequest.DESCRIPTOR),
+        st.builds(lambda secret: control_pb2.LockRequest(session_id=session.session_id,
+                                                         session_secret=secret), TEXT))
+    manual = st.builds(lambda kind: sensing_pb2.ManualControlRequest(type=kind),
+                       st.integers(0, len(sensing_pb2.ManualControlType.values()) + 1))
+    move = st.builds(lambda values: motion_pb2.MoveRelativeRequest(
+        frame=WORLD, values=values, motion_type=STRAIGHT), SIX)
+    return st.one_of(st.tuples(st.just("Lock"), own), st.tuples(st.just("Lock"), lock),
+                     st.tuples(st.just("ManualControl"), manual),
+                     st.tuples(st.just("MoveRelative"), move),
+                     *(st.tuples(st.just(name), st.builds(getattr(control_pb2, f"{name}Request")))
+                       for name in ("Release", "Activate", "Deactivate", "Reset")))
+
+
+def _back_to_control(arm):
+    """The locked, active, resting arm with manual control off, whatever a sequence did."""
+    device, session = arm.server.device, arm.session
+    if device.state in (State.MOVING, State.PAUSED):
+        _back_to_rest(arm)
+    if device.manual_control != "off":
+        arm.device.ManualControl(sensing_pb2.ManualControlRequest(
+            type=sensing_pb2.MANUAL_CONTROL_TYPE_OFF), timeout=10)
+    if device.state is State.ERROR:
+        arm.device.Reset(control_pb2.ResetRequest(), timeout=30)
+    if device.lock_holder is None or device.lock_holder.id != session.session_id:
+        session.lock()
+    if device.state is State.INACTIVE:
+        arm.device.Activate(control_pb2.ActivateRequest(), timeout=30)
+    assert device.state is State.RESTING
+
+
+def test_control_sequences_keep_the_server_sound(arm):
+    """Lock (random, right and wrong secrets), Release, Activate, Deactivate, Reset,
+    ManualControl and a straight move, in any order: each is done or refused (FAILED_PRECONDITION,
+    INVALID_ARGUMENT, OUT_OF_RANGE; PERMISSION_DENIED once the lock is given up) with an
+    ErrorInfo, a refusal changes nothing, and the server keeps serving."""
+    stub = device_service_pb2_grpc.DeviceServiceStub(arm.session.channel)
+    outcomes = collections.Counter()
+
+    # Besides the drawn sequences, one that surely gives control up and takes it back, turns
+    # manual control on and off, and stops the drives under a moving arm.
+    session = arm.session
+    handover = [("Release", control_pb2.ReleaseRequest()),
+                ("Lock", control_pb2.LockRequest(session_id=session.session_id,
+                                                 session_secret=session.session_secret)),
+                ("Activate", control_pb2.ActivateRequest()),
+                ("ManualControl", sensing_pb2.ManualControlRequest(
+                    type=sensing_pb2.MANUAL_CONTROL_TYPE_TEACHPENDANT)),
+                ("ManualControl", sensing_pb2.ManualControlRequest(
+                    type=sensing_pb2.MANUAL_CONTROL_TYPE_OFF)),
+                ("MoveRelative", motion_pb2.MoveRelativeRequest(
+                    frame=WORLD, values=[0.02, 0, 0, 0, 0, 0], motion_type=STRAIGHT)),
+                ("Deactivate", control_pb2.DeactivateRequest())]
+
+    @settings(max_examples=40, deadline=None, derandomize=True,
+              suppress_health_check=list(HealthCheck))
+    @given(st.sampled_from(["RESTING", "INACTIVE", "UNLOCKED"]),
+           st.lists(_control_step(arm), min_size=1, max_size=4))
+    @example("INACTIVE", handover)
+    def sequence(start, steps):
+        # From each state a holder meets (Resting, locked with the drives off, unlocked).
+        if start != "RESTING":
+            stub.Deactivate(control_pb2.DeactivateRequest(), timeout=30)
+        if start == "UNLOCKED":
+            stub.Release(control_pb2.ReleaseRequest(), timeout=30)
+        for name, request in steps:
+            before = _snapshot(arm) + (arm.server.device.lock_holder,)
+            try:
+                reply = getattr(stub, name)(request, timeout=30)
+                outcomes[name, "done"] += 1
+                if name == "Lock":   # the session's calls carry the new lease from now on
+                    arm.session.lease = reply.lease
+            except grpc.RpcError as error:
+                outcomes[name, error.code().name] += 1
+
+                assert error.code() in REFUSALS | {grpc.StatusCode.PERMISSION_DENIED}, \
+                    (name, error.code(), error.details(), request)
+                assert error.details() and error_info(error).domain == "landscape"
+                after = _snapshot(arm) + (arm.server.device.lock_holder,)
+                assert after[:4] + after[5:] == before[:4] + before[5:], (name, request)
+            assert_serving(arm.session.channel)
+        _back_to_control(arm)
+
+    sequence()
+    print(sorted(outcomes.items()))
+    # Not vacuous: control changed hands, the drives went off and on, the arm moved.
+    for name in ("Lock", "Release", "Activate", "Deactivate", "ManualControl", "MoveRelative"):
+        assert outcomes[name, "done"], sorted(outcomes.items())

@@ -3,6 +3,7 @@ the lock-step clock paced at real time (the deadman counts controller time, the 
 time): joint and Cartesian jogs, the joint ranges, the deadman, and what refuses a jog."""
 from __future__ import annotations
 
+import math
 import queue
 import threading
 import time
@@ -15,12 +16,13 @@ from landscape.server.collision import clearance
 from landscape.server.feedback import CMD, QD, SEQ
 from landscape.server.jog_control import MANUAL_TIP_SPEED
 from landscape.server.states import State
-from landscape.v1 import motion_pb2, sensing_pb2, types_pb2
+from landscape.v1 import motion_pb2, sensing_pb2, settings_pb2, types_pb2
 
 from support import Arm, error_info, wait_until
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 BASE = types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
+WORLD = types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME
 TOOL = types_pb2.REFERENCE_FRAME_TOOL_FRAME
 PERIOD = 0.02       # s between two jog requests, as a pendant sends them
 
@@ -151,6 +153,26 @@ def test_a_cartesian_jog_moves_the_tip_straight_within_the_manual_speed(arm):
     pendant.close()
     moved = arm.tool_tip()[:3, 3] - start[:3, 3]
     assert moved[2] < -0.01 and np.linalg.norm(moved[:2]) < 1e-3 * abs(moved[2])
+
+
+def test_the_spaceball_jogs_along_the_world_frames_axes(arm):
+    # The world frame turned a quarter about the base's z: its x is the base's y.
+    arm.device.SetWorldCartesianFrame(settings_pb2.SetWorldCartesianFrameRequest(
+        frame=types_pb2.Pose(yaw=math.pi / 2)), timeout=5)
+    _manual(arm, sensing_pb2.MANUAL_CONTROL_TYPE_SPACEBALL)
+    assert arm.server.device.status().manual_control == "spaceball"
+    start = arm.tool_tip()
+    pendant = Pendant(arm)
+    pendant.jog(WORLD, [20, 0, 0, 0, 0, 0], 0.4)      # along the world's x
+    pendant.close()
+    assert pendant.error is None and pendant.replies
+    end = arm.tool_tip()
+    moved = end[:3, 3] - start[:3, 3]                 # base axes
+    assert moved[1] > 0.01
+    assert np.linalg.norm(moved[[0, 2]]) < 1e-3 * moved[1]
+    assert np.allclose(end[:3, :3], start[:3, :3], atol=1e-4)
+    world = pendant.replies[-1].world_position        # the replies say it in world axes
+    assert (world.x, world.y) == pytest.approx((end[1, 3], -end[0, 3]), abs=0.01)  # (braking)
 
 
 def test_a_jog_stops_before_the_end_of_a_joint_range(arm):

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.jog_control import MANUAL_TIP_SPEED, JogIntegrator, JogLimits
+from landscape.server.jog_control import (MANUAL_TIP_SPEED, STALE_CYCLES, JogIntegrator,
+                                          JogLimits)
 from landscape.server.tip_model import TipModel
 from landscape.sim.arm import arm_model
 
@@ -16,12 +17,12 @@ ARM = arm_model()
 START = np.array([0.0, 0.0, math.pi / 2, 0.0, math.pi / 2, 0.0])
 
 
-def _jog(deadman_cycles: int = 50) -> JogIntegrator:
+def _jog(deadman_cycles: int = 50, guarded: bool = False) -> JogIntegrator:
     a = np.array(ARM.max_acceleration)
     cartesian = np.array([ARM.max_linear_acceleration, ARM.max_angular_acceleration])
     limits = JogLimits(np.array(ARM.max_velocity) * 0.25, a * 0.5, a, ARM.lower, ARM.upper,
                        cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, deadman_cycles)
-    return JogIntegrator("j", START, limits, TipModel(ARM), np.eye(4), DT)
+    return JogIntegrator("j", START, limits, TipModel(ARM), np.eye(4), DT, guarded=guarded)
 
 
 def _request(frame: str, velocity, deadman: bool = True) -> dict:
@@ -72,3 +73,28 @@ def test_a_released_deadman_holds_and_a_joint_stops_inside_its_range():
         jog.command(_request("joint", [0, 0, 0, 0, 10.0, 0]))   # joint 5 as fast as it goes
         q, qd = jog.step()
     assert ARM.upper[4] - 2e-3 < q[4] <= ARM.upper[4] and qd[4] == 0.0
+
+
+def test_a_late_clearance_allows_no_approach_and_a_silent_guard_holds_the_arm():
+    """The guard's figures hold for a few cycles only (jog_guard.py sends them every other
+    cycle): a stalled guard must not let the arm use up the room it reported long ago."""
+    jog = _jog(deadman_cycles=10 ** 6)
+    jog.keep_clear({"gradient": [0, 0, 0, 0, 0, -0.1], "rate": 0.1})   # J6+ closes 0.1 m/rad
+    for _ in range(STALE_CYCLES):
+        jog.command(_request("joint", [0, 0, 0, 0, 0, 2.0]))
+        _, qd = jog.step()
+    assert qd[5] > 0.0                                    # approaching at the rate allowed
+    for _ in range(200):                                  # the guard falls silent
+        jog.command(_request("joint", [0, 0, 0, 0, 0, 2.0]))
+        _, qd = jog.step()
+    assert qd[5] == 0.0                                   # no approach on old figures
+    for _ in range(100):
+        jog.command(_request("joint", [0, 0, 0, 0, 0, -2.0]))
+        _, qd = jog.step()
+    assert qd[5] < -1.0                                   # moving away stays free
+
+    jog = _jog(deadman_cycles=10 ** 6, guarded=True)      # a guard that never speaks
+    for _ in range(STALE_CYCLES + 200):
+        jog.command(_request("joint", [0, 0, 0, 0, 0, 2.0]))
+        _, qd = jog.step()
+    assert not np.any(qd)                                 # no word from the guard: held

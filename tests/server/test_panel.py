@@ -4,6 +4,9 @@ to Error with an alarm, and Reset is refused until the e-stop is released."""
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
+import threading
 
 import grpc
 import numpy as np
@@ -28,7 +31,7 @@ def arm(tmp_path):
 
 def _panel(channel, action) -> control_pb2.OperatePanelResponse:
     device = stubs(channel)[0]
-    return device.OperatePanel(control_pb2.OperatePanelRequest(action=action), timeout=10)
+    return device.OperatePanel(control_pb2.OperatePanelRequest(action=action), timeout=5)
 
 
 def _path(arm) -> str:
@@ -90,3 +93,23 @@ def test_the_door_is_an_input_of_the_cell(arm):
     _panel(arm.session.channel, control_pb2.PANEL_ACTION_CLOSE_DOOR)
     assert safety() == 1 << 1
     assert arm.server.device.state is State.RESTING                 # the supervisor's policy
+
+
+def test_the_panel_has_a_lane_of_its_own(arm):
+    """Every thread that serves slow reads is busy (here: held); the e-stop still goes in."""
+    held = threading.Event()
+    busy = [arm.server.dispatch.reads.submit(held.wait, 10) for _ in range(8)]
+    try:
+        reply = _panel(arm.session.channel, control_pb2.PANEL_ACTION_PRESS_ESTOP)
+        assert reply.estop_pressed
+        wait_until(lambda: arm.server.device.state is State.ERROR)
+    finally:
+        held.set()
+    assert all(f.result(5) for f in busy)
+
+
+def test_the_device_server_does_not_import_the_physics():
+    """DESIGN.md 7: nothing above the controller interface imports pybullet (the panel's
+    helper, which the server hands to the cycle, lives beside the panel without it)."""
+    code = "import sys, landscape.server.app; sys.exit('pybullet' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0

@@ -4,6 +4,7 @@ happen in a given order by holding the clock (simulated time stands still) or a 
 from __future__ import annotations
 
 import math
+import sqlite3
 import threading
 import time
 
@@ -11,8 +12,10 @@ import grpc
 import pytest
 
 from landscape.client import Session
+from landscape.server import convert
 from landscape.server.sessions import Outbox
 from landscape.server.states import State
+from landscape.sim.controller import EnableState
 from landscape.sim.cycle_process import EVENT, MSG, Mailbox
 from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
@@ -26,6 +29,14 @@ SLOW = motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=[2.5, 0, 1.5708, 0, 1.
 @pytest.fixture
 def arm(tmp_path):
     a = Arm(tmp_path, pace=1.0)
+    yield a
+    a.close()
+
+
+@pytest.fixture
+def flat_out(tmp_path):
+    """An active arm on the lock-step clock running as fast as it can."""
+    a = Arm(tmp_path)
     yield a
     a.close()
 
@@ -47,27 +58,38 @@ def _history(arm) -> list:
 
 # ---- 8.2 a stop never waits behind another command --------------------------------------
 
-def test_stop_motion_does_not_wait_for_an_open_path_load(arm):
+def test_stop_motion_does_not_wait_for_a_path_load_streaming_in(arm, monkeypatch):
+    """Chunks of a PathLoad stream go on arriving while the stop is sent; one of them is
+    being parsed (the real parser, made to take its time): the event loop must not be the
+    thread that parses, or the stop could not even be received."""
     _moving(arm)
-    release = threading.Event()
+    parsing, proceed = threading.Event(), threading.Event()
+    feed = convert.PathLoadStream.feed
 
-    def slow_load():
-        yield motion_pb2.PathLoadRequest(header=motion_pb2.PathHeader(
-            path_name="slow", frame=JOINT, motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
-            offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA))
-        release.wait(10)
-        yield motion_pb2.PathLoadRequest(tags=[types_pb2.TagStruct(
-            joint_values=[0, 0, 1.5708, 0, 1.5708, 0])])
+    def held_feed(stream, request):
+        if stream._messages == 3:
+            parsing.set()
+            proceed.wait(10)
+        feed(stream, request)
 
-    loading = arm.device.PathLoad.future(slow_load(), timeout=30)
-    time.sleep(0.2)   # the stream is open on the server
-    began = time.monotonic()
-    arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=5)
-    took = time.monotonic() - began
-    print(f"StopMotion with a PathLoad stream open: {took * 1000:.0f} ms")
-    assert arm.server.device.state is State.PAUSED and not loading.done()
-    release.set()
-    assert loading.result().points_loaded == 1
+    monkeypatch.setattr(convert.PathLoadStream, "feed", held_feed)
+    header = motion_pb2.PathHeader(path_name="streamed", frame=JOINT,
+                                   motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+    tags = [types_pb2.TagStruct(joint_values=[0.2 + 0.001 * i, 0, 1.5708, 0, 1.5708, 0],
+                                transition_speed=50) for i in range(100)]
+    chunks = [motion_pb2.PathLoadRequest(header=header)] + [
+        motion_pb2.PathLoadRequest(tags=tags[i:i + 20]) for i in range(0, 100, 20)]
+    loading = arm.device.PathLoad.future(iter(chunks), timeout=30)
+    try:
+        assert parsing.wait(10)
+        with grpc.insecure_channel(arm.server.target) as channel:   # a bystander reads
+            stubs(channel)[0].GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=3)
+        arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=3)
+        assert arm.server.device.state is State.PAUSED and not loading.done()
+    finally:
+        proceed.set()
+    assert loading.result().points_loaded == 100
 
 
 def test_stop_motion_does_not_wait_for_long_planning(arm):
@@ -79,7 +101,7 @@ def test_stop_motion_does_not_wait_for_long_planning(arm):
         motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
         offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
     chunks = [motion_pb2.PathLoadRequest(header=header)] + [
-        motion_pb2.PathLoadRequest(tags=tags[i:i + 10_000]) for i in range(0, len(tags), 10_000)]
+        motion_pb2.PathLoadRequest(tags=tags[i:i + 1_000]) for i in range(0, len(tags), 1_000)]
     loading = arm.device.PathLoad.future(iter(chunks), timeout=120)
     time.sleep(0.3)   # resolving, planning and checking 5,000 points takes a while
     assert not loading.done()
@@ -89,6 +111,28 @@ def test_stop_motion_does_not_wait_for_long_planning(arm):
     print(f"StopMotion while a long path resolves: {took * 1000:.0f} ms")
     assert arm.server.device.state is State.PAUSED and not loading.done()
     loading.result()
+
+
+def test_stop_motion_does_not_wait_for_a_settings_save(tmp_path):
+    """A settings change waits for its file (here another program holds the database's write
+    lock); the state table must not wait with it, or the next StopMotion would."""
+    paths = tmp_path / "paths.sqlite3"
+    arm = Arm(tmp_path, pace=1.0, paths_file=str(paths))
+    other = sqlite3.connect(str(paths), isolation_level=None)
+    try:
+        _moving(arm)
+        other.execute("BEGIN EXCLUSIVE")
+        setting = arm.device.SetSpeed.future(settings_pb2.SetSpeedRequest(
+            speed=50, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), timeout=30)
+        time.sleep(0.2)   # the save waits for the file
+        arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=3)
+        assert arm.server.device.state is State.PAUSED and not setting.done()
+        other.execute("COMMIT")
+        setting.result()
+        assert arm.server.device.settings.speed_percent == 50
+    finally:
+        other.close()
+        arm.close()
 
 
 # ---- 8.3 and 8.4 the disconnect handler ---------------------------------------------------
@@ -190,6 +234,44 @@ def test_an_estop_while_activating_fails_the_activation(tmp_path):
         arm.close()
 
 
+def test_the_holder_leaving_while_its_activate_waits_leaves_the_drives_off(flat_out):
+    arm, device = flat_out, flat_out.server.device
+    arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+    clock = arm.server.link.clock
+    clock.hold()   # enabling takes cycles: the drives come on only after the holder left
+    try:
+        activating = arm.device.Activate.future(control_pb2.ActivateRequest(), timeout=20)
+        wait_until(lambda: device.controller.state().enable is EnableState.ENABLING)
+        arm.session.close()
+        wait_until(lambda: device.state is State.UNLOCKED, timeout=5)
+    finally:
+        clock.release()
+    with pytest.raises(grpc.RpcError):
+        activating.result()
+    wait_until(lambda: device.controller.state().enable is EnableState.DISABLED, timeout=5)
+    assert device.state is State.UNLOCKED
+
+
+def test_drives_that_do_not_go_off_are_an_error_not_inactive(flat_out):
+    arm, device = flat_out, flat_out.server.device
+    device.enable_timeout = 0.3
+    arm.server.link.clock.hold()   # no cycle runs: the drives cannot go off
+    try:
+        with pytest.raises(grpc.RpcError) as refused:
+            arm.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
+        assert device.state is State.ERROR and "did not go off" in device.error
+    finally:
+        arm.server.link.clock.release()
+    assert refused.value.code() is grpc.StatusCode.ABORTED
+    history = _history(arm)
+    assert 103 in [e.detail.code for e in history if e.event_id == "alarm"]
+    assert not any(e.event_id == "state_changed" and e.detail.reason == "deactivated"
+                   for e in history)
+    wait_until(lambda: device.controller.state().enable is EnableState.DISABLED)
+    assert arm.device.Reset(control_pb2.ResetRequest(), timeout=10).state == \
+        types_pb2.DEVICE_STATE_INACTIVE
+
+
 def test_a_move_planned_while_its_holder_disconnects_never_starts(arm):
     device = arm.server.device
     planner = device.motions.planner
@@ -226,6 +308,11 @@ def test_the_cycles_outbox_drops_nothing_and_says_when_it_runs_high():
     assert [item[1]["label"] for item in posted] == list(range(1000))
     warnings = [item for item in mailbox.outbox if item[0] == EVENT]
     assert len(warnings) == 1 and "outbox" in warnings[0][1]
+    assert mailbox.outbox[0][0] == EVENT   # sent first, not behind the backlog it is about
+    mailbox.outbox.clear()                 # the server caught up; later it falls behind again
+    for i in range(1000):
+        mailbox.post({"op": "mark", "label": i})
+    assert mailbox.outbox[0][0] == EVENT and "outbox" in mailbox.outbox[0][1]
 
 
 def test_a_sessions_outbox_is_bounded_and_overflow_is_refused():

@@ -308,14 +308,18 @@ def test_the_audit_log_rotates_by_size(keys, tmp_path):
 
 
 def test_a_client_beyond_its_rate_is_refused_but_its_stops_get_through(tmp_path):
+    """A client is its address: a fresh connection from it draws on the same bucket."""
     server = start_server(security=SecurityConfig(rate_limit=2.0, rate_burst=5))
+    own = [("grpc.use_local_subchannel_pool", 1)]   # a connection of its own
     try:
-        with grpc.insecure_channel(server.target) as channel:
+        with grpc.insecure_channel(server.target) as channel, \
+                grpc.insecure_channel(server.target, options=own) as fresh:
+            grpc.channel_ready_future(fresh).result(timeout=10)   # connected before the burst
             device = _device(channel)
             for _ in range(5):
                 device.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=10)
-            refused = _refusal(lambda: device.GetDeviceState(control_pb2.GetDeviceStateRequest(),
-                                                              timeout=10))
+            refused = _refusal(lambda: _device(fresh).GetDeviceState(
+                control_pb2.GetDeviceStateRequest(), timeout=10))
             assert refused.code() is grpc.StatusCode.RESOURCE_EXHAUSTED
             assert error_info(refused).reason == "RATE_LIMITED"
             # A stop is never limited: the state table answers it (nothing moves here).
@@ -328,7 +332,7 @@ def test_a_client_beyond_its_rate_is_refused_but_its_stops_get_through(tmp_path)
 
 def test_streams_are_capped_per_identity_across_connections(keys, tmp_path):
     caps = {"watch": Cap(per_client=2, total=100), "session": Cap(per_client=2, total=100)}
-    server = start_server(security=SecurityConfig(tokens=str(keys.folder), identity_caps=caps))
+    server = start_server(stream_caps=caps, security=SecurityConfig(tokens=str(keys.folder)))
     channels, streams = [], []
     try:
         def watch(token):

@@ -3,6 +3,7 @@ moves (comply) on the real server, the simulated arm on the lock-step clock, the
 pressing on the real (simulated) table."""
 from __future__ import annotations
 
+import re
 import threading
 import time
 
@@ -16,7 +17,8 @@ from landscape.server.states import State
 from landscape.v1 import (control_pb2, motion_pb2, sensing_pb2, settings_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
 
-from support import Arm, error_info, wait_until
+from support import (Arm, cell_file, error_info, locked_session, start_server, stubs,
+                     wait_until)
 
 TABLE_TOP = 0.2
 FREE_SPOT = (0.65, 0.3)          # on the table, away from the parts and zones
@@ -45,9 +47,10 @@ def _react(arm, **fields) -> list:
     return arm.wait_command(reply.ret_val.command_id)
 
 
-def _touch(arm, threshold: float = -20.0) -> list:
-    """Down onto the table at 2 mm/s (0.1 % of the arm's 2 m/s) until fz reaches `threshold`."""
-    return _react(arm, sensor_type="force_sensor", motion=Z(z=0.1), speed=0.1,
+def _touch(arm, threshold: float = -20.0, mm_per_s: float = 2.0) -> list:
+    """Down onto the table at `mm_per_s` (as a % of the arm's 2 m/s) until fz reaches
+    `threshold`."""
+    return _react(arm, sensor_type="force_sensor", motion=Z(z=0.1), speed=mm_per_s / 20,
                   thresholds=Z(z=threshold))
 
 
@@ -86,19 +89,108 @@ def test_the_force_sensor_reads_at_the_tool_tip_in_the_tool_frame(cup):
     assert np.abs(reading[3:]).max() < 1e-3
 
 
+def test_torques_come_in_newton_times_the_length_unit(cup):
+    # The tip 0.1 m off the flange's axis: the hanging cup's weight turns about it.
+    cup.device.SetToolOffset(settings_pb2.SetToolOffsetRequest(
+        offset=types_pb2.Pose(x=0.1, z=0.12)), timeout=5)
+    weight = CUP_MASS * 9.81
+    reading = cup.reading()
+    assert reading[:3] == pytest.approx([0, 0, weight], abs=0.02)
+    assert reading[3:] == pytest.approx([0, 0.1 * weight, 0], abs=0.01)    # N*m
+    cup.device.SetUnits(settings_pb2.SetUnitsRequest(
+        linear_units=types_pb2.LINEAR_UNIT_MILLIMETERS,
+        angular_units=types_pb2.ANGULAR_UNIT_RADIANS), timeout=5)
+    in_mm = cup.reading()
+    assert in_mm[:3] == pytest.approx(reading[:3], abs=0.02)               # forces stay N
+    assert in_mm[3:] == pytest.approx(reading[3:] * 1000, abs=10)          # N*mm
+
+
+def test_a_sensor_the_cell_file_adds_is_read_from_the_controller(tmp_path):
+    """A third sensor (a second range sensor, 2 cm ahead of the tip) is not in the ring: its
+    readings come from the controller when asked, and the loops that need every cycle's refuse
+    it."""
+    cell = cell_file(tmp_path, {"[recorder]": '''[sensors.front_laser]
+kind = "laser_range"
+max_range = 1.0
+min_range = 0.005
+offset = [0.0, 0.0, 0.02]
+
+[recorder]'''})
+    server = start_server(cell=cell)
+    session = locked_session(server)
+    try:
+        device = stubs(session.channel)[0]
+        device.Activate(control_pb2.ActivateRequest(), timeout=10)
+
+        def reading(name):
+            return device.GetSensorReading(sensing_pb2.GetSensorReadingRequest(
+                sensor_type=name), timeout=10).current_data[0]
+        assert reading("front_laser") == pytest.approx(reading("laser_standoff_sensor") - 0.02,
+                                                       abs=1e-4)
+        device.SetUnits(settings_pb2.SetUnitsRequest(
+            linear_units=types_pb2.LINEAR_UNIT_MILLIMETERS,
+            angular_units=types_pb2.ANGULAR_UNIT_RADIANS), timeout=5)
+        assert reading("front_laser") == pytest.approx(reading("laser_standoff_sensor") - 20,
+                                                       abs=0.1)
+        error = _refused(lambda: reading("sonar"))
+        assert "front_laser" in error.details()
+        error = _refused(lambda: device.MoveReact(sensing_pb2.MoveReactRequest(
+            sensor_type="front_laser", motion=Z(z=10), speed=1, thresholds=Z(x=20))))
+        assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
+        assert "not read every cycle" in error.details()
+        stream = state_service_pb2_grpc.StateServiceStub(session.channel).StreamState(
+            state_service_pb2.StreamStateRequest(sensors=["front_laser"]))
+        assert _refused(lambda: next(stream)).code() is grpc.StatusCode.INVALID_ARGUMENT
+    finally:
+        session.close()
+        server.stop(grace=None)
+
+
 # ---- 3.7.2 moveReact ------------------------------------------------------------------------
 
-def test_move_react_stops_on_the_table_at_the_threshold(cup):
-    events = _touch(cup)
+def _vectors(message: str) -> list[np.ndarray]:
+    """The (x, y, z) vectors a message quotes, in order."""
+    return [np.array([float(v) for v in m.split(",")])
+            for m in re.findall(r"\(([-0-9.e, ]+)\)", message)]
+
+
+@pytest.mark.parametrize("mm_per_s", [2, 10, 20, 40])
+def test_move_react_stops_on_the_table_at_the_threshold(cup, mm_per_s):
+    events = _touch(cup, mm_per_s=mm_per_s)
     done = events[-1]
     assert done.event_id == "command_done" and done.command.command == "MoveReact"
-    assert done.command.message.startswith("triggered")
+    message = done.command.message
+    assert message.startswith("triggered")
     force = cup.reading()
     tip_height = cup.tool_tip()[2, 3]
-    print(f"\nmoveReact onto the table: at rest fz = {force[2]:.2f} N (threshold -20 N), tip "
-          f"{(tip_height - TABLE_TOP) * 1000:.2f} mm from the table; {done.command.message}")
+    print(f"\nmoveReact onto the table at {mm_per_s} mm/s: at rest fz = {force[2]:.2f} N "
+          f"(threshold -20 N), tip {(tip_height - TABLE_TOP) * 1000:.2f} mm from the table; "
+          f"{message}")
     assert force[2] == pytest.approx(-20.0, rel=0.2)
     assert abs(tip_height - TABLE_TOP) < 0.002
+    assert cup.server.device.state is State.RESTING
+    trigger, _, rest = _vectors(message)[:3]     # the reading at the trigger, where, at rest
+    assert trigger[2] <= -20.0
+    assert rest == pytest.approx(force[:3], abs=0.5)
+
+
+def test_a_stop_while_the_force_settles_ends_the_settling(cup):
+    clock = cup.link.clock
+    reply = cup.device.MoveReact(sensing_pb2.MoveReactRequest(
+        sensor_type="force_sensor", motion=Z(z=0.1), speed=2, thresholds=Z(z=-20)), timeout=30)
+    clock.hold()
+    try:
+        def until_settling(controller) -> None:   # the cycles, stepped here, one by one
+            while (motion := controller.cyclic._motion) is None or motion.force_settle is None:
+                controller.step()
+        cup.link.between_cycles(until_settling, timeout=60)
+        cup.server.device.motions.request_stop()
+    finally:
+        clock.release()
+    done = cup.wait_command(reply.ret_val.command_id)[-1]
+    assert done.event_id == "command_done"
+    assert done.command.message.startswith("triggered")
+    assert done.command.message.endswith("(stop before the force settled)")
     assert cup.server.device.state is State.RESTING
 
 
@@ -130,6 +222,19 @@ def test_a_reading_beyond_the_envelope_ends_move_react_as_failed(cup):
     assert abs(cup.reading()[2]) < 20     # stopped soon after 10 N
     alarm = [e for e in cup.history() if e.event_id == "alarm"][-1].detail
     assert alarm.code == alarms.MOTION and alarm.command_id == events[-1].command.command_id
+
+
+def test_move_react_lets_only_the_tool_touch_its_surface_the_arm_stays_checked(cup):
+    """Issue 11: the cup may meet the table it searches for; the flange may not. A search
+    planned 30 cm down would take the flange (12 cm above the cup's tip) into the table."""
+    before = cup.joints().copy()
+    error = _refused(lambda: cup.device.MoveReact(sensing_pb2.MoveReactRequest(
+        sensor_type="force_sensor", motion=Z(z=0.3), speed=1, thresholds=Z(z=-20))))
+    info = error_info(error)
+    assert error.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert info.metadata["body_a"].startswith("link") and info.metadata["body_b"] == "table"
+    assert np.allclose(cup.joints(), before, atol=1e-6)
+    assert cup.server.device.state is State.RESTING
 
 
 @pytest.mark.parametrize("fields, code", [
@@ -257,6 +362,79 @@ def test_comply_joins_a_running_motion(cup):
     assert cup.reading()[2] == pytest.approx(-20.0, abs=2.0)
 
 
+def _press(arm, kd: float) -> int:
+    """From resting on the table at 5 N, a comply in place at 20 N with differential gain
+    `kd` (m/N): the cycles until the force is within 2 N of it."""
+    _touch(arm, threshold=-5.0)
+    rows = _RingReader(arm)
+    reply = _comply(arm, max_timeout=1.0, differential_gains=[0, 0, kd, 0, 0, 0])
+    events = arm.wait_command(reply.ret_val.command_id)
+    assert events[-1].event_id == "command_done"
+    pressed = rows.stop()
+    began = events[0].time.ToNanoseconds() / 1e9
+    pressed = pressed[pressed[:, WALL] >= began]
+    sensors = arm.server.workcell.sensors
+    fz = np.array([sensors.from_row("force_sensor", row[SENSORS])[2] for row in pressed])
+    reached = np.nonzero(fz <= -18.0)[0]
+    assert reached.size, f"the force never reached 18 N (down to {fz.min():.1f} N)"
+    _lift(arm)
+    return int(reached[0])
+
+
+def _lift(arm, dz: float = 0.01) -> None:
+    reply = arm.device.MoveRelative(motion_pb2.MoveRelativeRequest(
+        frame=types_pb2.REFERENCE_FRAME_TOOL_FRAME, values=[0, 0, -dz, 0, 0, 0],
+        motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION), timeout=30)
+    assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+
+
+def test_comply_s_differential_gain_damps_the_approach_to_the_set_point(cup):
+    # Against a contact of stiffness k, kd slows the offset by 1 + kd * k (the derivative of
+    # the force error opposes its change): here about 20 kN/m and kd 1e-4 m/N, 3 times.
+    plain, damped = _press(cup, 0.0), _press(cup, 1e-4)
+    print(f"\ncomply from 5 to 18 N: {plain} cycles without kd, {damped} with kd 1e-4 m/N")
+    assert damped > 1.8 * plain
+
+
+def test_comply_beyond_its_travel_distance_panics_and_stops(cup):
+    _touch(cup)
+    start = cup.tool_tip()[:3, 3]
+    reply = _comply(cup, motion=Z(x=0.1), speed=1, max_travel_distances=[0.02, 0, 0, 0, 0, 0])
+    events = cup.wait_command(reply.ret_val.command_id)
+    assert events[-1].event_id == "command_failed"
+    assert "beyond the travel limits" in events[-1].command.message
+    moved = cup.tool_tip()[:3, 3] - start
+    assert 0.02 <= moved[0] < 0.022       # 20 mm/s: under a mm to brake
+    assert any(e.event_id == "alarm" and e.detail.command_id == reply.ret_val.command_id
+               for e in cup.history())
+    assert cup.server.device.state is State.RESTING
+
+
+def test_comply_whose_motion_outlasts_its_timeout_fails(cup):
+    _touch(cup)
+    start = cup.tool_tip()[:3, 3]
+    reply = _comply(cup, motion=Z(x=0.1), speed=1, max_timeout=0.5)   # 5 s of motion
+    events = cup.wait_command(reply.ret_val.command_id)
+    assert events[-1].event_id == "command_failed"
+    assert events[-1].command.message.startswith("timeout: the motion was not done within 0.5 s")
+    moved = cup.tool_tip()[:3, 3] - start
+    assert 0.005 < moved[0] < 0.015        # about half a second of it
+    assert cup.server.device.state is State.RESTING
+def test_comply_is_checked_with_its_compliance_at_both_ends(cup):
+    """Issue 11: the cup may press on the table, but a compliance of 20 cm would let the
+    flange follow it into the table: refused before anything moves. 1 cm is fine."""
+    _touch(cup, threshold=-5.0)
+    before = cup.joints().copy()
+    error = _refused(lambda: _comply(cup, max_timeout=1.0, compliance=Z(z=0.2)))
+    info = error_info(error)
+    assert error.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert info.metadata["body_a"].startswith("link") and info.metadata["body_b"] == "table"
+    assert "compliance" in error.details()
+    assert np.allclose(cup.joints(), before, atol=1e-6)
+    reply = _comply(cup, max_timeout=0.2)
+    assert cup.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+
+
 @pytest.mark.parametrize("fields", [
     {"compliance": Z()},                                                  # no compliant axis
     {"motion": Z(z=0.01), "speed": 1},                                    # along the compliance
@@ -279,21 +457,3 @@ def test_a_state_stream_refuses_an_unknown_sensor(arm):
         state_service_pb2.StreamStateRequest(sensors=["sonar"]))
     error = _refused(lambda: next(stream))
     assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
-
-
-def test_the_joint_torques_reported_at_rest_are_the_arm_models_with_the_tools_weight(cup):
-    """The drives' torques the state carries, against pinocchio's dynamics of the arm model
-    with the cup (its mass at its centre, from the cell file) on the flange."""
-    import pinocchio as pin
-    from landscape.sim.arm import urdf
-
-    model = pin.buildModelFromXML(urdf(cup.server.device.arm))
-    flange = model.frames[model.getFrameId("tool0")]
-    spec = next(t for t in cup.server.workcell.tools.tools.values() if t.name == "vacuum")
-    centre = flange.placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, spec.length / 3]))
-    model.inertias[flange.parentJoint] += centre.act(
-        pin.Inertia(spec.mass, np.zeros(3), np.eye(3) * 1e-6))
-    sample = cup.server.device.feedback()
-    gravity = pin.computeGeneralizedGravity(model, model.createData(), sample.position)
-    print(f"\nreported {np.round(sample.torque, 3)} N*m\nmodel    {np.round(gravity, 3)} N*m")
-    assert sample.torque == pytest.approx(gravity, abs=0.05)

@@ -23,41 +23,70 @@ VALID_REQUESTS = {
 
 METHODS = [(spec, m) for spec in services.ALL for m in spec.descriptor.methods]
 
-# Where each RPC is valid, written from the seed's sections (SAND98-2770 3.1 to 4) and
-# DESIGN.md section 4, independently of the server's own table: "Locked" is holding the lock
-# (Inactive and the Active states), "Active" is Resting, Moving or Paused; commands that move
-# the arm need Resting; read-only and state-neutral calls are valid everywhere.
+# Where each RPC is valid, written from the seed's section headings (SAND98-2770 3.1 to 4)
+# and DESIGN.md section 4, independently of the server's own table. As DESIGN.md 4 reads them,
+# "Locked" is holding the lock (Inactive and the Active states) and "Active" is Resting, Moving
+# or Paused; "state neutral" / "state independent" is every state. Where an entry departs from
+# the seed's words, its comment says "seed:" and why; the others are the seed's own.
 ALL = set(State)
 LOCKED = {State.INACTIVE, State.RESTING, State.MOVING, State.PAUSED}
 ACTIVE = {State.RESTING, State.MOVING, State.PAUSED}
 READS = ["GetUnits", "GetVelocities", "GetAccelerations", "GetMaxVelocities",
          "GetMaxAccelerations", "GetToolOffsets", "GetRobotPosition", "GetMotionControlState",
-         "GetTagId", "GetSensorReading", "GetEndEffectorState", "SendCommand", "GetDeviceState",
-         "GetRobotDescription", "GetCellDescription", "OperatePanel", "GetDigitalIO",
-         "SignalDigitalIO", "ListDigitalIO", "Subscribe", "Connect", "StreamState"]
+         "GetTagId",                                              # 3.3.1 state neutral
+         "GetSensorReading",                                      # 3.7.1 state independent
+         "GetEndEffectorState",                                   # 3.8.1 state independent
+         "GetDigitalIO", "SignalDigitalIO", "SendCommand",        # 4.1 state independent
+         "Subscribe", "Connect",                                  # 2.1, 2.2 state independent
+         # Extensions, read-only (OperatePanel is the person at the cell: no lease, any state).
+         "GetDeviceState", "GetRobotDescription", "GetCellDescription", "OperatePanel",
+         "ListDigitalIO", "StreamState"]
+# The seed's headings put every motion command in "Active" (3.4.1, 3.5.2) but its text for
+# moveReact (3.7.2) says "valid only in the Resting State": one motion at a time, so a command
+# that starts a motion needs the arm at rest (DESIGN.md 4: Resting --move--> Moving).
+STARTS_A_MOTION = {State.RESTING}
 EXPECTED = {
     **{rpc: ALL for rpc in READS},
     "Lock": {State.UNLOCKED},                                   # 3.1.1
-    "Release": {State.INACTIVE, State.ERROR},                   # 3.1.2 (and giving up an error)
-    "Activate": {State.INACTIVE},                               # 3.1.2
+    # 3.1.2 seed: "Locked". Not while Active: handing LOCAL control over (release) with the
+    # drives on, or activating what is active, has no meaning; DESIGN.md 4 draws both from
+    # Inactive. Release in Error too: a holder may give up control rather than reset.
+    "Release": {State.INACTIVE, State.ERROR},
+    "Activate": {State.INACTIVE},
     "Deactivate": ACTIVE,                                       # 3.1.3
     **{rpc: LOCKED for rpc in ("SetSpeed", "SetAcceleration", "SetToolOffset",
-                               "SetWorldCartesianFrame", "SetUnits")},   # 3.2.1
-    **{rpc: {State.RESTING} for rpc in ("MoveRelative", "MoveAbsolute", "MoveArc")},  # 3.4.1
-    "PathLoad": LOCKED, "PathClearPath": LOCKED,                # 3.5.1
-    "PathMove": {State.RESTING},                                # 3.5.2
+                               "SetWorldCartesianFrame", "SetUnits")},
+    # 3.2.1; setUnits is named there (never defined): a set command like the others.
+    # 3.4.1 seed: "Active": see STARTS_A_MOTION.
+    **{rpc: STARTS_A_MOTION for rpc in ("MoveRelative", "MoveAbsolute", "MoveArc")},
+    "PathLoad": LOCKED, "PathClearPath": LOCKED,                # 3.5.1 "Locked or Resting"
+    "PathMove": STARTS_A_MOTION,                                # 3.5.2 seed: "Active"
     "StopMotion": {State.MOVING},                               # 3.6.1
-    "ResumeMotion": {State.PAUSED},                             # 3.6.2
-    "AbortMotion": {State.INACTIVE, State.RESTING, State.PAUSED},   # 3.6.2
-    "MoveReact": {State.RESTING},                               # 3.7.2
-    "Comply": {State.RESTING, State.MOVING},                    # 3.7.2
-    "ManualControl": {State.INACTIVE, State.RESTING},           # 3.7.3
-    "Jog": {State.RESTING},
-    "GetTool": {State.RESTING}, "PutTool": {State.RESTING},     # 3.8.1: they move the arm
-    "ActivateTool": LOCKED, "DeactivateTool": LOCKED,           # 3.8.1
-    "SetDigitalIO": LOCKED,                                     # 4.1
-    "Reset": {State.ERROR},
-    "PostMessage": ALL,
+    # 3.6.2 seed: "Paused or Locked", the heading it shares with abortMotion. Resume continues
+    # the motion stopMotion paused; in any other state there is none (it ended, or Deactivate
+    # or abortMotion ended it), and accepting a resume of nothing would leave the client
+    # waiting for a done event that never comes.
+    "ResumeMotion": {State.PAUSED},
+    # 3.6.2 seed: "Paused or Locked". Not Moving: it "aborts current motion stopped by
+    # stopMotion()", so a moving arm is stopped first (StopMotion never waits, Deactivate
+    # stops it too).
+    "AbortMotion": {State.INACTIVE, State.RESTING, State.PAUSED},
+    "MoveReact": {State.RESTING},                               # 3.7.2 "Resting"
+    "Comply": {State.RESTING, State.MOVING},                    # 3.7.2 "Resting and Moving"
+    # 3.7.3 seed: "Locked". Not Moving or Paused: the teach pendant or spaceball would take an
+    # arm in the middle of a programmed motion; that motion ends (or is aborted) first.
+    "ManualControl": {State.INACTIVE, State.RESTING},
+    "Jog": {State.RESTING},             # extension: manual control's motion (STARTS_A_MOTION)
+    # 3.8.1 seed: "state independent". Picking and putting away a tool moves the arm
+    # (DESIGN.md 4): STARTS_A_MOTION.
+    "GetTool": STARTS_A_MOTION, "PutTool": STARTS_A_MOTION,
+    # 3.8.1 and 4.1 seed: "state independent", read as "whatever the motion state": these
+    # change the cell (the tool, its outputs), so only the lock holder may (3.1.1: the lock
+    # gives exclusive control), and not in Error, where the e-stop or fault holds the cell as
+    # it is until Reset. Every state the holder is in but Error: LOCKED.
+    "ActivateTool": LOCKED, "DeactivateTool": LOCKED, "SetDigitalIO": LOCKED,
+    "Reset": {State.ERROR},             # extension: leaving Error once its cause is cleared
+    "PostMessage": ALL,                 # 2.1 clientEvent's counterpart: state independent
 }
 # A joint move slow enough to last the whole sweep of a state (about a minute at real time).
 SLOW_MOVE = motion_pb2.MoveAbsoluteRequest(frame=types_pb2.REFERENCE_FRAME_JOINT_FRAME,

@@ -12,7 +12,7 @@ from landscape.v1 import digital_io_service_pb2 as io_pb
 from landscape.v1 import end_effector_pb2 as ee
 from landscape.v1 import control_pb2, motion_pb2, sensing_pb2, types_pb2
 
-from support import Arm, error_info, stubs
+from support import Arm, error_info, stubs, wait_until
 
 TABLE_TOP = 0.2
 PLACE_X = 0.73                      # the place zone's centre line
@@ -177,14 +177,21 @@ def test_tool_commands_refuse_what_does_not_fit_and_change_nothing(arm):
     assert _state(arm) == ("vacuum", "off")
 
 
-def test_a_held_part_carried_into_the_table_is_refused_and_free_space_is_not(arm):
-    """Issue 11: the part in the gripper is part of the arm for the collision check."""
+def _grip_block_2(arm) -> np.ndarray:
+    """block_2 alone on the table, in the gripper (closed around it where it lay); where it
+    lay."""
     _only_part(arm, "block_2")
     arm.get_tool("gripper")
     start = _part(arm, "block_2")
     arm.move_down_to(start[0], start[1], start[2] + 0.1)
     _lift(arm, -0.1)
     arm.device.ActivateTool(ee.ActivateToolRequest(tool_id="gripper", bit_field=1))
+    return start
+
+
+def test_a_held_part_carried_into_the_table_is_refused_and_free_space_is_not(arm):
+    """Issue 11: the part in the gripper is part of the arm for the collision check."""
+    start = _grip_block_2(arm)
     _lift(arm, 0.1)
     before = arm.joints().copy()
     # Straight down by as much as it was lifted: the block (hanging 2 cm below the finger
@@ -204,3 +211,63 @@ def test_a_held_part_carried_into_the_table_is_refused_and_free_space_is_not(arm
         motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION), timeout=30)
     assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
     assert _part(arm, "block_2") == pytest.approx(start + [0, 0.1, 0.15], abs=3e-3)
+
+
+# ---- the collision scene follows the parts (issue 11) -----------------------------------------
+
+def _scene_part(arm, name: str) -> np.ndarray:
+    return arm.server.device.collisions.part_pose(name)[:3, 3]
+
+
+def _by_hand(arm, part: str, change) -> None:
+    """A person moves `part` (the panel); the device's scene follows within its period."""
+    _world(arm, change)
+    wait_until(lambda: np.allclose(_scene_part(arm, part), _part(arm, part), atol=1e-3))
+
+
+def test_a_part_a_person_puts_in_the_way_is_an_obstacle_and_one_taken_away_is_not(arm):
+    arm.move_down_to(0.65, 0.3, 0.45)
+    before = arm.joints().copy()
+    down = motion_pb2.MoveAbsoluteRequest(
+        frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
+        values=[0.65, 0.3, TABLE_TOP + 0.035, np.pi, 0, 0],
+        motion_type=types_pb2.MOTION_TYPE_STRAIGHT_MOTION)
+    _by_hand(arm, "block_1",
+             lambda c: c.panel.place_part("block_1", (0.65, 0.3, TABLE_TOP + 0.0201)))
+    refused = _refused(lambda: arm.device.MoveAbsolute(down, timeout=30))
+    info = error_info(refused)
+    assert refused.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert info.metadata["body_b"] == "block_1"
+    assert np.allclose(arm.joints(), before, atol=1e-6)
+    _by_hand(arm, "block_1", lambda c: c.panel.remove_part("block_1"))
+    reply = arm.device.MoveAbsolute(down, timeout=30)
+    assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+
+
+def test_a_part_let_go_above_the_table_lies_on_the_table_in_the_scene(arm):
+    start = _grip_block_2(arm)
+    _lift(arm, 0.08)
+    arm.device.DeactivateTool(ee.DeactivateToolRequest(tool_id="gripper", bit_field=1))
+    landed = _part(arm, "block_2")
+    assert landed[2] == pytest.approx(start[2], abs=2e-3)          # it fell onto the table
+    assert _scene_part(arm, "block_2") == pytest.approx(landed, abs=1e-3)
+    assert _attached(arm) == {"gripper": "flange"}
+
+
+def test_a_tool_change_is_checked_whole_before_the_arm_moves(arm):
+    """A block left on the gripper's plate: the way into the slot is blocked, so GetTool is
+    refused before its approach runs (step by step, the arm went there first)."""
+    plate = _world(arm, lambda c: c.world.tools["gripper"].plate_pose())[0]
+    _by_hand(arm, "block_1",
+             lambda c: c.panel.place_part("block_1", np.add(plate, (0, 0, 0.0215))))
+    before = arm.joints().copy()
+    refused = _refused(lambda: arm.get_tool("gripper"))
+    info = error_info(refused)
+    assert refused.code() is grpc.StatusCode.FAILED_PRECONDITION and info.reason == "COLLISION"
+    assert info.metadata["body_b"] == "block_1" and "into the slot" in refused.details()
+    assert np.allclose(arm.joints(), before, atol=1e-6)              # nothing moved
+    assert not [e for e in arm.history() if e.event_id == "command_started"
+                and e.detail.command == "GetTool"]
+    _by_hand(arm, "block_1", lambda c: c.panel.remove_part("block_1"))
+    arm.get_tool("gripper")
+    assert _state(arm) == ("gripper", "open")

@@ -45,3 +45,20 @@ class Echo(StandIn):
 
 def make_echo(mailbox) -> Echo:
     return Echo(mailbox)
+
+
+class SlowStore(StandIn):
+    """Storing its recording takes 2 s (on the cycle process's asynchronous task)."""
+
+    def rec_store(self) -> str:
+        import time
+        time.sleep(2.0)
+        return "stored"
+
+
+def make_slow_store(mailbox) -> SlowStore:
+    return SlowStore()
+
+
+def steps_of(controller) -> int:
+    return controller.steps

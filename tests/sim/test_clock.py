@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -29,7 +30,8 @@ from landscape.sim.movegen import JointMove, sample_controller
 from landscape.sim.recorder import read_recording
 
 sys.path.insert(0, str(Path(__file__).parent))
-from cycle_standins import StandIn, make_broken, make_echo, make_stand_in  # noqa: E402
+from cycle_standins import (StandIn, make_broken, make_echo, make_slow_store,  # noqa: E402
+                            make_stand_in, steps_of)
 
 # Joint offsets (rad) of the test moves from the default cell's initial position: well inside
 # the ranges and speeds, away from the table.
@@ -195,6 +197,20 @@ def test_killed_child_is_reported_and_a_stop_is_not():
     with pytest.raises(CycleProcessError):
         clock.proxy.state()
     clock.stop()
+
+
+def test_an_urgent_call_is_answered_while_a_slow_call_runs():
+    """The operator panel's lane: a call marked urgent is not held back behind a call on the
+    asynchronous task (storing a recording), as the calls after that one are."""
+    with RealTimeClock(make_slow_store) as clock:
+        stored = []
+        storing = threading.Thread(target=lambda: stored.append(clock.call("rec_store")))
+        storing.start()
+        time.sleep(0.1)   # the store has begun
+        assert clock.between_cycles(steps_of, urgent=True, timeout=1.0) > 0
+        assert not stored
+        storing.join(10)
+        assert stored == ["stored"]
 
 
 def test_unknown_call_is_refused():

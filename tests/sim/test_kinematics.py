@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from landscape.sim.arm import VARIANTS, ArmModel, arm_model
-from landscape.sim.kinematics import (BRANCHES, Config, Kinematics, PinocchioModel, PosNeg,
-                                      ReversingResult, Shoulder, wrap_angle)
+from landscape.sim.kinematics import (BRANCHES, Config, Kinematics, PosNeg, ReversingResult,
+                                      Shoulder, wrap_angle)
+from landscape.sim.pinocchio_model import PinocchioModel
 
 TX90 = arm_model()
 TOL_POS = 1e-12  # m: the closed form is exact to rounding

@@ -103,6 +103,14 @@ class Page:
         self.click("btn-activate")
         self.shows("st-state", "resting")
 
+    def manual_control(self, on: bool) -> None:
+        """The pendant's ManualControl box, waited for until the device says so (the box
+        ticks at once; the device's answer comes after)."""
+        box = self.page.locator("#manual-control")
+        if box.is_checked() != on:
+            box.click(timeout=self.TIMEOUT_MS)
+        self.shows("st-manual", "teachpendant" if on else "off")
+
     def joint(self, index: int) -> str:
         return self.page.inner_text(f"#joints .joint:nth-child({index + 1}) .jvalue",
                                     timeout=self.TIMEOUT_MS)

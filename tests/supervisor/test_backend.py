@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import subprocess
 import sys
 import urllib.request
+from pathlib import Path
 
 import aiohttp
 import pytest
@@ -22,7 +24,9 @@ from support import start_server, wait_until
 
 DEVICE = "landscape.v1.DeviceService/"
 CONNECT = "landscape.v1.SessionService/Connect"
+CELL = DEVICE + "GetCellDescription"
 TIMEOUT = 30.0
+ROOT = Path(__file__).resolve().parents[2]
 
 
 class PageClient:
@@ -71,10 +75,11 @@ def unpack(reply: dict, message_class):
     return message
 
 
-def run_with_page(server, body):
+def run_with_page(server, body, **config):
     """Run body(page, server) against a backend on a free port, within a time limit."""
     async def main():
-        dashboard = await start(DashboardConfig(devices=(DeviceTarget("arm1", server.target),), port=0))
+        dashboard = await start(DashboardConfig(devices=(DeviceTarget("arm1", server.target),),
+                                                port=0, **config))
         try:
             async with aiohttp.ClientSession() as http:
                 async with http.ws_connect(dashboard.url + "ws") as ws:
@@ -163,15 +168,22 @@ def test_closing_the_page_ends_its_session_and_the_device_releases(server):
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
 
+async def _estop_question(page, server, name: str) -> tuple[int, dict]:
+    """The page's session takes the lock; the e-stop pressed and released: the device asks
+    the lock holder whether to reset. The session's call id and the question's frame."""
+    session = await page.send(CONNECT, {"hello": {"clientName": name}})
+    await page.answer(session)
+    await page.call(DEVICE + "Lock")
+    await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
+    await asyncio.to_thread(wait_until, lambda: server.device.state is State.ERROR, 5)
+    await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
+    return session, await page.until(
+        lambda f: f.get("id") == session and "rsvpRequest" in f.get("reply", {}))
+
+
 def test_the_estop_rsvp_reaches_the_page_and_its_answer_the_device(server):
     async def body(page, dashboard):
-        session = await page.send(CONNECT, {"hello": {"clientName": "operator"}})
-        await page.answer(session)
-        await page.call(DEVICE + "Lock")
-        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
-        await asyncio.to_thread(wait_until, lambda: server.device.state is State.ERROR, 5)
-        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
-        question = await page.until(lambda f: f.get("id") == session and "rsvpRequest" in f.get("reply", {}))
+        session, question = await _estop_question(page, server, "operator")
         request = question["reply"]["rsvpRequest"]
         assert set(request["choices"]) == {"reset", "stay"} and request["timeoutMs"] > 0
         await page.send(CONNECT, {"rsvpAnswer": {"rsvpId": request["rsvpId"], "choice": "reset"}},
@@ -237,3 +249,125 @@ def test_a_restarted_device_server_is_followed_from_its_first_event():
     finally:
         if second is not None:
             second.stop(grace=None)
+
+
+def test_the_backend_commands_over_tls_with_its_token_and_the_role_decides(secured, keys):
+    """An operator's token: sessions, the lock and commands; the e-stop (admin only) refused
+    with the device's reason, and nothing pressed."""
+    async def body(page, dashboard):
+        state = await page.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState")
+        assert state["reply"]["state"] == "DEVICE_STATE_UNLOCKED"
+        await page.call(CONNECT, {"hello": {"clientName": "tls-page"}})
+        assert "reply" in await page.call(DEVICE + "Lock")
+        assert "reply" in await page.call(DEVICE + "Activate")
+        assert secured.device.state is State.RESTING
+        refused = (await page.call(DEVICE + "OperatePanel",
+                                   {"action": "PANEL_ACTION_PRESS_ESTOP"}))["status"]
+        assert refused["code"] == 7 and "admin" in refused["message"]   # PERMISSION_DENIED
+        assert secured.device.state is State.RESTING   # not pressed
+    run_with_page(secured, body, tls=keys.tls(), token=keys.token("operator"))
+
+
+def test_an_admin_token_presses_the_estop_through_the_backend(secured, keys):
+    async def body(page, dashboard):
+        pressed = await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
+        assert pressed["reply"]["estopPressed"] is True
+        await asyncio.to_thread(wait_until, lambda: secured.device.state is State.ERROR, 5)
+        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
+    run_with_page(secured, body, tls=keys.tls(), token=keys.token("admin"))
+
+
+def test_without_a_token_every_read_is_refused_and_shown_so(secured, keys):
+    async def body(page, dashboard):
+        refused = await page.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState")
+        assert refused["status"]["code"] == 16   # UNAUTHENTICATED
+    run_with_page(secured, body, tls=keys.tls())
+
+
+def test_the_command_line_takes_the_client_credentials(keys):
+    from landscape.supervisor.__main__ import parse_args
+    config = parse_args(["--device", "a=127.0.0.1:1", "--tls-ca", str(keys.certs.ca),
+                         "--token-file", str(keys.token_file("viewer"))])
+    assert config.tls.ca == str(keys.certs.ca) and config.token == keys.token("viewer")
+
+
+def _bodies(frame: dict) -> dict[str, dict]:
+    return {body["name"]: body for body in frame["reply"]["bodies"]}
+
+
+def test_each_device_describes_its_own_cell():
+    first = start_server()
+    second = start_server(cell=str(ROOT / "sim" / "cells" / "press_tending.toml"))
+
+    async def body(page, dashboard):
+        cells = {}
+        while len(cells) < 2:
+            frame = await page.until(lambda f: f["rpc"] == CELL and f["device"] not in cells)
+            cells[frame["device"]] = frame["reply"]
+        assert (cells["arm1"]["cellName"], cells["arm2"]["cellName"]) == ("default",
+                                                                          "press_tending")
+        assert "block_1" in _bodies({"reply": cells["arm1"]})
+        assert "blank_1" in _bodies({"reply": cells["arm2"]})
+
+    async def main():
+        dashboard = await start(DashboardConfig(devices=(
+            DeviceTarget("arm1", first.target), DeviceTarget("arm2", second.target)), port=0))
+        try:
+            async with aiohttp.ClientSession() as http:
+                async with http.ws_connect(dashboard.url + "ws") as ws:
+                    await body(PageClient(ws), dashboard)
+        finally:
+            await dashboard.stop()
+    try:
+        asyncio.run(asyncio.wait_for(main(), 60))
+    finally:
+        first.stop(grace=None)
+        second.stop(grace=None)
+
+
+def test_the_world_follows_tool_changes_and_parts_taken_and_put(server):
+    """examples/02 fetches the gripper, carries block_1 to the place zone and puts the gripper
+    back: each change of the cell reaches the page as a new GetCellDescription."""
+    async def next_cell(page):   # each description once, in order
+        frame = await page.until(lambda f: f["rpc"] == CELL, timeout=120)
+        page.frames.remove(frame)
+        return _bodies(frame)
+
+    async def body(page, dashboard):
+        bodies = await next_cell(page)
+        seen = [(bodies["gripper"]["attachedTo"], bodies["block_1"]["attachedTo"])]
+        assert seen == [("", "")]
+        example = await asyncio.create_subprocess_exec(
+            sys.executable, str(ROOT / "examples" / "02_pick_and_place.py"), "--target",
+            server.target, stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE)
+        while len(seen) < 5:   # (gripper, block_1) attachments, each change once
+            bodies = await next_cell(page)
+            now = (bodies["gripper"]["attachedTo"], bodies["block_1"]["attachedTo"])
+            if seen[-1] != now:
+                seen.append(now)
+        _, errors = await example.communicate()
+        assert example.returncode == 0, errors.decode()
+        assert seen == [("", ""), ("flange", ""), ("flange", "tool"), ("flange", ""), ("", "")]
+        block = bodies["block_1"]["pose"]
+        assert (block["x"], block["y"]) == pytest.approx((0.73, -0.15), abs=0.01)   # placed
+    run_with_page(server, body)
+
+
+def test_an_unanswered_question_times_out_on_the_device_and_the_backend_sends_nothing(
+        server, caplog):
+    """The device's own timer decides: the backend answers nothing when the page does not (a
+    default sent for it would race that timer and be logged as an answer)."""
+    server.device.rsvp_timeout = 0.5
+
+    async def body(page, dashboard):
+        await _estop_question(page, server, "silent")
+        settled = await page.until(lambda f: "rsvpAnswer" in f.get("reply", {}).get("event", {}))
+        answer = settled["reply"]["event"]["rsvpAnswer"]
+        assert (answer["choice"], answer["timedOut"]) == ("stay", True)
+        await asyncio.sleep(1.0)   # an answer the backend sent would have arrived by now
+
+    with caplog.at_level(logging.WARNING, logger="landscape.server.servicers.session"):
+        run_with_page(server, body)
+    late = [r.getMessage() for r in caplog.records if "no such question waits" in r.getMessage()]
+    assert not late
+    assert server.device.state is State.ERROR   # "stay": the default kept it there

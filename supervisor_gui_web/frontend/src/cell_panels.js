@@ -7,15 +7,22 @@ const IO_PERIOD_MS = 500;
 const MAIN_FUNCTION = 1;   // bit 0: the tool's main function (close the gripper, vacuum on)
 
 export class ToolPanel {
-  constructor(ctx, toolNames) {
-    const select = $('tool-id');
-    select.replaceChildren(...toolNames.map((name) => new Option(name, name)));
-    const tool = () => select.value;
+  constructor(ctx) {
+    const tool = () => $('tool-id').value;
     const on = (id, handler) => $(id).addEventListener('click', handler);
     on('btn-tool-get', () => ctx.command('GetTool', { toolId: tool() }));
     on('btn-tool-put', () => ctx.command('PutTool', { toolId: tool() }));
     on('btn-tool-close', () => ctx.command('ActivateTool', { toolId: tool(), bitField: MAIN_FUNCTION }));
     on('btn-tool-open', () => ctx.command('DeactivateTool', { toolId: tool(), bitField: MAIN_FUNCTION }));
+  }
+
+  // The cell's tools, from its description; the one chosen stays chosen.
+  setTools(names) {
+    const select = $('tool-id');
+    const chosen = select.value;
+    if ([...select.options].map((o) => o.value).join() === names.join()) return;
+    select.replaceChildren(...names.map((name) => new Option(name, name)));
+    if (names.includes(chosen)) select.value = chosen;
   }
 }
 

@@ -17,7 +17,10 @@ function summary(event) {
   if (event.alarm) return `${event.alarm.severity.replace('ALARM_SEVERITY_', '')} ${event.alarm.code}: ${event.alarm.message}`;
   if (event.stateChange) return `${event.stateChange.fromState} → ${event.stateChange.toState} (${event.stateChange.reason})`;
   if (event.rsvpRequest) return `asks: ${event.rsvpRequest.data.join(' ')} [${event.rsvpRequest.choices.join(' / ')}]`;
-  if (event.rsvpAnswer) return `answered ${event.rsvpAnswer.choice}${event.rsvpAnswer.timedOut ? ' (timed out: default)' : ''}`;
+  if (event.rsvpAnswer) {
+    const a = event.rsvpAnswer;
+    return a.timedOut ? `timed out: the device took its default, ${a.choice}` : `answered ${a.choice}`;
+  }
   if (event.operatorMessage) return `${event.operatorMessage.source}: ${event.operatorMessage.text}`;
   if (event.eventsLost) return `events ${event.eventsLost.firstSequence}–${event.eventsLost.lastSequence} lost`;
   return event.data.join(' ');

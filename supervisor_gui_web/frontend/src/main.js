@@ -51,19 +51,25 @@ async function main() {
   new JogPendant(ctx);
   new IoPanel(ctx);
   new SensorPanel(ctx);
+  const tools = new ToolPanel(ctx);
+  // What the 3D view shows, in one line: the arm, and the cell as its device describes it.
+  const showCell = () => {
+    const cell = ctx.model.cell;
+    const world = cell?.refused ? `no cell description: ${describeStatus(cell.refused)}` : `cell “${cell?.cellName || '…'}”`;
+    $('scene-note').textContent = `${ctx.model.robotType || '…'} in ${world}`;
+  };
   // What the latency benchmark reads: when each sample's cycle ran and when it arrived here.
   const stats = window.dashboardStats = { samples: [] };
+  window.cellView = view;   // the 3D view, for the console and the page tests
 
   link.onConnection = async (up) => {
     $('connection').textContent = up ? 'connected' : 'disconnected: reconnecting…';
     $('connection').className = `pill ${up ? 'ok' : 'alert'}`;
     if (!up || view.robot) return;
-    const world = await (await fetch(`/api/devices/${encodeURIComponent(device)}/world`)).json();
-    view.loadWorld(world);
-    new ToolPanel(ctx, world.world.tools.map((t) => t.name));
     const description = await ctx.command('GetRobotDescription');
     if (description) state.setLimits(view.loadRobot(description.urdf));
-    $('scene-note').textContent = `${description?.robotType || '?'} — world: ${world.note}`;
+    ctx.model.robotType = description?.robotType || '?';
+    showCell();
     ctx.changed('robot');
   };
 
@@ -85,6 +91,7 @@ async function main() {
       ctx.model.sample = sample;
       const units = sample.units || SI;
       view.setJoints((sample.jointPositions || []).map((q) => toSI(q, 'angular', units)));
+      view.setEndEffector(sample.endEffector, sample.endEffectorState);
       if (sample.toolPose) view.setToolPose(poseToSI(sample.toolPose, units));
       state.sample(sample, received - cycle);
       plots.add(sample, performance.now() / 1000, (a) => fromSI(toSI(a, 'angular', units), 'angular', ctx.model.units));
@@ -95,12 +102,19 @@ async function main() {
       log.addEvent(device, event);
       paths.event(event);
       rsvp.event(event);
+    } else if (method === 'GetCellDescription') {
+      ctx.model.cell = frame.status ? { refused: frame.status } : frame.reply;
+      if (frame.reply) {
+        view.setCell(frame.reply);
+        tools.setTools(frame.reply.bodies.filter((b) => b.kind === 'KIND_TOOL').map((b) => b.name));
+      }
+      showCell();
     } else if (method.startsWith('Get')) {
       ctx.model.status[method] = frame.status ? { refused: frame.status } : frame.reply;
       if (method === 'GetUnits' && frame.reply) {
         ctx.model.units = { linear: frame.reply.linearUnits, angular: frame.reply.angularUnits };
       }
-      if (method === 'GetEndEffectorState' && frame.reply) view.setEndEffector(frame.reply.currentEe);
+      if (method === 'GetToolOffsets' && frame.reply) view.setTipOffset(poseToSI(frame.reply.offset, frame.reply.units));
       state.status();
       ctx.changed('status');
     }

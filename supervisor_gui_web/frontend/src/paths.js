@@ -1,17 +1,20 @@
 // Paths: teach (store the current pose as a tag of a named path), load points typed in, clear,
-// run, stop, resume, abort, and the run's progress by tag from the event stream. The page keeps
-// the tags of the paths it loaded (the contract has no call to list a stored path's points), and
-// draws them in the 3D view.
+// run, stop, resume, abort, and the progress by tag of the newest PathMove of any client, from
+// the event stream. The page keeps the tags of the paths it loaded (the contract has no call to
+// list a stored path's points), and draws them in the 3D view.
+import { poseMatrix } from './scene.js';
 import { fromSI, poseToSI, toSI } from './units.js';
 
 const $ = (id) => document.getElementById(id);
+const ENDED = new Set(['done', 'failed', 'aborted']);
 
 export class PathPanel {
   constructor(ctx, view) {
     this.ctx = ctx;
     this.view = view;
     this.paths = new Map();      // path name -> {frame, tags: [TagStruct JSON]}
-    this.run = null;             // {commandId, path, reached: Set of tag indexes}
+    this.run = null;             // {commandId, path, phase, reached: [[tag index, name]] in order}
+    this.drawn = 0;              // the newest draw; an older one still computing gives way
     const on = (id, handler) => $(id).addEventListener('click', handler);
     on('btn-teach', () => this.teach());
     on('btn-path-load', () => this.loadTyped());
@@ -74,55 +77,87 @@ export class PathPanel {
   async start() {
     const name = $('path-name').value;
     const reply = await this.ctx.command('PathMove', { pathName: name, numberOfCycles: Number($('path-cycles').value) });
-    if (reply) {
-      this.run = { commandId: reply.retVal.commandId, path: name, reached: new Set(), phase: 'started' };
-      this.show();
-    }
+    if (reply && this.run?.commandId !== reply.retVal.commandId) this.follow(reply.retVal.commandId, name);
   }
 
-  // A landscape.v1.Event: tag arrivals and the end of the page's run.
+  follow(commandId, path) {
+    this.run = { commandId, path, reached: [], phase: 'started' };
+  }
+
+  // A landscape.v1.Event: a PathMove started by any client (its point name is the path's), the
+  // tags it reaches and its end.
   event(event) {
     const c = event.command;
-    if (!c || !this.run || c.commandId !== this.run.commandId) return;
-    if (c.phase === 'PHASE_TAG_REACHED') this.run.reached.add(c.tagIndex);
+    if (!c || c.command !== 'PathMove') return;
+    if (c.phase === 'PHASE_STARTED' && this.run?.commandId !== c.commandId) this.follow(c.commandId, c.pointName);
+    if (c.commandId !== this.run?.commandId) return;
+    if (c.phase === 'PHASE_TAG_REACHED') this.run.reached.push([c.tagIndex, c.tagName]);
     else this.run.phase = c.phase.replace('PHASE_', '').toLowerCase();
     this.show();
   }
 
+  // The newest run (once it ended, unless another path this page loaded is typed), by its
+  // path's tags when the page knows them, else by the tags reached so far; otherwise the typed
+  // path's tags. The path shown is drawn.
   show() {
-    const name = $('path-name').value;
+    const typed = $('path-name').value;
+    const other = typed !== this.run?.path && this.paths.has(typed);
+    const run = this.run && !(other && ENDED.has(this.run.phase)) ? this.run : null;
+    const name = run ? run.path : typed;
     const path = this.paths.get(name);
     const box = $('path-progress');
     box.replaceChildren();
-    const run = this.run && this.run.path === name ? this.run : null;
     if (run) {
       const head = document.createElement('div');
-      head.textContent = `run ${run.commandId}: ${run.phase}, ${run.reached.size}${path ? '/' + path.tags.length : ''} tags reached`;
+      head.textContent = `run ${run.commandId} of ${run.path}: ${run.phase}, ${run.reached.length}${path ? '/' + path.tags.length : ''} tags reached`;
       box.append(head);
     }
-    for (const [i, tag] of (path?.tags || []).entries()) {
+    // A path the page loaded has its tags numbered 0, 1, ...; another's are shown as reached.
+    const reached = new Set(run?.reached.map(([i]) => i));
+    const tags = path ? path.tags.map((tag, i) => [i, tag.tagName || `#${i}`]) : run?.reached || [];
+    for (const [i, tagName] of tags) {
       const item = document.createElement('span');
-      item.className = `tag ${run?.reached.has(i) ? 'reached' : ''}`;
-      item.textContent = tag.tagName || `#${i}`;
+      item.className = `tag ${reached.has(i) ? 'reached' : ''}`;
+      item.textContent = tagName;
       box.append(item);
     }
     this.draw(path);
   }
 
-  // The loaded points as tool tip positions in the base frame (meters).
-  draw(path) {
+  // The loaded points as tool tip positions in the base frame (meters): joint values through
+  // the arm's kinematics, base points as they are, world points through the device's world
+  // frame.
+  async draw(path) {
+    const drawing = ++this.drawn;
     if (!path || !this.view.robot) { this.view.setPath([]); return; }
     const units = this.ctx.model.units;
-    const offset = this.ctx.model.status.GetToolOffsets;
-    const toolOffset = offset?.offset ? poseToSI(offset.offset, offset.units) : { x: 0, y: 0, z: 0, roll: 0, pitch: 0, yaw: 0 };
+    const toolOffset = this.toolOffset();
+    const world = path.frame === 'REFERENCE_FRAME_WORLD_CARTESIAN_FRAME' ? await this.worldInBase(toolOffset) : null;
+    if (drawing !== this.drawn) return;
     const points = path.tags.map((tag) => {
       if (path.frame === 'REFERENCE_FRAME_JOINT_FRAME') {
         return this.view.tipAt(tag.jointValues.map((v) => toSI(v, 'angular', units)), toolOffset);
       }
-      // World points are drawn as base points: exact while the world frame is the base frame.
       const p = poseToSI({ x: tag.x, y: tag.y, z: tag.z, roll: 0, pitch: 0, yaw: 0 }, units);
-      return { x: p.x, y: p.y, z: p.z };
+      const point = { x: p.x, y: p.y, z: p.z };
+      return world ? this.view.transformed(point, world) : point;
     });
     this.view.setPath(points);
+  }
+
+  toolOffset() {
+    const offset = this.ctx.model.status.GetToolOffsets;
+    return offset?.offset ? poseToSI(offset.offset, offset.units) : { x: 0, y: 0, z: 0, roll: 0, pitch: 0, yaw: 0 };
+  }
+
+  // The device's world Cartesian frame in its base frame (SetWorldCartesianFrame, which has no
+  // get): from one GetRobotPosition, the tool tip in the base (the arm's kinematics at its
+  // joints) times the inverse of the tip in the world.
+  async worldInBase(toolOffset) {
+    const position = await this.ctx.command('GetRobotPosition');
+    if (!position) return null;
+    const joints = position.jointPosition.map((q) => toSI(q, 'angular', position.units));
+    const tipInWorld = poseMatrix(poseToSI(position.worldPosition, position.units));
+    return this.view.tipMatrix(joints, toolOffset).multiply(tipInWorld.invert());
   }
 }

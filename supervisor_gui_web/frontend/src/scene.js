@@ -1,7 +1,9 @@
-// The cell in 3D: the arm from the device's URDF (urdf-loader), the world (table, rack, tools,
-// parts, zones), the tool frame, the tool tip's trail and the loaded path.
-// Everything is in meters and radians, z up, the cell's world frame; the arm's base_link sits at
-// the cell's base pose. Orientations are fixed-axis X-Y-Z roll, pitch, yaw (three.js order 'ZYX').
+// The cell in 3D: the arm from the device's URDF (urdf-loader), the cell around it as the device
+// describes it (DeviceService.GetCellDescription: fixtures, zones, tools in the rack or on the
+// flange, parts where they lie or in the tool), the tool frame, the tool tip's trail and the
+// loaded path. Everything is in meters and radians, z up, the cell's world frame; the arm's
+// base_link sits at the cell's base pose. Orientations are fixed-axis X-Y-Z roll, pitch, yaw
+// (three.js order 'ZYX').
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import URDFLoader from 'urdf-loader';
@@ -24,7 +26,19 @@ function placePose(object, xyz, rpy) {
 }
 
 function colorOf(rgba) {
-  return new THREE.Color(rgba[0], rgba[1], rgba[2]);
+  return rgba && rgba.length >= 3 ? new THREE.Color(rgba[0], rgba[1], rgba[2]) : new THREE.Color(0x9e9e9e);
+}
+
+// A landscape.v1 Pose (JSON) as a matrix.
+export function poseMatrix(pose) {
+  const object = new THREE.Object3D();
+  placePose(object, [pose.x, pose.y, pose.z], [pose.roll, pose.pitch, pose.yaw]);
+  object.updateMatrix();
+  return object.matrix;
+}
+
+function setLocal(object, matrix) {
+  matrix.decompose(object.position, object.quaternion, object.scale);
 }
 
 export class CellView {
@@ -55,9 +69,9 @@ export class CellView {
     const sun = new THREE.DirectionalLight(0xffffff, 2.0);
     sun.position.set(2, 1, 4);
     this.scene.add(sun);
-    const grid = new THREE.GridHelper(4, 20, 0x888888, 0xcccccc);
-    grid.rotation.x = Math.PI / 2;   // GridHelper lies in x-z; the floor is x-y
-    this.scene.add(grid);
+    this.grid = new THREE.GridHelper(4, 20, 0x888888, 0xcccccc);
+    this.grid.rotation.x = Math.PI / 2;   // GridHelper lies in x-z; the floor is x-y
+    this.scene.add(this.grid);
 
     this.base = new THREE.Group();          // the arm's base_link frame
     this.scene.add(this.base);
@@ -68,7 +82,12 @@ export class CellView {
     this.base.add(this.trail.line);
     this.pathGroup = new THREE.Group();
     this.base.add(this.pathGroup);
-    this.tools = new Map();                 // tool name -> {mesh, slotParent, slot}
+    this.cell = null;                       // the newest GetCellDescription
+    this.bodies = new Map();                // body name -> {object, attachedTo}
+    this.tipOffset = new THREE.Matrix4();   // the tool tip in the flange frame
+    this.endEffector = '';                  // "<tool> <state>" of the newest sample
+    this.graspFlange = null;                // the flange (world) when the tool last acted,
+                                            // if no cell description came since
 
     new ResizeObserver(() => this.resize()).observe(canvas.parentElement);
     this.resize();
@@ -109,6 +128,10 @@ export class CellView {
     if (this.robot) this.base.remove(this.robot);
     this.robot = loader.parse(urdf);
     this.base.add(this.robot);
+    if (this.cell) {   // the bodies on the flange and in the tool go on this arm
+      for (const item of this.bodies.values()) item.attachedTo = null;
+      this.setCell(this.cell);
+    }
     this.requestRender();
     this.ghost = loader.parse(urdf);        // never drawn: forward kinematics of path points
     this.jointNames = Object.keys(this.robot.joints).filter((n) => this.robot.joints[n].jointType !== 'fixed');
@@ -118,51 +141,82 @@ export class CellView {
     });
   }
 
-  // The world from the cell description (cell_world.py): poses in meters and radians.
-  loadWorld(cell) {
-    placePose(this.base, cell.base.xyz, cell.base.rpy);
-    const world = cell.world;
-    for (const box of [...world.fixtures, ...world.parts]) {
-      const mesh = new THREE.Mesh(new THREE.BoxGeometry(...box.size),
-        new THREE.MeshLambertMaterial({ color: colorOf(box.color) }));
-      placePose(mesh, box.pose.xyz, box.pose.rpy);
-      mesh.name = box.name;
-      this.scene.add(mesh);
+  // The cell from GetCellDescription (JSON): bodies are made once, then only moved.
+  setCell(cell) {
+    this.cell = cell;
+    const base = cell.base || {};
+    placePose(this.base, [base.x || 0, base.y || 0, base.z || 0], [base.roll || 0, base.pitch || 0, base.yaw || 0]);
+    this.grid.visible = Boolean(cell.floor);
+    this.scene.updateMatrixWorld(true);
+    const names = new Set();
+    for (const body of cell.bodies || []) {
+      names.add(body.name);
+      if (!this.bodies.has(body.name)) this.bodies.set(body.name, { object: this.makeBody(body), attachedTo: null });
+      this.place(this.bodies.get(body.name), body);
     }
-    for (const zone of world.zones) {
-      const edges = new THREE.LineSegments(new THREE.EdgesGeometry(new THREE.BoxGeometry(...zone.size)),
-        new THREE.LineBasicMaterial({ color: 0x2e7d32 }));
-      edges.position.set(...zone.center);
-      this.scene.add(edges);
+    for (const [name, item] of this.bodies) {
+      if (!names.has(name)) { item.object.removeFromParent(); this.bodies.delete(name); }
     }
-    for (const tool of world.tools) this.addTool(tool);
+    this.graspFlange = null;
     this.requestRender();
   }
 
-  addTool(tool) {
-    // The tool's frame is its mounting plate, z along the tool axis; the body hangs along +z.
-    const slot = new THREE.Group();
-    placePose(slot, tool.slot.xyz, tool.slot.rpy);
-    this.scene.add(slot);
-    const radius = tool.kind === 'vacuum_cup' ? tool.cup_radius : 0.035;
-    const body = new THREE.Mesh(new THREE.CylinderGeometry(radius, 0.04, tool.length, 20),
-      new THREE.MeshLambertMaterial({ color: tool.kind === 'vacuum_cup' ? 0x37474f : 0x78909c }));
-    body.rotation.x = Math.PI / 2;          // three's cylinder runs along y
-    body.position.z = tool.length / 2;
-    const mount = new THREE.Group();
-    mount.add(body);
-    slot.add(mount);
-    this.tools.set(tool.name, { mount, slot });
+  makeBody(body) {
+    if (body.kind === 'KIND_TOOL') return new URDFLoader().parse(body.urdf);   // root: the mounting plate
+    const size = body.size || { x: 0, y: 0, z: 0 };
+    const box = new THREE.BoxGeometry(size.x, size.y, size.z);
+    if (body.kind === 'KIND_ZONE') {
+      return new THREE.LineSegments(new THREE.EdgesGeometry(box), new THREE.LineBasicMaterial({ color: 0x2e7d32 }));
+    }
+    const mesh = new THREE.Mesh(box, new THREE.MeshLambertMaterial({ color: colorOf(body.color) }));
+    mesh.name = body.name;
+    return mesh;
   }
 
-  // Which tool is on the flange ('' for none): it rides on tool0, the others stay in the rack.
-  setEndEffector(name) {
-    if (!this.robot) return;
-    const flange = this.robot.links.tool0;
-    for (const [toolName, tool] of this.tools) {
-      const parent = toolName === name && flange ? flange : tool.slot;
-      if (tool.mount.parent !== parent) { parent.add(tool.mount); this.requestRender(); }
+  // A body in the world, on the flange (a mounted tool) or in the tool (a held part). A part
+  // keeps where it was in the tool when taken: from the flange then to where it lay. The tool
+  // acts at rest, so the flange then is the one when the sample said so (graspFlange) or, if
+  // the description came first, the one shown now. A part first seen held is drawn at the tip.
+  place(item, body) {
+    const object = item.object;
+    const flange = this.robot?.links.tool0;
+    if (!body.attachedTo) {
+      this.scene.add(object);
+      placePose(object, [body.pose.x, body.pose.y, body.pose.z], [body.pose.roll, body.pose.pitch, body.pose.yaw]);
+    } else if (!flange) {
+      object.removeFromParent();   // drawn once the arm is loaded (loadRobot places it again)
+      return;
+    } else if (item.attachedTo !== body.attachedTo || object.parent !== flange) {
+      let local = body.attachedTo === 'flange' ? new THREE.Matrix4() : this.tipOffset.clone();
+      if (body.attachedTo === 'tool' && object.parent === this.scene) {
+        object.updateMatrixWorld(true);
+        const grasp = this.graspFlange || flange.matrixWorld;
+        local = grasp.clone().invert().multiply(object.matrixWorld);
+      }
+      flange.add(object);
+      setLocal(object, local);
     }
+    item.attachedTo = body.attachedTo;
+  }
+
+  // The tip of the tool in the flange frame (GetToolOffsets, meters and radians).
+  setTipOffset(pose) {
+    this.tipOffset = poseMatrix(pose);
+  }
+
+  // The tool on the flange and its state, from every sample: the flange's pose when the state
+  // changes is where a part was taken; a gripper's fingers open and close.
+  setEndEffector(tool, state) {
+    const now = `${tool} ${state}`;
+    if (now === this.endEffector || !this.robot) return;
+    this.endEffector = now;
+    this.scene.updateMatrixWorld(true);
+    this.graspFlange = this.robot.links.tool0.matrixWorld.clone();
+    const mounted = this.bodies.get(tool)?.object;
+    for (const [name, joint] of Object.entries(mounted?.joints || {})) {
+      if (joint.jointType === 'prismatic') mounted.setJointValue(name, state === 'open' ? joint.limit.upper : 0);
+    }
+    this.requestRender();
   }
 
   // Joint values in radians, joint 1 first; an arm at rest costs no frame.
@@ -192,16 +246,22 @@ export class CellView {
     this.requestRender();
   }
 
-  // Where the tool tip is at these joint values (radians), in the base frame; toolOffset is the
-  // tip in the flange frame (meters, radians).
-  tipAt(joints, toolOffset) {
+  // The tool tip in the base frame at these joint values (radians), as a matrix; toolOffset is
+  // the tip in the flange frame (meters, radians).
+  tipMatrix(joints, toolOffset) {
     this.jointNames.forEach((name, i) => this.ghost.setJointValue(name, joints[i]));
     this.ghost.updateMatrixWorld(true);
-    const tip = new THREE.Object3D();
-    placePose(tip, [toolOffset.x, toolOffset.y, toolOffset.z], [toolOffset.roll, toolOffset.pitch, toolOffset.yaw]);
-    tip.updateMatrix();
-    const m = this.ghost.links.tool0.matrixWorld.clone().multiply(tip.matrix);
-    return new THREE.Vector3().setFromMatrixPosition(m);
+    return this.ghost.links.tool0.matrixWorld.clone().multiply(poseMatrix(toolOffset));
+  }
+
+  // Where the tool tip is at these joint values, in the base frame.
+  tipAt(joints, toolOffset) {
+    return new THREE.Vector3().setFromMatrixPosition(this.tipMatrix(joints, toolOffset));
+  }
+
+  // A point {x, y, z} through a matrix.
+  transformed(point, matrix) {
+    return new THREE.Vector3(point.x, point.y, point.z).applyMatrix4(matrix);
   }
 
   // The path as loaded: its points ({x, y, z}: tool tip positions, base frame, meters) joined

@@ -7,11 +7,16 @@ import pty
 import select
 import subprocess
 import sys
+from concurrent import futures
 from pathlib import Path
 
+import grpc
 import pytest
 
 from landscape.server.states import State
+from landscape.v1 import device_service_pb2_grpc
+
+from support import make_keys, start_secured_server, start_server
 
 LANDSCAPE = Path(sys.executable).with_name("landscape")   # the installed console script
 
@@ -114,3 +119,122 @@ def test_crcl_run_without_a_gateway_says_so(tmp_path):
                        '<EndCanon><CommandID>2</CommandID></EndCanon></CRCLProgram>')
     done = landscape("127.0.0.1:1", "crcl", "run", str(program), "--gateway", "127.0.0.1:1")
     assert done.returncode == 1 and "cannot reach the CRCL gateway at 127.0.0.1:1" in done.stderr
+
+
+def test_watch_json_prints_one_document_a_line_events_and_state(server):
+    done = landscape(server.target, "--json", "watch", "--after", "0", "--rate", "20",
+                     "--count", "6")
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert len(lines) == 6 and all(len(line) == 1 for line in lines)
+    events = [line["event"] for line in lines if "event" in line]
+    states = [line["state"] for line in lines if "state" in line]
+    assert events[0]["sequence"] == "1" and events[0]["event_id"] == "state_changed"
+    assert states and len(states[0]["joint_positions"]) == 6
+
+
+def test_a_json_path_file_loads_and_runs_its_tags(server, tmp_path):
+    path_file = tmp_path / "tour.json"
+    path_file.write_text(json.dumps({"frame": "joint", "motion": "joint", "points": [
+        {"values": [0.3, 0.0, 1.5, 0.0, 1.5, 0.0], "tag_name": "one"},
+        {"values": [0.5, 0.1, 1.4, 0.0, 1.4, 0.2], "tag_name": "two"}]}))
+    loaded = landscape(server.target, "--json", "path", "load", str(path_file))
+    assert loaded.returncode == 0, loaded.stderr
+    assert json.loads(loaded.stdout)["path_name"] == "tour"
+    assert json.loads(loaded.stdout)["points_loaded"] == 2
+    ran = landscape(server.target, "--json", "path", "run", "tour")
+    assert ran.returncode == 0, ran.stderr
+    assert json.loads(ran.stdout)["tags_reached"] == 2
+    assert "tag one reached" in ran.stderr and "tag two reached" in ran.stderr
+    assert server.device.feedback().position == pytest.approx([0.5, 0.1, 1.4, 0, 1.4, 0.2],
+                                                              abs=1e-4)
+
+
+def test_io_set_switches_an_output_that_io_get_then_reads(server):
+    lamp = 1 << 3   # cell_outputs bit 3: lamp_green in the default cell
+    done = landscape(server.target, "io", "set", "2", "--on", hex(lamp),
+                     "--description", "lamp on")
+    assert done.returncode == 0, done.stderr
+    read = landscape(server.target, "--json", "io", "get", "2", "--output")
+    assert read.returncode == 0, read.stderr
+    assert int(json.loads(read.stdout)["bits_on"]) & lamp
+    assert server.device.state is State.UNLOCKED   # the lock was this command's alone
+
+
+def test_sensor_reads_forces_in_newtons(server):
+    done = landscape(server.target, "sensor", "force_sensor")
+    assert done.returncode == 0, done.stderr
+    assert "(fx fy fz N, tx ty tz N*m)" in done.stdout and "meters" not in done.stdout
+    assert len(done.stdout.split(":")[1].split("(")[0].split()) == 6
+    laser = landscape(server.target, "sensor", "laser_standoff_sensor")
+    assert laser.returncode == 0 and laser.stdout.rstrip().endswith("(meters)"), laser.stderr
+
+
+def test_tool_get_mounts_the_gripper_and_tool_put_returns_it(server):
+    got = landscape(server.target, "tool", "get", "gripper")
+    assert got.returncode == 0, got.stderr
+    state = json.loads(landscape(server.target, "--json", "tool", "state").stdout)
+    assert state["current_ee"] == "gripper"
+    put = landscape(server.target, "tool", "put", "gripper")
+    assert put.returncode == 0, put.stderr
+    assert json.loads(landscape(server.target, "--json", "tool", "state").stdout)[
+        "current_ee"] == ""
+    assert server.device.state is State.UNLOCKED
+
+
+def test_a_motion_longer_than_the_timeout_exits_4_and_hands_the_arm_back():
+    paced = start_server(lockstep_pace=1.0)   # the move lasts as long as on the arm
+    try:
+        done = landscape(paced.target, "--timeout", "0.2", "move", "joint", "0.8", "-0.3",
+                         "1.2", "0.4", "1.2", "0.5")
+        assert done.returncode == 4, done.stderr
+        assert "did not end in time" in done.stderr
+        assert paced.device.state is State.UNLOCKED   # stopped, drives off, released
+    finally:
+        paced.stop(grace=None)
+
+
+def test_a_server_without_the_command_exits_5():
+    """A device server built from the contract that carries out none of DeviceService (the
+    generated base class answers UNIMPLEMENTED): another vendor's, or an older one."""
+    bare = grpc.server(futures.ThreadPoolExecutor(max_workers=2))
+    device_service_pb2_grpc.add_DeviceServiceServicer_to_server(
+        device_service_pb2_grpc.DeviceServiceServicer(), bare)
+    port = bare.add_insecure_port("127.0.0.1:0")
+    bare.start()
+    try:
+        done = landscape(f"127.0.0.1:{port}", "status")
+    finally:
+        bare.stop(grace=None)
+    assert done.returncode == 5, done.stderr
+    assert "error:" in done.stderr
+
+
+def test_tls_and_a_token_file_from_the_flags_or_the_environment(tmp_path):
+    keys = make_keys(tmp_path / "keys")
+    secured = start_secured_server(keys)
+    try:
+        tls = ["--tls-ca", str(keys.certs.ca)]
+        moved = landscape(secured.target, *tls, "--token-file",
+                          str(keys.token_file("operator")), "--json", "move", "joint", "0.3",
+                          "0", "1.5", "0", "1.5", "0")
+        assert moved.returncode == 0, moved.stderr
+        viewer = {**os.environ, "LANDSCAPE_TLS_CA": str(keys.certs.ca),
+                  "LANDSCAPE_TOKEN_FILE": str(keys.token_file("viewer"))}
+        status = subprocess.run([str(LANDSCAPE), "--target", secured.target, "--json",
+                                 "status"], env=viewer, capture_output=True, text=True,
+                                timeout=60)
+        assert status.returncode == 0, status.stderr   # a viewer reads
+        assert json.loads(status.stdout)["joints"] == pytest.approx([0.3, 0, 1.5, 0, 1.5, 0],
+                                                                   abs=1e-4)
+        refused = subprocess.run([str(LANDSCAPE), "--target", secured.target, "move", "joint",
+                                  "0", "0", "1.5", "0", "1.5", "0"], env=viewer,
+                                 capture_output=True, text=True, timeout=60)
+        assert refused.returncode == 1 and "ROLE_TOO_LOW" in refused.stderr
+        no_token = landscape(secured.target, *tls, "status")
+        assert no_token.returncode == 1 and "UNAUTHENTICATED" in no_token.stderr
+        missing = landscape(secured.target, *tls, "--token-file", str(tmp_path / "nope"),
+                            "status")
+        assert missing.returncode == 2 and "nope" in missing.stderr
+    finally:
+        secured.stop(grace=None)

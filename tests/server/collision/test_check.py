@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from landscape.server.collision import CollisionModelError, check_motion
+from landscape.server.collision import AllowedContact, CollisionModelError, check_motion
 from landscape.server.units import pose_matrix
 
 ARM = {"link1", "link2", "link3", "link4", "link5", "link6"}
@@ -161,41 +161,49 @@ def tool_approach(kit, tool_index: int, height: float):
     return kit.joints(at, q_up), q_up
 
 
-def test_the_tool_changer_couples_only_under_its_allowed_contact(kit, scene):
+def test_the_bare_flange_docks_on_a_rack_tool_along_its_axis_only(kit, scene):
+    """The coupling at the changer: link6 may meet a tool in the rack in the tool's corridor
+    (within the changer's 5 mm and 3 degrees of the plate's axis), nowhere else."""
     q_slot, q_up = tool_approach(kit, 0, 0.1)
-    contact = kit.check(scene, [q_up, q_slot]).contact
-    assert contact.bodies == ("link6", "gripper")
-    coupling = scene.coupling("gripper")
-    assert {c.reason for c in coupling} == {"coupling gripper"}
-    assert {frozenset((c.a, c.b)) for c in coupling} == {frozenset(("link6", "gripper")),
-                                                        frozenset(("gripper", "rack"))}
-    assert kit.check(scene, [q_up, q_slot], allow=coupling).clear
-    # Something left on the tool is still hit.
+    assert kit.check(scene, [q_up, q_slot]).clear                 # straight down its axis
     slot = kit.cell.world.tools[0].slot
+    at = pose_matrix(slot.xyz, slot.rpy)
+    for off in (pose_matrix((0.01, 0, 0), (0, 0, 0)),            # 1 cm beside the axis
+                pose_matrix((0, 0, 0), (np.radians(5), 0, 0))):   # tilted 5 degrees
+        q_off = kit.joints(at @ off, q_slot)
+        contact = kit.check(scene, [kit.joints(at @ off @ pose_matrix((0, 0, -0.1), (0, 0, 0)),
+                                               q_off), q_off]).contact
+        assert contact.bodies == ("link6", "gripper")
+    side = kit.joints(at @ pose_matrix((0.1, 0, -0.003), (0, 0, 0)), q_slot)
+    over = kit.joints(at @ pose_matrix((0, 0, -0.003), (0, 0, 0)), q_slot)
+    assert kit.check(scene, [side, over]).contact.bodies == ("link6", "gripper")   # a swipe
+    # Something left on the tool is still hit.
     scene.place_part("block_2", pose_matrix(np.add(slot.xyz, (0, 0, 0.03)), (0, 0, 0)))
-    contact = kit.check(scene, [q_up, q_slot], allow=coupling).contact
-    assert contact.bodies == ("link6", "block_2")
+    assert kit.check(scene, [q_up, q_slot]).contact.bodies == ("link6", "block_2")
 
 
-def test_putting_a_tool_back_touches_the_rack_only_at_its_slot(kit, scene):
+def test_a_mounted_tool_goes_into_its_own_slot_along_its_axis_only(kit, scene):
     scene.mount_tool("gripper")
     q_slot, q_up = tool_approach(kit, 0, 0.1)
-    assert kit.check(scene, [q_up, q_slot]).contact.bodies == ("gripper", "rack")
-    coupling = scene.coupling("gripper")
-    assert kit.check(scene, [q_up, q_slot], allow=coupling).clear
+    assert kit.check(scene, [q_up, q_slot]).clear                 # onto the rack, in its slot
+    beside = kit.joints(pose_matrix(np.add(kit.cell.world.tools[0].slot.xyz, (0.01, 0, 0)),
+                                    kit.cell.world.tools[0].slot.rpy), q_slot)
+    assert kit.check(scene, [q_up, beside]).contact.bodies == ("gripper", "rack")
     q_other, _ = tool_approach(kit, 1, 0.05)          # 5 cm above the vacuum cup's slot
-    contact = kit.check(scene, [q_up, q_other], allow=coupling).contact
-    assert contact.bodies == ("gripper", "vacuum")
+    assert kit.check(scene, [q_up, q_other]).contact.bodies == ("gripper", "vacuum")
 
 
 def test_persistent_allowed_contacts_until_forbidden(kit, scene):
+    scene.mount_tool("gripper")
     q_slot, q_up = tool_approach(kit, 0, 0.1)
-    scene.allow(*scene.coupling("gripper"))
-    assert kit.check(scene, [q_up, q_slot]).clear
-    scene.forbid("coupling gripper")
-    assert not kit.check(scene, [q_up, q_slot]).clear
+    beside = kit.joints(pose_matrix(np.add(kit.cell.world.tools[0].slot.xyz, (0.01, 0, 0)),
+                                    kit.cell.world.tools[0].slot.rpy), q_slot)
+    scene.allow(AllowedContact("set down anywhere", "gripper", "rack"))
+    assert kit.check(scene, [q_up, beside]).clear
+    scene.forbid("set down anywhere")
+    assert not kit.check(scene, [q_up, beside]).clear
     with pytest.raises(CollisionModelError):
-        scene.forbid("coupling gripper")
+        scene.forbid("set down anywhere")
 
 
 def test_a_gripper_closing_on_its_part_is_allowed_and_hides_nothing_else(kit, scene):

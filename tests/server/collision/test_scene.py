@@ -121,3 +121,21 @@ def test_allowed_contacts_name_known_bodies(scene):
         scene.allow(AllowedContact("oops", "link6", "tabel"))
     with pytest.raises(CollisionModelError, match="no tool"):
         scene.grasp("block_1")
+
+
+def test_the_world_s_part_poses_are_taken_unless_the_scene_changed_since_they_were_read(
+        scene, kit):
+    lying = scene.part_pose("block_1")
+    model, version = scene.model(), scene.version
+    nudged = lying @ pose_matrix((0.0005, 0, 0), (0, 0, 0))       # under a millimetre
+    assert scene.follow_parts({"block_1": nudged}, version)
+    assert scene.model() is model                                 # nothing to recompile
+    moved = pose_matrix((0.3, 0.3, 0.22), (0, 0, 0.5))
+    stale = scene.version
+    scene.attach_part("block_2", kit.q0)                          # the device: a grasp
+    assert not scene.follow_parts({"block_1": moved}, stale)      # read before it: dropped
+    assert np.allclose(scene.part_pose("block_1"), lying)
+    held = pose_matrix((0.6, 0.0, 0.22), (0, 0, 0))
+    assert scene.follow_parts({"block_1": moved, "block_2": held}, scene.version)
+    assert np.allclose(scene.part_pose("block_1"), moved)
+    assert scene.held == "block_2" and scene.part_pose("block_2") is None   # the tool's

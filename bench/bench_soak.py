@@ -1,0 +1,233 @@
+"""Memory (issue 17): the device server's resident memory idle, under load, and whether it grows
+over a long run. Prints figures, no pass/fail.
+
+The server runs as users start it (`python -m landscape.server`, real-time clock, audit log on),
+in a process of its own; its resident memory (VmRSS) and its cycle process's are read from
+/proc once a second. After a settled idle phase, the load is what a busy cell puts on it, each
+part in a child process: the lock holder running a 20-point blended path again and again (its
+PathMove commands, tag events and done events; it first fills the server's bounded event
+history with operator messages, so that filling it is not taken for growth), 8 clients calling GetRobotPosition and
+GetDeviceState back to back, 8 StreamState watchers at 50 Hz and 4 event subscribers.
+
+Growth is the slope of a least-squares line through the samples after the warm-up (the first
+quarter of the load phase, at least 10 s: caches, pools and the ring fill), in MB per minute;
+a leak of one small object per call shows up there (8 readers make about 5,000 calls a second).
+
+    .venv/bin/python bench/bench_soak.py              # 60 s of load
+    .venv/bin/python bench/bench_soak.py --soak       # 10 minutes of load
+    .venv/bin/python bench/bench_soak.py --seconds 20 # any length (CI: 20 s)
+"""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import math
+import multiprocessing as mp
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import grpc
+import numpy as np
+from common import in_child, record
+
+from landscape.client import AsyncSession
+from landscape.server.events import DEFAULT_HISTORY
+from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
+                          event_service_pb2_grpc, motion_pb2, settings_pb2, state_service_pb2,
+                          state_service_pb2_grpc, types_pb2)
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+GOAL_GROWTH = 1.0   # MB per minute under steady load: allocator noise, not a leak
+
+
+def rss_mb(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as status:
+        kb = next(int(line.split()[1]) for line in status if line.startswith("VmRSS"))
+    return kb / 1024
+
+
+def cycle_process(pid: int) -> int | None:
+    """The device server's largest child: its cycle process (the others are multiprocessing's
+    helpers)."""
+    with open(f"/proc/{pid}/task/{pid}/children") as children:
+        pids = [int(c) for c in children.read().split()]
+    return max(pids, key=rss_mb, default=None)
+
+
+# -- the load, each part in a child ----------------------------------------------------------
+
+def local(stop) -> threading.Event:
+    """A local copy of the manager's event `stop` (asking the manager costs a round trip)."""
+    flag = threading.Event()
+    threading.Thread(target=lambda: (stop.wait(), flag.set()), daemon=True).start()
+    return flag
+
+
+async def holder(target: str, stop, ready):
+    """Lock, activate, load a blended path, run it until `stop` is set; returns runs done."""
+    async with grpc.aio.insecure_channel(target) as channel, \
+            AsyncSession(channel, "soak-holder") as session:
+        await session.lock()
+        md = session.metadata()
+        device = device_service_pb2_grpc.DeviceServiceStub(channel)
+        events = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
+            event_service_pb2.SubscribeRequest())
+        await device.Activate(control_pb2.ActivateRequest(), metadata=md)
+        await device.SetSpeed(settings_pb2.SetSpeedRequest(
+            speed=60, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), metadata=md)
+        points = [types_pb2.TagStruct(
+            tag_name=f"t{i}", transition_speed=40,
+            joint_values=[0.8 * math.sin(i / 3), 0.2 * math.sin(i / 2), 1.5708,
+                          0.4 * math.cos(i / 3), 1.5708, math.sin(i / 4)]) for i in range(20)]
+        header = motion_pb2.PathHeader(path_name="soak", frame=JOINT,
+                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+        await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=points)]),
+                              metadata=md)
+        # Fill the event history (bounded: the last DEFAULT_HISTORY events are kept for
+        # resuming subscribers), so that what it takes is not counted as growth.
+        poster = event_service_pb2_grpc.EventServiceStub(channel)
+        while (await poster.PostMessage(event_service_pb2.PostMessageRequest(
+                text="soak: filling the event history " + "x" * 40),
+                metadata=md)).sequence <= DEFAULT_HISTORY:
+            pass
+        ready.set()
+        stop, runs = local(stop), 0
+        while not stop.is_set():
+            command = (await device.PathMove(motion_pb2.PathMoveRequest(
+                path_name="soak", number_of_cycles=1), metadata=md)).ret_val.command_id
+            async for reply in events:
+                if reply.event.command.command_id == command and reply.event.event_id in (
+                        "command_done", "command_failed", "command_aborted"):
+                    break
+            runs += 1
+        events.cancel()
+        await device.Deactivate(control_pb2.DeactivateRequest(), metadata=md)
+        return runs
+
+
+async def readers(target: str, n: int, stop):
+    """n callers of GetRobotPosition and GetDeviceState until `stop`; returns calls made."""
+    stop = local(stop)
+    async with grpc.aio.insecure_channel(target) as channel:
+        device = device_service_pb2_grpc.DeviceServiceStub(channel)
+        calls = 0
+
+        async def one():
+            nonlocal calls
+            while not stop.is_set():
+                await device.GetRobotPosition(settings_pb2.GetRobotPositionRequest())
+                await device.GetDeviceState(control_pb2.GetDeviceStateRequest())
+                calls += 2
+        await asyncio.gather(*(one() for _ in range(n)))
+        return calls
+
+
+async def watchers(target: str, states: int, subscribers: int, stop):
+    """State watchers at 50 Hz and event subscribers until `stop`; returns messages read."""
+    async with grpc.aio.insecure_channel(target) as channel:
+        state = state_service_pb2_grpc.StateServiceStub(channel)
+        event = event_service_pb2_grpc.EventServiceStub(channel)
+        calls = [state.StreamState(state_service_pb2.StreamStateRequest(rate_hz=50))
+                 for _ in range(states)]
+        calls += [event.Subscribe(event_service_pb2.SubscribeRequest())
+                  for _ in range(subscribers)]
+        got = 0
+
+        async def drain(call):
+            nonlocal got
+            async for _ in call:
+                got += 1
+        tasks = [asyncio.ensure_future(drain(call)) for call in calls]
+        await asyncio.get_running_loop().run_in_executor(None, stop.wait)
+        for call in calls:
+            call.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        return got
+
+
+# -- the run --------------------------------------------------------------------------------------
+
+def start_server(folder: str) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "landscape.server", "--port", "0", "--rate-limit", "0",
+         "--paths", f"{folder}/paths.sqlite3", "--audit-log", f"{folder}/audit.log"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    for line in proc.stdout:
+        if "listening on" in line:
+            return proc, line.rsplit(" ", 1)[-1].strip()
+    raise RuntimeError("the device server did not start")
+
+
+def sample(pid: int, cycle: int | None, seconds: float, rows: list) -> None:
+    """(t, server MB, cycle process MB) once a second for `seconds`."""
+    began = time.monotonic()
+    while (now := time.monotonic() - began) < seconds:
+        rows.append((now, rss_mb(pid), rss_mb(cycle) if cycle else math.nan))
+        time.sleep(1.0)
+
+
+def growth(rows: list) -> tuple[float, float]:
+    """MB per minute of the server and of the cycle process (least squares)."""
+    t = np.array([r[0] for r in rows])
+    return tuple(float(np.polyfit(t, np.array([r[k] for r in rows]), 1)[0]) * 60
+                 for k in (1, 2))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=60.0, help="length of the load phase")
+    parser.add_argument("--soak", action="store_true", help="10 minutes of load")
+    args = parser.parse_args()
+    seconds = 600.0 if args.soak else args.seconds
+    warm_up = max(10.0, seconds / 4)
+    with tempfile.TemporaryDirectory() as folder:
+        proc, target = start_server(folder)
+        try:
+            time.sleep(3.0)   # the controller enabled, homed, the server settled
+            cycle = cycle_process(proc.pid)
+            idle: list = []
+            sample(proc.pid, cycle, 5.0, idle)
+            manager = mp.get_context("spawn").Manager()
+            stop, ready = manager.Event(), manager.Event()
+            loads = [in_child(holder, target, stop, ready)]
+            if not ready.wait(120):
+                raise RuntimeError("the lock holder did not get going (its error is above)")
+            loads += [in_child(readers, target, 8, stop), in_child(watchers, target, 8, 4, stop)]
+            time.sleep(warm_up)
+            loaded: list = []
+            sample(proc.pid, cycle, seconds - warm_up, loaded)
+            stop.set()
+            runs, calls, messages = (queue.get(timeout=120) for _, queue in loads)
+        finally:
+            proc.terminate()
+            proc.wait(timeout=30)
+    server_idle = float(np.median([r[1] for r in idle]))
+    cycle_idle = float(np.median([r[2] for r in idle]))
+    server_load = float(np.median([r[1] for r in loaded]))
+    cycle_load = float(np.median([r[2] for r in loaded]))
+    server_growth, cycle_growth = growth(loaded)
+    print(f"resident memory (MB), {seconds:g} s of load after {warm_up:g} s of warm-up: "
+          f"{runs} path runs, {calls:,} read calls, {messages:,} streamed messages")
+    print(f"  device server   idle {server_idle:6.1f}   under load {server_load:6.1f}   "
+          f"growth {server_growth:+6.2f} MB/min")
+    print(f"  cycle process   idle {cycle_idle:6.1f}   under load {cycle_load:6.1f}   "
+          f"growth {cycle_growth:+6.2f} MB/min")
+    print(f"  goal (issue 17): no growth (at most {GOAL_GROWTH:g} MB/min of allocator noise)")
+    record("server memory, idle", server_idle, "MB")
+    record("server memory, under load", server_load, "MB", baseline=server_idle,
+           baseline_name="idle")
+    record(f"server memory growth, {seconds:g} s of load", server_growth, "MB/min",
+           goal=GOAL_GROWTH)
+    record(f"cycle process memory growth, {seconds:g} s of load", cycle_growth, "MB/min",
+           goal=GOAL_GROWTH)
+    record("memory over time (server, cycle process)", server_load, "MB",
+           points=[list(r) for r in idle + [(warm_up + 5.0 + r[0], r[1], r[2])
+                                                for r in loaded]])
+
+
+if __name__ == "__main__":
+    main()

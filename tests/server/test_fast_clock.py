@@ -1,0 +1,65 @@
+"""`--clock fast`: the cycle process running cycles back to back. The same server and the same
+controller as on the real-time clock, only the deadlines are gone: a program runs to the end
+in less wall time than it takes on the arm, and everything else holds."""
+from __future__ import annotations
+
+import math
+import time
+
+import grpc
+
+from landscape.client import Session
+from landscape.v1 import (control_pb2, event_service_pb2, motion_pb2, state_service_pb2,
+                          state_service_pb2_grpc, types_pb2)
+
+from support import spawned_server, stubs
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+
+
+def _controller_time(channel) -> float:
+    """The controller's own clock (s), from the newest state sample."""
+    stream = state_service_pb2_grpc.StateServiceStub(channel).StreamState(
+        state_service_pb2.StreamStateRequest(rate_hz=10))
+    try:
+        return next(m.sample.controller_time for m in stream if m.WhichOneof("message") == "sample")
+    finally:
+        stream.cancel()
+
+
+def test_a_path_runs_ahead_of_the_wall_clock_and_every_tag_is_reported(tmp_path):
+    with spawned_server("--clock", "fast", "--paths", str(tmp_path / "paths.sqlite3")) as target, \
+            grpc.insecure_channel(target) as channel, Session(channel, "fast") as session:
+        device, _, events = stubs(session.channel)
+        stream = events.Subscribe(event_service_pb2.SubscribeRequest())
+        session.lock()
+        device.Activate(control_pb2.ActivateRequest(), timeout=10)
+        tags = [types_pb2.TagStruct(tag_name=f"t{i}", transition_speed=30, joint_values=[
+            0.8 * math.sin(i / 2), 0.1, 1.5708, 0.3 * math.cos(i / 2), 1.5708, 0.0])
+            for i in range(12)]
+        device.PathLoad(iter([motion_pb2.PathLoadRequest(
+            header=motion_pb2.PathHeader(path_name="p", frame=JOINT,
+                                         motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                         offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA),
+            tags=tags)]), timeout=30)
+        simulated, wall = _controller_time(channel), time.monotonic()
+        command = device.PathMove(motion_pb2.PathMoveRequest(path_name="p", number_of_cycles=3),
+                                  timeout=30).ret_val.command_id
+        reached = []
+        for reply in stream:
+            event = reply.event
+            if event.command.command_id != command:
+                continue
+            if event.event_id == "tag_reached":
+                reached.append(event.command.tag_name)
+            if event.event_id in ("command_done", "command_failed"):
+                break
+        wall = time.monotonic() - wall
+        simulated = _controller_time(channel) - simulated
+        stream.cancel()
+        assert event.event_id == "command_done", event.command.message
+        assert reached == [f"t{i}" for i in range(12)] * 3   # every tag, in order
+        # The defining behaviour of the clock, not a speed figure (bench_lockstep has those):
+        # the controller's time ran ahead of the wall clock.
+        assert simulated > wall, (simulated, wall)
+        device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
