@@ -78,11 +78,9 @@ def test_set_end_effector_with_no_tool_is_an_error(client):
     assert "no end effector" in field(refused, "StateDescription")
 
 
-@pytest.mark.xfail(strict=True, reason="the device's collision check refuses the empty flange "
-                   "meeting a rack tool's coupling (link6 meets gripper); the collision branch "
-                   "allows that docking contact")
 def test_couple_with_the_flange_moved_into_the_slot(client):
-    """A CRCL client moves the flange onto the plate itself, then closes the changer."""
+    """A CRCL client moves the flange onto the plate itself (the device allows the bare flange
+    to dock along the coupling's axis), then closes the changer."""
     _ok(client.run("MoveTo", 2, MOVE.format("false") + pose(PLATE[0], PLATE[1], PLATE[2] + 0.1)))
     _ok(client.run("MoveTo", 3, MOVE.format("true") + pose(*PLATE)))
     coupled = _ok(client.run("CloseToolChanger", 4))
