@@ -93,6 +93,8 @@ def gateway_service(config: CellConfig, targets: dict[str, str], workdir: Path) 
             "--host", gateway.address, "--port", str(gateway.port)]
     if gateway.grpc_port is not None:
         argv += ["--grpc-port", str(gateway.grpc_port)]
+    if config.security.insecure:      # the gateway keeps off the network otherwise, as they do
+        argv.append("--insecure")
     argv += client_arguments(config.security, gateway.token)
     return ServiceSpec("gateway", "CRCL gateway", argv, workdir, note=f"-> {gateway.device}")
 

@@ -48,9 +48,11 @@ def read_path(path: str | Path, frame: str | None = None, motion: str | None = N
     """Read a .json or .csv path file; `frame` / `motion` override (or supply) the file's."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as error:
         raise PathFileError(f"{path}: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise PathFileError(f"{path}: not UTF-8 text (byte {error.start})") from None
     if path.suffix.lower() == ".csv":
         points, found_frame = _csv_points(path, text)
         found_motion = None
@@ -86,12 +88,17 @@ def _json_points(path: Path, text: str):
         raise PathFileError(f"{path}: not JSON: {error}") from None
     if isinstance(data, list):
         data = {"points": data}
+    if not isinstance(data, dict) or not isinstance(data.get("points", []), list):
+        raise PathFileError(f"{path}: expected an object with a list of points, or that list")
+    for key in ("frame", "motion"):
+        if not isinstance(data.get(key, ""), str):
+            raise PathFileError(f"{path}: {key} must be a name, got {data[key]!r}")
     points = []
     for number, item in enumerate(data.get("points", []), 1):
         try:
             fields = {k: v for k, v in item.items() if k in TagPoint.__dataclass_fields__}
             points.append(TagPoint(**{**fields, "values": [float(v) for v in item["values"]]}))
-        except (KeyError, TypeError, ValueError, AttributeError) as error:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as error:
             raise PathFileError(f"{path}: point {number}: {error!r}") from None
     return points, data.get("frame"), data.get("motion")
 

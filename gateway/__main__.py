@@ -1,6 +1,12 @@
 """`python -m landscape.gateway`: the CRCL gateway in front of one device server.
 
     python -m landscape.gateway --device 127.0.0.1:50051 --port 64444
+
+The device server's exposure rule holds here too (server/tls.py): the gateway commands the
+arm with its own token for whoever reaches it, so it listens on loopback unless told
+otherwise. CRCL over TCP has no authentication: a non-loopback --host needs --insecure. The
+gRPC face may leave loopback with mutual TLS (--grpc-tls-cert, --grpc-tls-key and
+--grpc-tls-ca: only clients with a certificate of that CA get in), or with --insecure.
 """
 from __future__ import annotations
 
@@ -8,6 +14,10 @@ import argparse
 import asyncio
 import logging
 import signal
+import sys
+from pathlib import Path
+
+import grpc
 
 from landscape.client import credentials
 from landscape.gateway.device import DeviceLink
@@ -16,6 +26,7 @@ from landscape.gateway.server import DEFAULT_PORT, Gateway
 from landscape.gateway.session import GatewayOptions
 from landscape.gateway.status import DEFAULT_GRIPPER_STROKE
 from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT
+from landscape.server.tls import is_loopback
 
 
 def arguments(argv=None) -> argparse.Namespace:
@@ -27,6 +38,15 @@ def arguments(argv=None) -> argparse.Namespace:
     parser.add_argument("--port", type=int, default=DEFAULT_PORT, help="CRCL TCP port (0: any)")
     parser.add_argument("--grpc-port", type=int, default=None,
                         help="also serve CrclService (gRPC) on this port (0: any)")
+    parser.add_argument("--grpc-host", default=None,
+                        help="address of the gRPC face (default: --host)")
+    parser.add_argument("--grpc-tls-cert", help="the gRPC face's PEM certificate (TLS)")
+    parser.add_argument("--grpc-tls-key", help="the PEM key of --grpc-tls-cert")
+    parser.add_argument("--grpc-tls-ca",
+                        help="PEM CA of the client certificates the gRPC face requires (mTLS)")
+    parser.add_argument("--insecure", action="store_true",
+                        help="listen on non-loopback addresses all the same: whoever reaches "
+                             "the gateway commands the arm (a network of your own only)")
     parser.add_argument("--schemas", default=None,
                         help="folder of the CRCL XSDs (default: $LANDSCAPE_CRCL_SCHEMAS, else "
                              "../shared/crcl/xsd if present); 'none' to skip schema validation")
@@ -47,6 +67,36 @@ def schema_set(option: str | None) -> SchemaSet | None:
     return SchemaSet(directory) if directory else None
 
 
+def exposure_problems(args: argparse.Namespace) -> list[str]:
+    """Why the gateway must not listen where `args` say (the module's rule); empty if it may."""
+    if args.insecure:
+        return []
+    problems = []
+    if not is_loopback(args.host):
+        problems.append(f"refusing to serve CRCL on {args.host}: CRCL has no authentication, "
+                        f"so anyone on the network could command the arm with this gateway's "
+                        f"token; listen on 127.0.0.1 (a tunnel or a proxy with authentication "
+                        f"in front), or pass --insecure if this network is yours alone")
+    grpc_host = args.grpc_host or args.host
+    if args.grpc_port is not None and not is_loopback(grpc_host) and not (
+            args.grpc_tls_cert and args.grpc_tls_key and args.grpc_tls_ca):
+        problems.append(f"refusing to serve the gRPC face on {grpc_host} without mutual TLS "
+                        f"(--grpc-tls-cert, --grpc-tls-key, --grpc-tls-ca; `landscape-cell "
+                        f"certs` makes them), or --insecure")
+    return problems
+
+
+def grpc_credentials(args: argparse.Namespace) -> grpc.ServerCredentials | None:
+    """The gRPC face's TLS (mutual with --grpc-tls-ca), or None for plaintext."""
+    if not (args.grpc_tls_cert or args.grpc_tls_key or args.grpc_tls_ca):
+        return None
+    if not (args.grpc_tls_cert and args.grpc_tls_key):
+        raise ValueError("the gRPC face's TLS needs --grpc-tls-cert and --grpc-tls-key")
+    pair = (Path(args.grpc_tls_key).read_bytes(), Path(args.grpc_tls_cert).read_bytes())
+    ca = Path(args.grpc_tls_ca).read_bytes() if args.grpc_tls_ca else None
+    return grpc.ssl_server_credentials([pair], ca, require_client_auth=ca is not None)
+
+
 async def serve(args: argparse.Namespace, ready=None) -> None:
     link = DeviceLink(args.device, args.state_rate, *credentials.from_arguments(args))
     await link.start()
@@ -55,8 +105,10 @@ async def serve(args: argparse.Namespace, ready=None) -> None:
     grpc_server = None
     if args.grpc_port is not None:
         from landscape.gateway.grpc_face import serve_grpc
-        grpc_server, grpc_port = await serve_grpc(link, options, args.host, args.grpc_port)
-        print(f"CRCL gRPC face listening on {args.host}:{grpc_port}", flush=True)
+        host = args.grpc_host or args.host
+        grpc_server, grpc_port = await serve_grpc(link, options, host, args.grpc_port,
+                                                  grpc_credentials(args))
+        print(f"CRCL gRPC face listening on {host}:{grpc_port}", flush=True)
     print(f"CRCL gateway listening on {args.host}:{gateway.port} "
           f"(schemas: {options.schemas.directory if options.schemas else 'none'})", flush=True)
     stop = asyncio.Event()
@@ -72,7 +124,17 @@ async def serve(args: argparse.Namespace, ready=None) -> None:
 
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    asyncio.run(serve(arguments(argv)))
+    args = arguments(argv)
+    problems = exposure_problems(args)
+    try:
+        grpc_credentials(args)
+    except (OSError, ValueError) as error:
+        problems.append(f"the gRPC face's TLS: {error}")
+    if problems:
+        for problem in problems:
+            print(f"landscape-crcl-gateway: {problem}", file=sys.stderr)
+        raise SystemExit(2)
+    asyncio.run(serve(args))
 
 
 if __name__ == "__main__":

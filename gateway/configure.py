@@ -7,8 +7,7 @@ import numpy as np
 
 from landscape.gateway import model as m
 from landscape.gateway.errors import CrclError
-from landscape.gateway.motions import push_rates
-from landscape.gateway.settings import JOINTS, rate_si, tolerance_si
+from landscape.gateway.settings import DEFAULT_END_TOLERANCE, JOINTS, rate_si, tolerance_si
 from landscape.v1 import event_service_pb2, settings_pb2, types_pb2
 
 _RATE_FIELDS = {"TransSpeed": ("trans_speed", "length", "max_world_linear_velocity", "limits"),
@@ -27,8 +26,9 @@ async def set_rate(session, cmd: m.SetRate) -> str:
     units = session.settings.units
     scale = units.length_si(1.0) if quantity == "length" else units.angle_si(1.0)
     rate = rate_si(cmd.rate, scale)
-    setattr(session.settings, field, rate)
-    await push_rates(session)
+    if not (rate.absolute or rate.fraction or 0.0) > 0.0:
+        raise CrclError(f"{cmd.QUANTITY} must be above 0")
+    setattr(session.settings, field, rate)      # on the device before the next motion
     maximum = getattr(getattr(session.control, limits), limit)
     if rate.absolute is not None and rate.absolute > maximum:
         out = units.length_out if quantity == "length" else units.angle_out
@@ -37,7 +37,9 @@ async def set_rate(session, cmd: m.SetRate) -> str:
 
 
 async def set_end_pose_tolerance(session, cmd: m.SetEndPoseTolerance) -> str:
-    session.settings.end_tolerance = tolerance_si(cmd.tolerance, session.settings.units)
+    # An element left out keeps the default (DEFAULT_END_TOLERANCE), never "any end".
+    session.settings.end_tolerance = tolerance_si(cmd.tolerance, session.settings.units).over(
+        DEFAULT_END_TOLERANCE)
     return "end pose tolerance set"
 
 
@@ -91,7 +93,8 @@ MAX_DWELL = 86_400.0   # s
 async def dwell(session, cmd: m.Dwell) -> str:
     if cmd.seconds > MAX_DWELL:
         raise CrclError(f"a dwell of {cmd.seconds:g} s is longer than a day")
-    await asyncio.sleep(cmd.seconds)
+    if cmd.seconds > 0:
+        await asyncio.sleep(cmd.seconds)
     return f"dwelled {cmd.seconds:g} s"
 
 

@@ -62,6 +62,7 @@ class DeviceLink:
         self.event_service = event_service_pb2_grpc.EventServiceStub(self.channel)
         self.feed = StateFeed(self.channel, state_rate_hz)
         self.events = EventRouter(self.channel)
+        self.slots: dict = {}      # rack tool -> its plate in the world (tooling.py)
 
     async def start(self) -> None:
         await self.feed.start()
@@ -116,7 +117,7 @@ class Control:
     async def prepare(self) -> None:
         """After Lock: drives on, SI units on the device, and the arm's limits read once."""
         self.pushed.clear()
-        await self.call("Activate", control_pb2.ActivateRequest())
+        await self.ensure_active()      # a second InitCanon finds the drives on
         await self.call("SetUnits", settings_pb2.SetUnitsRequest(
             linear_units=types_pb2.LINEAR_UNIT_METERS, angular_units=types_pb2.ANGULAR_UNIT_RADIANS))
         self.limits = await self.link.read("GetMaxVelocities", settings_pb2.GetMaxVelocitiesRequest())

@@ -68,10 +68,13 @@ class CrclServicer(crcl_service_pb2_grpc.CrclServiceServicer):
             await session.close()
 
 
-async def serve_grpc(link: DeviceLink, options: GatewayOptions, host: str, port: int):
-    """CrclService on host:port (0: any); returns (server, port)."""
+async def serve_grpc(link: DeviceLink, options: GatewayOptions, host: str, port: int,
+                     credentials: grpc.ServerCredentials | None = None):
+    """CrclService on host:port (0: any), over TLS with `credentials`; returns (server, port)."""
     server = grpc.aio.server()
     crcl_service_pb2_grpc.add_CrclServiceServicer_to_server(CrclServicer(link, options), server)
-    bound = server.add_insecure_port(f"{host}:{port}")
+    address = f"{host}:{port}"
+    bound = (server.add_secure_port(address, credentials) if credentials is not None
+             else server.add_insecure_port(address))
     await server.start()
     return server, bound

@@ -46,3 +46,20 @@ HANDLERS = {
 }
 
 SESSION_COMMANDS = (m.InitCanon, m.EndCanon, m.GetStatus)
+
+# Commands carried out without the device (settings and reporting): their handlers never
+# await anything, so the session runs them at once when it is idle, and they are Done before
+# the next document is read (tests/gateway/test_gateway.py checks every one).
+IMMEDIATE = frozenset({
+    m.SetAngleUnits, m.SetLengthUnits, m.SetForceUnits, m.SetTorqueUnits,
+    m.SetTransSpeed, m.SetRotSpeed, m.SetTransAccel, m.SetRotAccel,
+    m.SetEndPoseTolerance, m.SetIntermediatePoseTolerance, m.SetDefaultJointPositionsTolerances,
+    m.SetMotionCoordination, m.ConfigureJointReports, m.ConfigureStatusReport,
+    m.EnableRobotParameterStatus, m.DisableRobotParameterStatus, m.EnableGripper,
+    m.DisableGripper})
+
+
+def immediate(command: m.Command) -> bool:
+    """Whether the command is carried out without the device and without waiting (a Dwell of
+    no time is a point in a program, nothing to wait for)."""
+    return type(command) in IMMEDIATE or (isinstance(command, m.Dwell) and command.seconds == 0)

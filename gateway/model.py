@@ -79,13 +79,13 @@ class ActuateJoints(Command):
     tolerances: tuple[JointTolerance, ...] | None = None
 
 
-@_command("CloseToolChanger")
+@_command("CloseToolChanger", motion=True)   # the device's tool change moves the arm
 @dataclass(frozen=True, kw_only=True)
 class CloseToolChanger(Command):
     pass
 
 
-@_command("OpenToolChanger")
+@_command("OpenToolChanger", motion=True)
 @dataclass(frozen=True, kw_only=True)
 class OpenToolChanger(Command):
     pass

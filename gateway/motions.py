@@ -8,14 +8,16 @@ workstation coordinates, m and rad).
   the last; the path is cleared afterwards.
 - ActuateJoints: MoveAbsolute in the joint frame; per-joint speeds become the move's percent
   speed (every joint stays within its own), accelerations the percent acceleration.
-- Per-command speed and acceleration (PoseAndSetType, JointDetails) apply to that command only.
-- The end is checked against the end tolerance (the pose's own, or SetEndPoseTolerance) with
-  the device's live state; a motion the device fails or aborts is an error.
-
-Speeds: the device scales every limit by one percent speed (joints) and its linear and angular
-speed settings (the tool tip). CRCL's TransSpeed v becomes percent 100 v / v_max with the linear
-setting at v_max (so straight moves get v exactly and joint moves the same share of the
-joints' maxima); RotSpeed w the angular setting 100 w / percent, at most the maximum.
+- Per-command rates (PoseAndSetType, JointDetails) apply to that command only (rates.py); a
+  pose's RotSpeed / RotAccel only to straight motions (the device times joint-interpolated
+  ones by the joints), and is refused on others. The session's SetRotSpeed / SetRotAccel
+  likewise hold straight motions.
+  A pose's Coordinated is honoured either way: the device always ends rotation and
+  translation together, which "coordinated" asks and "uncoordinated" allows (spec VII).
+- A motion starts from the device's present state and its end is judged on a sample taken
+  after the device's done event, against the end tolerance (the pose's own, else
+  SetEndPoseTolerance's, else the default: settings.py); with no such sample, or a motion the
+  device fails or aborts, the command is an error.
 """
 from __future__ import annotations
 
@@ -27,102 +29,27 @@ from scipy.spatial.transform import Rotation
 
 from landscape.gateway import model as m
 from landscape.gateway import poses
+from landscape.gateway.device import DeviceRefused
 from landscape.gateway.errors import CrclError
-from landscape.gateway.settings import SiRate, ToleranceSi, rate_si, tolerance_si
-from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
+from landscape.gateway.rates import PERCENT_ACCEL, RatesFor, motion_rates, percent, speed_percent
+from landscape.gateway.settings import DEFAULT_JOINT_TOLERANCE, ToleranceSi, tolerance_si
+from landscape.gateway.state_feed import LiveState
+from landscape.gateway.units import CrclUnits
+from landscape.v1 import control_pb2, motion_pb2, types_pb2
 
-MIN_PERCENT = 0.1            # the device needs a percent above 0
 SCREW_STEP = math.radians(5.0)   # helix points at most this far apart in turn
 SCREW_STEP_LENGTH = 0.005        # m, and along the axis
+SETTLE_TIMEOUT = 2.0             # s for a sample of the device taken after a motion's end
 JOINT_FRAME = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 WORLD_FRAME = types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME
 
 
-# ---- rates -----------------------------------------------------------------------------------------
-
-def _percent(value: float, maximum: float) -> float:
-    return min(100.0, max(MIN_PERCENT, 100.0 * value / maximum))
-
-
-def speed_percent(session, rate: SiRate | None = None) -> float:
-    limits = session.control.limits
-    return _percent((rate or session.settings.trans_speed).value(limits.max_world_linear_velocity),
-                    limits.max_world_linear_velocity)
-
-
-def accel_percent(session, rate: SiRate | None = None) -> float:
-    limits = session.control.accel_limits
-    return _percent((rate or session.settings.trans_accel).value(limits.max_world_linear_accel),
-                    limits.max_world_linear_accel)
-
-
-async def push_rates(session) -> None:
-    """The session's speeds and accelerations, as the device's settings (only those that
-    changed since they were last sent)."""
-    s, control = session.settings, session.control
-    v_max, w_max = control.limits.max_world_linear_velocity, control.limits.max_world_angular_velocity
-    a_max = control.accel_limits.max_world_linear_accel
-    alpha_max = control.accel_limits.max_world_angular_accel
-    percent = speed_percent(session)
-    wanted = {
-        ("SetSpeed", types_pb2.SPEED_TYPE_PERCENT_SPEED): percent,
-        ("SetSpeed", types_pb2.SPEED_TYPE_LINEAR_SPEED): v_max,
-        ("SetSpeed", types_pb2.SPEED_TYPE_ANGULAR_SPEED):
-            min(w_max, s.rot_speed.value(w_max) * 100.0 / percent),
-        ("SetAcceleration", types_pb2.ACCEL_TYPE_PERCENT_ACCEL): accel_percent(session),
-        ("SetAcceleration", types_pb2.ACCEL_TYPE_LINEAR_ACCEL): s.trans_accel.value(a_max),
-        ("SetAcceleration", types_pb2.ACCEL_TYPE_ANGULAR_ACCEL): s.rot_accel.value(alpha_max)}
-    for (rpc, kind), value in wanted.items():
-        if control.pushed.get((rpc, kind)) == value:
-            continue
-        request = (settings_pb2.SetSpeedRequest(speed=value, attribute=kind) if rpc == "SetSpeed"
-                   else settings_pb2.SetAccelerationRequest(accel=value, attribute=kind))
-        control.pushed.pop((rpc, kind), None)   # unknown until the device says yes
-        await control.call(rpc, request)
-        control.pushed[(rpc, kind)] = value
-
-
-class _AccelFor:
-    """A percent acceleration for one command's motion: set before it starts, and the
-    session's own put back as soon as it has started (the device plans at the start)."""
-
-    def __init__(self, session, percent: float | None):
-        self.session, self.percent = session, percent
-
-    async def __aenter__(self):
-        if self.percent is not None:
-            await self._set(self.percent)
-
-    async def __aexit__(self, *exc):
-        if self.percent is not None:
-            await asyncio.shield(self._set(accel_percent(self.session)))
-
-    async def _set(self, percent: float) -> None:
-        control, key = self.session.control, ("SetAcceleration", types_pb2.ACCEL_TYPE_PERCENT_ACCEL)
-        control.pushed.pop(key, None)
-        await control.call(key[0], settings_pb2.SetAccelerationRequest(accel=percent, attribute=key[1]))
-        control.pushed[key] = percent
-
-
-def _pose_rates(session, pose: m.Pose) -> tuple[float | None, float | None]:
-    """(speed percent, accel percent) a PoseAndSetType asks for, or None each."""
-    settings, units = pose.settings, session.settings.units
-    if settings is None:
-        return None, None
-    speed = accel = None
-    if settings.trans_speed is not None:
-        speed = speed_percent(session, rate_si(settings.trans_speed, units.length_si(1.0)))
-    if settings.trans_accel is not None:
-        accel = accel_percent(session, rate_si(settings.trans_accel, units.length_si(1.0)))
-    return speed, accel
-
-
 # ---- running a device motion ----------------------------------------------------------------------
 
-async def _run(session, rpc: str, request, accel: float | None = None) -> None:
+async def _run(session, rpc: str, request, overrides=None) -> None:
     """Start a non-blocking device motion and wait for its end; an error unless it is done."""
     await session.control.ensure_active()
-    async with _AccelFor(session, accel):
+    async with RatesFor(session, overrides or {}):
         session.motion_start = asyncio.ensure_future(session.control.call(rpc, request))
         reply = await asyncio.shield(session.motion_start)
         session.motion_start = None
@@ -134,16 +61,33 @@ async def _run(session, rpc: str, request, accel: float | None = None) -> None:
                         f"{': ' + outcome.message if outcome.message else ''}")
 
 
-async def _settled(session):
-    """The live state once the motion has ended: a sample of a cycle after its done event."""
-    return await session.link.feed.taken_after(session.motion_ended)
-
-
-def _check_pose(session, goal: np.ndarray, tolerance: ToleranceSi, live) -> str:
+async def present(session) -> LiveState:
+    """The device's present state, to start a motion from; CrclError if the state stream has
+    none (it is down or stalled)."""
+    feed = session.link.feed
+    live = await feed.present(SETTLE_TIMEOUT)
     if live is None:
-        return "the end pose is unchecked (no live state from the device)"
-    offsets, x_angle, z_angle = poses.deviation(goal, live.tool_pose)
-    units = session.settings.units
+        raise CrclError(f"no present state from the device to start from: {feed.stale()}")
+    return live
+
+
+async def _settled(session) -> LiveState:
+    """The device's state once the motion has ended: a sample of a cycle at or after its done
+    event. An older one cannot say where the motion ended: then the command fails."""
+    feed = session.link.feed
+    live = await feed.taken_after(session.motion_ended, SETTLE_TIMEOUT)
+    if live is None:
+        raise CrclError(f"the device reported the motion done, but no state taken after its "
+                        f"end came within {SETTLE_TIMEOUT:g} s ({feed.stale() or 'no new sample'})"
+                        f": the end pose is unchecked")
+    return live
+
+
+def check_pose(units: CrclUnits, goal: np.ndarray, tolerance: ToleranceSi,
+               actual: np.ndarray) -> str:
+    """CrclError unless the SI pose `actual` is within `tolerance` of `goal`; else a
+    description of how near it is. A limit left unset is no limit (settings give defaults)."""
+    offsets, x_angle, z_angle = poses.deviation(goal, actual)
     for axis, error, limit in zip("XYZ", offsets, (tolerance.x, tolerance.y, tolerance.z)):
         if limit is not None and error > limit:
             raise CrclError(f"ended {units.length_out(error):.6g} {units.length} off in {axis}, "
@@ -153,45 +97,66 @@ def _check_pose(session, goal: np.ndarray, tolerance: ToleranceSi, live) -> str:
         if limit is not None and error > limit:
             raise CrclError(f"ended with {axis} {units.angle_out(error):.6g} {units.angle} off, "
                             f"beyond the tolerance {units.angle_out(limit):.6g}")
-    return (f"reached within {units.length_out(float(max(offsets))):.3g} {units.length}")
+    return f"reached within {units.length_out(float(max(offsets))):.3g} {units.length}"
 
 
-def _end_tolerance(session, pose: m.Pose) -> ToleranceSi:
-    if pose.settings is not None and pose.settings.tolerance is not None:
-        return tolerance_si(pose.settings.tolerance, session.settings.units)
-    return session.settings.end_tolerance
+def _end_tolerance(session, pose: m.Pose | None) -> ToleranceSi:
+    """The pose's own tolerance, with the session's end tolerance where it sets none."""
+    own = pose.settings.tolerance if pose is not None and pose.settings is not None else None
+    if own is None:
+        return session.settings.end_tolerance
+    return tolerance_si(own, session.settings.units).over(session.settings.end_tolerance)
+
+
+async def _check_end(session, goal: np.ndarray, pose: m.Pose | None) -> str:
+    live = await _settled(session)
+    return check_pose(session.settings.units, goal, _end_tolerance(session, pose), live.tool_pose)
 
 
 # ---- the commands -----------------------------------------------------------------------------------
 
+def _straight_only(straight: bool, pose_list) -> None:
+    """The device holds the tool's rotation to its angular caps on straight motions only (it
+    times joint-interpolated ones by the joints): a pose's own RotSpeed or RotAccel there would
+    be ignored, so it is refused."""
+    if straight:
+        return
+    for pose in pose_list:
+        if pose.settings is not None and (pose.settings.rot_speed or pose.settings.rot_accel):
+            raise CrclError("RotSpeed / RotAccel in a pose hold straight motions only (the "
+                            "device times joint-interpolated motions by its joints): send it "
+                            "with MoveStraight true, or without them")
+
+
 async def move_to(session, cmd: m.MoveTo) -> str:
+    _straight_only(cmd.straight, [cmd.end])
     goal = poses.to_device(cmd.end, session.settings.units)
-    speed, accel = _pose_rates(session, cmd.end)
+    [(speed, accel)], overrides = motion_rates(session, [cmd.end])
+    if accel is not None:
+        overrides[PERCENT_ACCEL] = accel
     request = motion_pb2.MoveAbsoluteRequest(
         point_name=f"CRCL MoveTo {cmd.command_id}", frame=WORLD_FRAME, values=goal.tolist(),
         motion_type=(types_pb2.MOTION_TYPE_STRAIGHT_MOTION if cmd.straight
                      else types_pb2.MOTION_TYPE_JOINT_MOTION))
     if speed is not None:
         request.speed = speed
-    await _run(session, "MoveAbsolute", request, accel)
-    return _check_pose(session, goal, _end_tolerance(session, cmd.end), await _settled(session))
+    await _run(session, "MoveAbsolute", request, overrides)
+    return await _check_end(session, goal, cmd.end)
 
 
 async def move_through_to(session, cmd: m.MoveThroughTo) -> str:
+    _straight_only(cmd.straight, cmd.waypoints)
     units = session.settings.units
-    points = [(poses.to_device(p, units), *_pose_rates(session, p)) for p in cmd.waypoints]
-    await run_path(session, cmd.command_id, points, cmd.straight)
-    return _check_pose(session, points[-1][0], _end_tolerance(session, cmd.waypoints[-1]),
-                       await _settled(session))
+    percents, overrides = motion_rates(session, list(cmd.waypoints))
+    points = [(poses.to_device(p, units), *rates) for p, rates in zip(cmd.waypoints, percents)]
+    await run_path(session, cmd.command_id, points, cmd.straight, overrides)
+    return await _check_end(session, points[-1][0], cmd.waypoints[-1])
 
 
-async def run_path(session, command_id: int, points, straight: bool) -> None:
+async def run_path(session, command_id: int, points, straight: bool, overrides=None) -> None:
     """Through (pose SI (6,), speed percent or None, accel percent or None) points from where
     the arm is, blended through all but the last."""
-    live = session.link.feed.latest
-    if live is None:
-        raise CrclError(f"no live state from the device to start the path from "
-                        f"({session.link.feed.unavailable})")
+    live = await present(session)
     name = f"{session.name.split()[0]}-{command_id}"
     motion = types_pb2.MOTION_TYPE_STRAIGHT_MOTION if straight else types_pb2.MOTION_TYPE_JOINT_MOTION
     transition = speed_percent(session)
@@ -206,7 +171,7 @@ async def run_path(session, command_id: int, points, straight: bool) -> None:
             joint_values=live.joint_positions.tolist(), tag_name="start")])
         await _load(control, name, WORLD_FRAME, motion, tags)
         await _run(session, "PathMove", motion_pb2.PathMoveRequest(path_name=name,
-                                                                    number_of_cycles=1))
+                                                                    number_of_cycles=1), overrides)
     finally:
         await asyncio.shield(_clear(control, name))
 
@@ -231,18 +196,20 @@ async def _clear(control, name: str) -> None:
 async def move_screw(session, cmd: m.MoveScrew) -> str:
     """Spec VII MoveScrew: to the start (any convenient trajectory), then along the tool axis by
     the free distance, then the screw: a rigid turn about the axis through the axis point
-    (default: the controlled point), parallel to the tool's Z, while advancing along it."""
+    (default: the controlled point), parallel to the tool's Z, while advancing along it. The
+    start's speeds, accelerations and tolerance (a PoseAndSetType) hold for all of it."""
     units = session.settings.units
     if cmd.start is not None:
-        await move_to(session, m.MoveTo(command_id=cmd.command_id, straight=False, end=cmd.start))
-    live = await _settled(session)
-    if live is None:
-        raise CrclError(f"no live state from the device ({session.link.feed.unavailable})")
-    here = poses.matrix(live.tool_pose)
+        # Straight: the start's rates (RotSpeed too) then hold on the way to it as well.
+        await move_to(session, m.MoveTo(command_id=cmd.command_id, straight=True, end=cmd.start))
+    [(speed, accel)], overrides = (motion_rates(session, [cmd.start]) if cmd.start is not None
+                                   else ([(None, None)], {}))
+    here = poses.matrix((await present(session)).tool_pose)
     axis = here[:3, 2]
     if cmd.axial_distance_free:
         here[:3, 3] += axis * units.length_si(cmd.axial_distance_free)
-        await run_path(session, cmd.command_id, [(poses.from_matrix(here), None, None)], True)
+        await run_path(session, cmd.command_id, [(poses.from_matrix(here), speed, accel)], True,
+                       overrides)
     center = here[:3, 3] if cmd.axis_point is None else np.array(
         [units.length_si(cmd.axis_point.x), units.length_si(cmd.axis_point.y),
          units.length_si(cmd.axis_point.z)])
@@ -256,20 +223,16 @@ async def move_screw(session, cmd: m.MoveScrew) -> str:
         pose = np.eye(4)
         pose[:3, :3] = spin @ here[:3, :3]
         pose[:3, 3] = center + spin @ (here[:3, 3] - center) + axis * advance * s / steps
-        points.append((poses.from_matrix(pose), None, None))
-    await run_path(session, cmd.command_id, points, True)
-    return _check_pose(session, points[-1][0], session.settings.end_tolerance,
-                       await _settled(session))
+        points.append((poses.from_matrix(pose), speed, accel))
+    await run_path(session, cmd.command_id, points, True, overrides)
+    return await _check_end(session, points[-1][0], cmd.start)
 
 
 async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
     units, control = session.settings.units, session.control
-    live = session.link.feed.latest
-    if live is None:
-        raise CrclError(f"no live state from the device ({session.link.feed.unavailable})")
     maxima = control.limits.max_joint_velocities
     accel_maxima = control.accel_limits.max_joint_accels
-    target = live.joint_positions.copy()
+    target = (await present(session)).joint_positions.copy()
     speeds, accels = [], []
     for joint in cmd.joints:
         if joint.joint > len(target):
@@ -279,38 +242,37 @@ async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
                             f"supported (landscape.v1 has no joint torque mode); use JointSpeedAccel")
         target[joint.joint - 1] = units.angle_si(joint.position)
         if joint.details.speed is not None:
-            speeds.append(_percent(units.angle_si(joint.details.speed), maxima[joint.joint - 1]))
+            speeds.append(percent(units.angle_si(joint.details.speed), maxima[joint.joint - 1]))
         if joint.details.accel is not None:
-            accels.append(_percent(units.angle_si(joint.details.accel),
+            accels.append(percent(units.angle_si(joint.details.accel),
                                    accel_maxima[joint.joint - 1]))
     request = motion_pb2.MoveAbsoluteRequest(point_name=f"CRCL ActuateJoints {cmd.command_id}",
                                              frame=JOINT_FRAME, values=target.tolist())
     if speeds:
         request.speed = min(speeds)
-    await _run(session, "MoveAbsolute", request, min(accels) if accels else None)
+    await _run(session, "MoveAbsolute", request, {PERCENT_ACCEL: min(accels)} if accels else None)
     return _check_joints(session, cmd, target, await _settled(session))
 
 
-def _check_joints(session, cmd: m.ActuateJoints, target: np.ndarray, live) -> str:
+def _check_joints(session, cmd: m.ActuateJoints, target: np.ndarray, live: LiveState) -> str:
     units = session.settings.units
     tolerances = dict(session.settings.joint_tolerances)
     tolerances.update({t.joint: units.angle_si(t.tolerance) for t in cmd.tolerances or ()})
-    if live is None:
-        return "the end position is unchecked (no live state from the device)"
     for joint in cmd.joints:
         error = abs(float(live.joint_positions[joint.joint - 1] - target[joint.joint - 1]))
-        limit = tolerances.get(joint.joint)
-        if limit is not None and error > limit:
+        limit = tolerances.get(joint.joint, DEFAULT_JOINT_TOLERANCE)
+        if error > limit:
             raise CrclError(f"joint {joint.joint} ended {units.angle_out(error):.6g} {units.angle} "
                             f"off, beyond its tolerance {units.angle_out(limit):.6g}")
     return "joints reached"
 
 
 async def stop_motion(session, cmd: m.StopMotion) -> str:
-    """Normal: a controlled stop on the path, drives on. Fast: the same, then drives off.
-    Immediate: drives off at once; the device stops along the path at full deceleration before
-    the drives go off (landscape.v1 has no stop that cuts the drives mid-motion but the
-    e-stop)."""
+    """Spec VII StopMotion; every kind starts at once, ahead of the commands before it
+    (session.py). Immediate: drives off now, with no controlled stop asked first (the device
+    brakes at its full deceleration and cuts the drives at rest; landscape.v1 has no stop that
+    cuts them mid-motion but the operator's e-stop). Fast: a controlled stop on the path, then
+    drives off. Normal: a controlled stop on the path, drives on."""
     if cmd.condition == "Immediate":
         await _deactivate(session)
         return "stopped, drives off"
@@ -322,7 +284,9 @@ async def stop_motion(session, cmd: m.StopMotion) -> str:
 
 
 async def _deactivate(session) -> None:
-    if await session.control.state() in (types_pb2.DEVICE_STATE_RESTING,
-                                         types_pb2.DEVICE_STATE_MOVING,
-                                         types_pb2.DEVICE_STATE_PAUSED):
+    """Drives off (Deactivate stops a motion first); already off is fine."""
+    try:
         await session.control.call("Deactivate", control_pb2.DeactivateRequest())
+    except DeviceRefused:
+        if await session.control.state() != types_pb2.DEVICE_STATE_INACTIVE:
+            raise

@@ -4,13 +4,14 @@ Each connection reads into its own DocumentSplitter; a document is handled befor
 read, and GetStatus answers are written in order. A connection whose stream cannot be
 resynchronised (a DOCTYPE, a single token past the size bound) is closed; everything else a
 client gets wrong is a CRCL_Error status on the connection, which stays open. One client's
-trouble never touches another's connection.
+trouble never touches another's connection. A gateway that stops (SIGTERM) ends every
+connection as if its client had left, then exits.
 """
 from __future__ import annotations
 
 import asyncio
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from landscape.gateway.device import DeviceLink
 from landscape.gateway.session import CrclSession, GatewayOptions
@@ -27,6 +28,7 @@ class Gateway:
     link: DeviceLink
     options: GatewayOptions
     server: asyncio.base_events.Server | None = None
+    connections: set = field(default_factory=set)    # their tasks
 
     @property
     def port(self) -> int:
@@ -39,8 +41,13 @@ class Gateway:
         return self
 
     async def close(self) -> None:
+        """No new connections; each open one ends as if its client had left (its session
+        closes: the device stops the arm and frees the lock), its socket closed in order."""
         if self.server is not None:
             self.server.close()
+            for task in list(self.connections):
+                task.cancel()
+            await asyncio.gather(*self.connections, return_exceptions=True)
             await self.server.wait_closed()
 
     async def _connection(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
@@ -48,6 +55,7 @@ class Gateway:
         session = CrclSession(self.link, self.options, f"{peer[0]}:{peer[1]}" if peer else "")
         splitter = DocumentSplitter(self.options.max_document)
         log.info("%s connected", session.name)
+        self.connections.add(asyncio.current_task())
         try:
             while data := await reader.read(READ_SIZE):
                 for item in splitter.feed(data):
@@ -62,7 +70,10 @@ class Gateway:
             log.warning("%s: closing: %s", session.name, error)
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
+        except asyncio.CancelledError:
+            pass                          # the gateway is closing (close()): end in order
         finally:
+            self.connections.discard(asyncio.current_task())
             await session.close()
             writer.close()
             try:

@@ -4,6 +4,8 @@
   the typed parser; a refused document becomes a CRCL_Error status saying why, and the
   session goes on.
 - GetStatus is answered at once from the live state; it never waits behind a command.
+- Settings and reporting commands (handlers.IMMEDIATE: no device call) are carried out at
+  once when nothing else runs, so they are Done for the very next GetStatus.
 - Other commands run in the order they arrive, each the current one (CRCL_Working) while it
   runs. A new command preempts a running one that lasts (a motion, a dwell, a program: spec
   section VI): it is cancelled and the arm stops along its path before the new one starts;
@@ -26,8 +28,8 @@ from landscape.gateway import model as m
 from landscape.gateway import parse, status, xmlsafe
 from landscape.gateway.device import Control, DeviceLink, DeviceRefused
 from landscape.gateway.errors import CrclError
-from landscape.gateway.handlers import HANDLERS
-from landscape.gateway.motions import push_rates
+from landscape.gateway.handlers import HANDLERS, immediate
+from landscape.gateway.rates import push_rates
 from landscape.gateway.program import expand
 from landscape.gateway.schemas import SchemaInvalid, SchemaSet
 from landscape.gateway.settings import CrclSettings
@@ -96,10 +98,19 @@ class CrclSession:
         command = document.command
         if isinstance(command, m.GetStatus):
             return self.status()
+        if immediate(command) and self._running is None and not self._queue:
+            record = CommandRecord(command.command_id, WORKING, program_file=document.program_file,
+                                   program_index=document.program_index,
+                                   program_length=document.program_length)
+            self.record = record
+            await self._outcome(record, self.execute(command))   # never waits: no device
+            self.changed()
+            return None
         self.submit(lambda: self.execute(command), command.MOTION or command.LASTS,
                     CommandRecord(command.command_id, WORKING, program_file=document.program_file,
                                   program_index=document.program_index,
-                                  program_length=document.program_length))
+                                  program_length=document.program_length),
+                    urgent=isinstance(command, m.StopMotion) and self.control is not None)
         await asyncio.sleep(0)   # a command done at once is Done for the next GetStatus
         return None
 
@@ -117,19 +128,25 @@ class CrclSession:
     def status(self) -> bytes:
         feed = self.link.feed
         return status.build(self.record, next(self._status_ids), self.settings, feed.latest,
-                            feed.unavailable, self.options.gripper_stroke)
+                            feed.stale(), self.options.gripper_stroke)
 
     # ---- running commands ---------------------------------------------------------------------
 
-    def submit(self, body, lasts: bool, record: CommandRecord) -> None:
+    def submit(self, body, lasts: bool, record: CommandRecord, urgent: bool = False) -> None:
         """Queue a command (`body()` makes its coroutine). Commands run in order; a new one
-        preempts a running command that lasts (a motion, a dwell, a program)."""
+        preempts a running command that lasts (a motion, a dwell, a program). An urgent one (a
+        stop) starts at once: the commands queued before it are dropped, and it waits neither
+        for them nor for the preempted motion's controlled stop."""
         if len(self._queue) >= MAX_QUEUED:
             self.record = CommandRecord(record.command_id, ERROR,
                                         f"more than {MAX_QUEUED} commands queued: refused")
             return
-        self._queue.append((body, lasts, record))
-        if self._running is None and len(self._queue) == 1:
+        if urgent:
+            self._queue.clear()
+            started = asyncio.ensure_future(body())
+            body = lambda: started            # noqa: E731 - the worker awaits it in turn
+        self._queue.append((body, lasts, record, urgent))
+        if urgent or (self._running is None and len(self._queue) == 1):
             self.record = record     # it runs next: status names it from now on
         if self._running is not None and self._running_lasts and not self._running.done():
             self._running.cancel()
@@ -138,30 +155,40 @@ class CrclSession:
 
     async def _work(self) -> None:
         while self._queue:
-            body, lasts, record = self._queue.popleft()
+            body, lasts, record, urgent = self._queue.popleft()
+            if lasts and self._queue and not urgent:
+                # Preempted before it began: the next command came while it waited.
+                record.state, record.description = ERROR, "preempted by the next command"
+                continue
             if self._must_halt:
                 self._must_halt = False
-                await self._halt_quietly()
+                if not urgent:                   # a stop stops the arm its own way
+                    await self._halt_quietly()
             self.record = record
             self.changed()
-            self._running, self._running_lasts = asyncio.create_task(body()), lasts
+            self._running, self._running_lasts = asyncio.ensure_future(body()), lasts
             try:
-                description = await asyncio.shield(self._running)
-                if self.record is record:
-                    record.state, record.description = DONE, description or ""
+                await self._outcome(record, asyncio.shield(self._running))
             except asyncio.CancelledError:
                 if not self._running.cancelled():
                     raise              # the worker itself is cancelled: the session closes
                 record.state, record.description = ERROR, "preempted by the next command"
                 self._must_halt = lasts
-            except (CrclError, DeviceRefused) as error:
-                record.state, record.description = ERROR, str(error)
-            except Exception as error:   # a bug must not take the connection down silently
-                log.exception("%s: command %d failed", self.name, record.command_id)
-                record.state, record.description = ERROR, f"gateway error: {error!r}"
             finally:
                 self._running = None
                 self.changed()
+
+    async def _outcome(self, record: CommandRecord, running) -> None:
+        """Await a command (its coroutine or task) and write how it ended into its record."""
+        try:
+            description = await running
+            if self.record is record:
+                record.state, record.description = DONE, description or ""
+        except (CrclError, DeviceRefused) as error:
+            record.state, record.description = ERROR, str(error)
+        except Exception as error:   # a bug must not take the connection down silently
+            log.exception("%s: command %d failed", self.name, record.command_id)
+            record.state, record.description = ERROR, f"gateway error: {error!r}"
 
     async def wait(self) -> None:
         """Until every queued command has finished (for programs and tests)."""
@@ -169,11 +196,8 @@ class CrclSession:
             await asyncio.gather(self._worker, return_exceptions=True)
 
     async def _halt_quietly(self) -> None:
-        """After a preempted motion: let a move request in flight land, then stop on the
-        path. A failure here is the next command's to report."""
-        if self.motion_start is not None:
-            await asyncio.gather(self.motion_start, return_exceptions=True)
-            self.motion_start = None
+        """After a preempted motion: stop on the path. A failure here is the next command's
+        to report."""
         if self.control is not None:
             try:
                 await self.halt()
@@ -181,7 +205,15 @@ class CrclSession:
                 log.warning("%s: stopping the preempted motion: %s", self.name, error)
 
     async def halt(self) -> None:
-        """Stop a motion along its path and drop it (the arm rests, drives stay on)."""
+        """Stop a motion along its path and drop it (the arm rests, drives stay on); once more
+        after a motion request still in flight has landed."""
+        await self._halt_once()
+        if self.motion_start is not None:
+            await asyncio.gather(self.motion_start, return_exceptions=True)
+            self.motion_start = None
+            await self._halt_once()
+
+    async def _halt_once(self) -> None:
         state = await self.control.state()
         if state == types_pb2.DEVICE_STATE_MOVING:
             await self.control.call("StopMotion", motion_pb2.StopMotionRequest())
@@ -211,6 +243,7 @@ class CrclSession:
         try:
             await self.control.prepare()
             self.settings = CrclSettings()
+            await self.link.feed.watch(self, ())
             await push_rates(self)
         except BaseException:
             await self.drop_control()
@@ -238,6 +271,10 @@ class CrclSession:
         await asyncio.gather(*(t for t in (self._running, self._worker) if t),
                              return_exceptions=True)
         await self.drop_control()
+        try:
+            await self.link.feed.watch(self, ())     # its sensors, if no one else's
+        except CrclError as error:
+            log.warning("%s: %s", self.name, error)
 
     # ---- programs ----------------------------------------------------------------------------
 

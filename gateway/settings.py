@@ -1,7 +1,8 @@
 """What one CRCL session has set, in SI, and what it asked status to report.
 
 InitCanon starts from these defaults (spec section VI for the units; the rates are the
-device's cautious defaults: a quarter of the maximum speed, half the maximum acceleration).
+device's cautious defaults: a quarter of the maximum speed, half the maximum acceleration; the
+end tolerances DEFAULT_END_TOLERANCE and DEFAULT_JOINT_TOLERANCE).
 """
 from __future__ import annotations
 
@@ -44,6 +45,21 @@ class ToleranceSi:
     x_axis: float | None = None
     z_axis: float | None = None
 
+    def over(self, base: "ToleranceSi") -> "ToleranceSi":
+        """These limits, with `base`'s where these have none."""
+        return ToleranceSi(*(own if own is not None else b for own, b in zip(
+            (self.x, self.y, self.z, self.x_axis, self.z_axis),
+            (base.x, base.y, base.z, base.x_axis, base.z_axis))))
+
+
+# What counts as reached when no SetEndPoseTolerance or SetDefaultJointPositionsTolerances
+# said (CRCL names no default): 1 mm per axis, 1 mrad between axes and per joint (1 mrad is
+# 1 mm at the arm's 1 m reach). Far above where an arm settles (the simulated TX90 ends within
+# 1e-7 m and rad, a real one within its 0.03 mm repeatability and its controller's in-position
+# window), far below a wrong end (a preempted or stopped move, a pose read from old state).
+DEFAULT_END_TOLERANCE = ToleranceSi(0.001, 0.001, 0.001, 0.001, 0.001)
+DEFAULT_JOINT_TOLERANCE = 0.001   # rad
+
 
 def tolerance_si(t: m.PoseTolerance, units: CrclUnits) -> ToleranceSi:
     length = lambda v: None if v is None else units.length_si(v)
@@ -74,7 +90,7 @@ class CrclSettings:
     rot_speed: SiRate = SiRate(fraction=0.25)
     trans_accel: SiRate = SiRate(fraction=0.5)
     rot_accel: SiRate = SiRate(fraction=0.5)
-    end_tolerance: ToleranceSi = ToleranceSi()
+    end_tolerance: ToleranceSi = DEFAULT_END_TOLERANCE
     intermediate_tolerance: ToleranceSi = ToleranceSi()
     joint_tolerances: dict[int, float] = field(default_factory=dict)      # joint -> rad
     coordinated: bool = True

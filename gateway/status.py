@@ -2,11 +2,14 @@
 the device's live state, in the units last set (spec section VIII).
 
 Elements are written in the schema's order; a part the session turned off, or that the device
-cannot say (no live state yet, no tool on the flange), is left out, as the schema allows. The
+cannot say (no live state yet, no tool on the flange), is left out, as the schema allows. A
+live state that is old (the state stream stalled or down) is still shown, and StateDescription
+says how old. The
 tests validate every status written here against CRCLStatus.xsd.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -15,6 +18,7 @@ from lxml import etree
 from landscape.gateway import poses
 from landscape.gateway.settings import CrclSettings, SiRate, ToleranceSi
 from landscape.gateway.state_feed import LiveState
+from landscape.gateway.units import CrclUnits
 
 XSI = "http://www.w3.org/2001/XMLSchema-instance"
 WORKING, DONE, ERROR, READY = "CRCL_Working", "CRCL_Done", "CRCL_Error", "CRCL_Ready"
@@ -42,9 +46,11 @@ def number(value: float) -> str:
 
 
 def _add(parent, tag: str, text: str | None = None, xsi_type: str | None = None):
-    element = etree.SubElement(parent, tag)
     if xsi_type:
+        element = etree.SubElement(parent, tag, nsmap={"xsi": XSI})
         element.set(f"{{{XSI}}}type", xsi_type)
+    else:
+        element = etree.SubElement(parent, tag)
     if text is not None:
         element.text = text
     return element
@@ -56,37 +62,55 @@ def _vector(parent, tag: str, values, names: str = "IJK") -> None:
         _add(element, name, number(value))
 
 
+_HEAD = f"<?xml version='1.0' encoding='UTF-8'?>\n<CRCLStatus xmlns:xsi=\"{XSI}\">".encode()
+_TAIL = b"</CRCLStatus>"
+
+
 def build(record: CommandRecord, status_id: int, settings: CrclSettings,
-          live: LiveState | None, unavailable: str = "",
+          live: LiveState | None, stale: str = "",
           gripper_stroke: float = DEFAULT_GRIPPER_STROKE) -> bytes:
-    """The CRCLStatus document, with its XML declaration, as UTF-8 bytes."""
-    root = etree.Element("CRCLStatus", nsmap={"xsi": XSI})
-    _command_status(root, record, status_id, unavailable if live is None else "")
-    report, units = settings.reporting, settings.units
+    """The CRCLStatus document, with its XML declaration, as UTF-8 bytes. `stale`: why the
+    live state is not the device's present state (none, or old), added to StateDescription."""
+    root = etree.Element("CRCLStatus")       # holds the parts made anew each time
+    _command_status(root, record, status_id, stale)
+    report = settings.reporting
+    arm = b""
     if live is not None:
-        if report.joints:
-            _joint_statuses(root, settings, live)
-        if report.pose:
-            point, x_axis, z_axis = poses.axes(live.tool_pose)
-            pose = _add(_add(root, "PoseStatus"), "Pose")
-            _vector(pose, "Point", [units.length_out(v) for v in point], names="XYZ")
-            _vector(pose, "XAxis", x_axis)
-            _vector(pose, "ZAxis", z_axis)
+        arm = _arm(live, settings.units, report.pose, tuple(sorted(
+            report.joint_reports.items())) if report.joints else ())
         if report.gripper and live.end_effector and live.end_effector not in settings.grippers_disabled:
             _gripper(root, live, settings, gripper_stroke)
     if report.settings:
         _settings_status(root, settings)
     if report.sensors and live is not None:
         _sensors(root, settings, live)
-    return etree.tostring(root, xml_declaration=True, encoding="UTF-8")
+    parts = [etree.tostring(element) for element in root]
+    return b"".join((_HEAD, parts[0], arm, *parts[1:], _TAIL))
 
 
-def _command_status(root, record: CommandRecord, status_id: int, unavailable: str) -> None:
+@functools.lru_cache(maxsize=16)
+def _arm(live: LiveState, units: CrclUnits, pose: bool,
+         joint_reports: tuple[tuple[int, tuple[bool, bool, bool]], ...]) -> bytes:
+    """JointStatuses and PoseStatus of one sample, as reported: made once per sample and
+    report, however many clients poll it (the bulk of a status)."""
+    root = etree.Element("CRCLStatus")
+    if joint_reports:
+        _joint_statuses(root, units, joint_reports, live)
+    if pose:
+        point, x_axis, z_axis = poses.axes(live.tool_pose)
+        element = _add(_add(root, "PoseStatus"), "Pose")
+        _vector(element, "Point", [units.length_out(v) for v in point], names="XYZ")
+        _vector(element, "XAxis", x_axis)
+        _vector(element, "ZAxis", z_axis)
+    return b"".join(etree.tostring(element) for element in root)
+
+
+def _command_status(root, record: CommandRecord, status_id: int, stale: str) -> None:
     status = _add(root, "CommandStatus")
     _add(status, "CommandID", str(record.command_id))
     _add(status, "StatusID", str(status_id))
     _add(status, "CommandState", record.state)
-    description = "; ".join(d for d in (record.description, unavailable) if d)
+    description = "; ".join(d for d in (record.description, stale) if d)
     if description:
         _add(status, "StateDescription", description)
     if record.program_file is not None:
@@ -97,9 +121,8 @@ def _command_status(root, record: CommandRecord, status_id: int, unavailable: st
         _add(status, "ProgramLength", str(record.program_length))
 
 
-def _joint_statuses(root, settings: CrclSettings, live: LiveState) -> None:
-    units = settings.units
-    rows = [(j, flags) for j, flags in sorted(settings.reporting.joint_reports.items())
+def _joint_statuses(root, units: CrclUnits, joint_reports, live: LiveState) -> None:
+    rows = [(j, flags) for j, flags in joint_reports
             if j <= len(live.joint_positions) and any(flags)]
     if not rows:
         return
@@ -224,5 +247,5 @@ def _sensor(parent, tag: str, name: str, live: LiveState):
     sensor = _add(parent, tag)
     _add(sensor, "SensorID", name)
     _add(sensor, "ReadCount", str(live.sequence % 2**31))
-    _add(sensor, "LastReadTime", str(int(live.received * 1e6)))
+    _add(sensor, "LastReadTime", str(int(live.time * 1e3)))   # ms since 1970 (the schema)
     return sensor

@@ -1,21 +1,45 @@
 """CRCL commands on the tool, the tool changer, sensors and the vendor hook.
 
 landscape.v1 names the mounted tool and its state (GetEndEffectorState), switches its main
-function with ActivateTool / DeactivateTool (bit 0: close the gripper, or suction on), couples
-and releases tools with the cell's "toolchanger_lock" output (DigitalIOService), reads sensors
-(GetSensorReading, and the state stream) and passes text to the vendor (SendCommand). Where
-the device answers UNIMPLEMENTED, the command is a CRCL_Error saying so.
+function with ActivateTool / DeactivateTool (bit 0: close the gripper, or suction on), changes
+tools at the rack (GetTool / PutTool: the fine moves into and out of a slot, with the contact
+of the coupling allowed, and the changer's lock), couples and releases with the cell's
+"toolchanger_lock" output (DigitalIOService), tells where the rack's tools are
+(GetCellDescription), reads sensors (the state stream) and passes text to the vendor
+(SendCommand). Where the device answers UNIMPLEMENTED, the command is a CRCL_Error saying so.
+
+The tool changer (spec V: the arm is moved to an attachment or detachment position, then the
+changer closes or opens). A tool's changer position is its plate in the rack: the flange at
+the plate (within SLOT_REACH, the device's own lock distance) couples or releases there with
+the lock output; the flange above the plate on its axis (up to DOCK_REACH, as a CRCL client
+can reach it without touching the coupling) has the device's GetTool / PutTool do the last
+moves along the axis and the lock. Anywhere else, both commands are errors.
 """
 from __future__ import annotations
 
+import numpy as np
+
 from landscape.gateway import model as m
+from landscape.gateway import poses
 from landscape.gateway.errors import CrclError
+from landscape.gateway.motions import SETTLE_TIMEOUT, present
+from landscape.gateway.rates import push_rates
 from landscape.gateway.status import is_vacuum
+from landscape.v1 import control_pb2
 from landscape.v1 import digital_io_service_pb2 as dio
-from landscape.v1 import end_effector_pb2, sensing_pb2
+from landscape.v1 import end_effector_pb2, settings_pb2, types_pb2
 
 TOOL_CHANGER_OUTPUT = "toolchanger_lock"    # the cell's output: 1 couples, 0 releases
 MAIN_FUNCTION = 1                           # bit 0 of ActivateTool's bit field
+SLOT_REACH = 0.005           # m: the flange this near a plate is at it (the device's lock distance)
+DOCK_REACH = 0.3             # m: the flange on a plate's axis up to this far above it is docking
+AXIS_REACH = 0.002           # m off the plate's axis
+ANGLE_REACH = np.radians(3.0)   # rad between the flange's and the plate's orientation
+ON_STATES = ("closed", "suction_on", "holding")   # the device's tool states, function on
+OFF_STATES = ("open", "off")                       # and off
+_LENGTH_M = {types_pb2.LINEAR_UNIT_METERS: 1.0, types_pb2.LINEAR_UNIT_MILLIMETERS: 0.001,
+             types_pb2.LINEAR_UNIT_CENTIMETERS: 0.01, types_pb2.LINEAR_UNIT_INCHES: 0.0254,
+             types_pb2.LINEAR_UNIT_FEET: 0.3048}
 
 
 async def _tool(session) -> tuple[str, str]:
@@ -39,19 +63,84 @@ async def _changer(session, couple: bool) -> None:
     raise CrclError(f"the cell has no {TOOL_CHANGER_OUTPUT!r} output: no tool changer")
 
 
+async def _slots(session) -> dict[str, np.ndarray]:
+    """Each rack tool's plate in its slot (4x4, world, m). A tool on the flange has no place in
+    the cell's description: its slot is the one last seen (the link remembers them)."""
+    cell = await session.link.read("GetCellDescription", control_pb2.GetCellDescriptionRequest())
+    session.link.slots.update({body.name: poses.matrix(np.array(
+        [body.pose.x, body.pose.y, body.pose.z, body.pose.roll, body.pose.pitch, body.pose.yaw]))
+        for body in cell.bodies if body.kind == body.KIND_TOOL and not body.attached_to})
+    return session.link.slots
+
+
+async def _flange(session) -> np.ndarray:
+    """The flange now (4x4, world, m): the controlled point less the tool offset."""
+    live = await present(session)
+    reply = await session.link.read("GetToolOffsets", settings_pb2.GetToolOffsetsRequest())
+    o, scale = reply.offset, _LENGTH_M.get(reply.units.linear, 1.0)
+    angles = np.array([o.roll, o.pitch, o.yaw])
+    if reply.units.angular == types_pb2.ANGULAR_UNIT_DEGREES:
+        angles = np.radians(angles)
+    offset = poses.matrix(np.array([o.x * scale, o.y * scale, o.z * scale, *angles]))
+    return poses.matrix(live.tool_pose) @ np.linalg.inv(offset)
+
+
+async def _ready_to_move(session) -> None:
+    """Drives on and the session's rates on the device: GetTool / PutTool move the arm."""
+    await session.control.ensure_active()
+    await push_rates(session)
+
+
+def _docking(flange: np.ndarray, plate: np.ndarray) -> float | None:
+    """How far above the plate, along its axis, the flange is (0: at it), or None if it is
+    not on the axis, turned as the plate, within DOCK_REACH."""
+    relative = np.linalg.inv(plate) @ flange
+    lateral, along = float(np.hypot(*relative[:2, 3])), float(-relative[2, 3])
+    turned = np.arccos(np.clip((np.trace(relative[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
+    if lateral > AXIS_REACH or turned > ANGLE_REACH or not -SLOT_REACH <= along <= DOCK_REACH:
+        return None
+    return max(along, 0.0)
+
+
 async def close_tool_changer(session, cmd: m.CloseToolChanger) -> str:
-    await _changer(session, couple=True)
     tool, _ = await _tool(session)
-    if not tool:
-        await _changer(session, couple=False)
-        raise CrclError("no tool coupled: the arm is at no tool in the changing station")
-    return f"tool {tool} coupled"
+    if tool:
+        raise CrclError(f"the {tool} is coupled already: OpenToolChanger at its slot first")
+    flange, slots = await _flange(session), await _slots(session)
+    for name, plate in slots.items():
+        above = _docking(flange, plate)
+        if above is None:
+            continue
+        if above <= SLOT_REACH:
+            await _changer(session, couple=True)
+            tool, _ = await _tool(session)
+            if not tool:
+                await _changer(session, couple=False)
+                raise CrclError(f"the changer did not couple the {name} at its plate")
+            return f"tool {tool} coupled"
+        await _ready_to_move(session)
+        await session.control.call("GetTool", end_effector_pb2.GetToolRequest(tool_id=name))
+        return f"tool {name} coupled (the device docked it from {above:.3f} m above)"
+    raise CrclError(f"the arm is at no tool changer: the flange must be at a rack tool's plate "
+                    f"or on its axis above it ({', '.join(slots) or 'no tools in the rack'})")
 
 
 async def open_tool_changer(session, cmd: m.OpenToolChanger) -> str:
     tool, _ = await _tool(session)
-    await _changer(session, couple=False)
-    return f"tool {tool} released" if tool else "changer open (no tool was coupled)"
+    if not tool:
+        await _changer(session, couple=False)
+        return "changer open (no tool was coupled)"
+    plate = (await _slots(session)).get(tool)
+    above = None if plate is None else _docking(await _flange(session), plate)
+    if plate is not None and above is None:
+        raise CrclError(f"the {tool} is not at its rack slot: bring the flange onto the slot's "
+                        f"axis above it (or into it), then OpenToolChanger")
+    if plate is None or above <= SLOT_REACH:   # the device checks the slot itself
+        await _changer(session, couple=False)
+        return f"tool {tool} released"
+    await _ready_to_move(session)
+    await session.control.call("PutTool", end_effector_pb2.PutToolRequest(tool_id=tool))
+    return f"tool {tool} released into its slot (the device docked it from {above:.3f} m above)"
 
 
 async def set_end_effector(session, cmd: m.SetEndEffector) -> str:
@@ -66,6 +155,12 @@ async def set_end_effector(session, cmd: m.SetEndEffector) -> str:
                else end_effector_pb2.DeactivateToolRequest)(tool_id=tool, bit_field=MAIN_FUNCTION)
     await session.control.call(rpc, request)
     session.settings.end_effector_setting = cmd.setting
+    # Done once the state stream shows it too, so the next GetStatus does.
+    states = ON_STATES if activate else OFF_STATES
+    if await session.link.feed.until(lambda s: s.end_effector_state in states,
+                                     SETTLE_TIMEOUT) is None:
+        raise CrclError(f"the device did {rpc} but its state stream does not show the {tool} "
+                        f"{' or '.join(states)} within {SETTLE_TIMEOUT:g} s")
     return f"{tool}: {rpc}"
 
 
@@ -91,18 +186,17 @@ async def disable_gripper(session, cmd: m.DisableGripper) -> str:
 async def enable_sensor(session, cmd: m.EnableSensor) -> str:
     if cmd.options:
         raise CrclError("sensor options are not supported")
-    reply = await session.link.read("GetSensorReading",
-                                    sensing_pb2.GetSensorReadingRequest(sensor_type=cmd.sensor_id))
+    # The gateway's one state stream carries it from now on, once the device has accepted it.
+    await session.link.feed.watch(session, session.settings.sensors | {cmd.sensor_id})
     session.settings.sensors.add(cmd.sensor_id)
-    feed = session.link.feed
-    feed.watch_sensors(tuple(set(feed.sensors) | {cmd.sensor_id}))
-    return f"sensor {cmd.sensor_id} reported ({len(reply.current_data)} values)"
+    return f"sensor {cmd.sensor_id} reported"
 
 
 async def disable_sensor(session, cmd: m.DisableSensor) -> str:
     if cmd.sensor_id not in session.settings.sensors:
         raise CrclError(f"sensor {cmd.sensor_id} is not enabled")
     session.settings.sensors.discard(cmd.sensor_id)
+    await session.link.feed.watch(session, session.settings.sensors)
     return f"sensor {cmd.sensor_id} no longer reported"
 
 

@@ -11,8 +11,9 @@ so it costs one `bytes.find` per markup token. It refuses a DOCTYPE outright (no
 no entity declarations can ever reach the parser) and bounds what one document may take.
 A document that grows past the bound is skipped to its end while its bytes are dropped, so the
 connection stays usable; a single token past the bound cannot be skipped safely and is fatal.
-An XML declaration inside a document means it was truncated: it is refused, and the next
-document starts there.
+An XML declaration, or the start of a CRCL root element (`<CRCLCommandInstance`,
+`<CRCLProgram`: CRCL's roots never nest), inside a document means it was truncated: it is
+refused, and the next document starts there.
 """
 from __future__ import annotations
 
@@ -23,6 +24,8 @@ SKIP_BUDGET = 256                  # an oversized document is skipped for this m
                                    # bound at most; past that the connection closes
 
 _WHITESPACE = b" \t\r\n"
+# Root elements of CRCL documents (CRCLStatus too, for readers of status streams).
+ROOTS = (b"CRCLCommandInstance", b"CRCLProgram", b"CRCLStatus")
 
 
 @dataclass(frozen=True)
@@ -143,6 +146,10 @@ class DocumentSplitter:
             if self._depth <= 0:
                 self._finish(out, end)
         elif second not in (0x3F, 0x21):                 # <name ...> or <name .../>
+            if self._in_root and _is_root(buf, lt):
+                self._truncated(out, lt)                 # a new document began: resync here
+                self._pos = lt
+                return True
             self._in_root = True
             if buf[end - 2] != 0x2F:
                 self._depth += 1
@@ -189,8 +196,9 @@ class DocumentSplitter:
         self._skipped = 0
 
     def _truncated(self, out: list, lt: int) -> None:
-        """An XML declaration inside a document: the document was cut short (a declaration
-        may only open one). Refuse it and start the next document at the declaration."""
+        """An XML declaration or a CRCL root inside a document: the document was cut short
+        (a declaration may only open one; roots never nest). Refuse it and start the next
+        document there."""
         offset = self._skip_offset if self._skipping else self._base + self._doc_start
         out.append(Refused("truncated document: another began before its end", offset))
         self._doc_start, self._depth, self._in_root, self._skipping = lt, 0, False, None
@@ -226,6 +234,15 @@ class DocumentSplitter:
 
 def _is_declaration(buf: bytearray, lt: int) -> bool:
     return buf.startswith(b"<?xml", lt) and len(buf) > lt + 5 and buf[lt + 5] in b" \t\r\n?"
+
+
+def _is_root(buf: bytearray, lt: int) -> bool:
+    """Whether the (complete) start tag at lt opens a CRCL root element."""
+    for name in ROOTS:
+        end = lt + 1 + len(name)
+        if buf.startswith(name, lt + 1) and buf[end] in b" \t\r\n/>":
+            return True
+    return False
 
 
 def _first_quote(buf: bytearray, start: int, stop: int) -> int:

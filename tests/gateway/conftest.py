@@ -1,4 +1,5 @@
-"""Fixtures: a real device server (lock-step clock) and the real gateway before it."""
+"""Fixtures: a real device server (lock-step clock) and the real gateway before it, directly or
+through a forwarding proxy that counts the device calls and can stall a stream."""
 from __future__ import annotations
 
 import sys
@@ -7,7 +8,8 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from crcl_support import RunningGateway  # noqa: E402
+from crcl_support import RawClient, RunningGateway, field  # noqa: E402
+from grpc_proxy import GrpcProxy  # noqa: E402
 
 
 @pytest.fixture
@@ -15,3 +17,28 @@ def gateway(server):
     running = RunningGateway(server.target)
     yield running
     running.close()
+
+
+@pytest.fixture
+def client(gateway):
+    """A CRCL client in a session (its InitCanon done). Modules that need one before InitCanon
+    define their own."""
+    c = RawClient(gateway.port)
+    assert field(c.run("InitCanon", 1), "CommandState") == "CRCL_Done"
+    yield c
+    c.close()
+
+
+@pytest.fixture
+def proxied(server):
+    """The gateway reaching the device server through a proxy that can stall the state
+    stream (at 5 samples a simulated second: the lock-step clock runs some 10 times faster than
+    the wall clock, and the proxy forwards that many with time to spare)."""
+    proxy = GrpcProxy(server.target)
+    gateway = RunningGateway(proxy.target, state_rate_hz=5.0)
+    client = RawClient(gateway.port)
+    assert field(client.run("InitCanon", 1), "CommandState") == "CRCL_Done"
+    yield proxy, gateway, client
+    client.close()
+    gateway.close()
+    proxy.close()

@@ -9,37 +9,41 @@ import threading
 import time
 from pathlib import Path
 
+import grpc
+import numpy as np
 import pytest
 from lxml import etree
+from scipy.spatial.transform import Rotation
 
 from landscape.gateway.device import DeviceLink
 from landscape.gateway.schemas import SchemaSet, default_directory
 from landscape.gateway.server import Gateway
 from landscape.gateway.session import GatewayOptions
+from landscape.v1 import state_service_pb2, state_service_pb2_grpc, types_pb2
 
-EXAMPLES = Path(__file__).resolve().parents[3] / "shared" / "crcl" / "examples"
-# NIST's examples are read from beside the checkout, never copied in: without them, the tests
-# that use them skip.
+XSD = default_directory()
+# NIST's examples are read from beside the schemas (../shared/crcl/examples, or the folder
+# beside $LANDSCAPE_CRCL_SCHEMAS), never copied in: without them, the tests that use them skip.
+EXAMPLES = (XSD.parent if XSD else Path(__file__).resolve().parents[3] / "shared" / "crcl") / "examples"
 needs_examples = pytest.mark.skipif(not EXAMPLES.is_dir(),
                                     reason="NIST's CRCL examples (../shared/crcl/examples) are absent")
-XSD = default_directory()
 
 
 class RunningGateway:
     """The gateway serving on a free loopback port, stopped by close()."""
 
-    def __init__(self, device_target: str, **options):
+    def __init__(self, device_target: str, state_rate_hz: float = 100.0, **options):
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True,
                                        name="crcl-gateway")
         self.thread.start()
         schemas = SchemaSet(XSD) if XSD else None
         self.options = GatewayOptions(schemas=schemas, **options)
-        self.link, self.gateway = self.run(self._start(device_target))
+        self.link, self.gateway = self.run(self._start(device_target, state_rate_hz))
         self.port = self.gateway.port
 
-    async def _start(self, target: str):
-        link = DeviceLink(target)
+    async def _start(self, target: str, state_rate_hz: float):
+        link = DeviceLink(target, state_rate_hz)
         await link.start()
         gateway = await Gateway(link, self.options).serve("127.0.0.1", 0)
         return link, gateway
@@ -54,6 +58,58 @@ class RunningGateway:
         self.run(stop())
         self.loop.call_soon_threadsafe(self.loop.stop)
         self.thread.join(timeout=10)
+
+
+class ToolWatch:
+    """The device's tool pose every few controller cycles (a state stream of its own, opened
+    at the present), with the controller's (simulated) time. Open one just before the motion
+    to watch, and call moved() after it, so the samples cover all of it."""
+
+    def __init__(self, target: str, rate_hz: float = 100.0):
+        self.channel = grpc.insecure_channel(target)
+        self.samples: list[tuple[float, np.ndarray]] = []
+        self.call = state_service_pb2_grpc.StateServiceStub(self.channel).StreamState(
+            state_service_pb2.StreamStateRequest(
+                rate_hz=rate_hz, frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
+                units=types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS,
+                                      angular=types_pb2.ANGULAR_UNIT_RADIANS)))
+        threading.Thread(target=self._read, daemon=True).start()
+        self._until(lambda: len(self.samples) >= 3, "no samples")
+
+    def _read(self):
+        try:
+            for reply in self.call:
+                if reply.WhichOneof("message") == "sample":
+                    p = reply.sample.tool_pose
+                    self.samples.append((reply.sample.controller_time,
+                                         np.array([p.x, p.y, p.z, p.roll, p.pitch, p.yaw])))
+        except grpc.RpcError:
+            pass
+
+    def _until(self, predicate, what: str, timeout: float = 30.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            assert time.monotonic() < deadline, what
+            time.sleep(0.01)
+
+    def moved(self) -> tuple[np.ndarray, np.ndarray]:
+        """Once the samples show the tool moved and at rest again: (controller times (K,),
+        tool poses (K, 6))."""
+        def at_rest_elsewhere():
+            last = [p for _, p in self.samples[-5:]]
+            return (len(last) == 5 and np.ptp(np.array(last), axis=0).max() < 1e-9
+                    and np.abs(last[-1] - self.samples[0][1]).max() > 1e-6)
+        self._until(at_rest_elsewhere, "the tool did not move and come to rest")
+        self.call.cancel()
+        self.channel.close()
+        return np.array([t for t, _ in self.samples]), np.array([p for _, p in self.samples])
+
+    def peak_turn_rate(self, window: int = 5) -> float:
+        """The fastest the tool turned (rad/s of controller time) over `window` samples."""
+        times, tool = self.moved()
+        rotations = Rotation.from_euler("xyz", tool[:, 3:])
+        angles = (rotations[window:] * rotations[:-window].inv()).magnitude()
+        return float(np.max(angles / (times[window:] - times[:-window])))
 
 
 # ---- a CRCL client from the specification ------------------------------------------------------

@@ -21,6 +21,7 @@ def point(status: str) -> tuple[float, float, float]:
 
 @pytest.fixture
 def client(gateway):
+    """Here a client before its InitCanon."""
     c = RawClient(gateway.port)
     yield c
     c.close()
@@ -171,21 +172,6 @@ def test_stop_motion_normal_stops_on_the_path_and_keeps_the_drives_on(client, se
                  "CommandState") == "CRCL_Done"
 
 
-@pytest.mark.parametrize("kind, body, rpc", [
-    ("SetEndEffector", "<Setting>1</Setting>", "GetEndEffectorState"),
-    ("CloseToolChanger", "", "ListDigitalIO"),
-    ("RunProgram", "<ProgramText>version</ProgramText>", "SendCommand"),
-    ("EnableSensor", "<SensorID>force_sensor</SensorID>", "GetSensorReading"),
-])
-def test_what_the_device_does_not_implement_is_an_error_saying_so(client, kind, body, rpc):
-    client.run("InitCanon", 1)
-    status = client.run(kind, 2, body)
-    description = field(status, "StateDescription")
-    if field(status, "CommandState") == "CRCL_Done" or "UNIMPLEMENTED" not in description:
-        pytest.skip(f"the device implements {rpc} now: {description}")
-    assert f"does not implement {rpc} yet (UNIMPLEMENTED)" in description
-
-
 def test_settings_status_reports_what_was_set_in_current_units(client):
     client.run("InitCanon", 1)
     client.run("ConfigureStatusReport", 2, "".join(
@@ -213,3 +199,55 @@ def test_a_message_reaches_every_supervisor_on_the_device_event_stream(client, s
     subscription.close()
     assert posted and posted[0].detail.text == "check the fixture"
     assert posted[0].detail.source   # the gateway's session, which holds the lock
+
+
+def test_get_status_is_answered_without_any_device_call(proxied):
+    """GetStatus comes from the live state stream: the device hears nothing of the polls."""
+    proxy, _, client = proxied
+    client.run("Dwell", 2, "<DwellTime>0</DwellTime>")
+    before = dict(proxy.calls)
+    statuses = [client.status() for _ in range(200)]
+    assert all(field(s, "CommandID") == "2" for s in statuses)
+    assert dict(proxy.calls) == before, {k: v - before.get(k, 0) for k, v in proxy.calls.items()}
+    client.run("MoveTo", 3, MOVE.format("true") + pose(0.5, 0.1, 0.6))   # a motion is heard
+    assert proxy.calls["MoveAbsolute"] == before.get("MoveAbsolute", 0) + 1
+
+
+TOLERANCE = "<Tolerance><XPointTolerance>0.001</XPointTolerance></Tolerance>"
+RATE = '<{0} xsi:type="{0}RelativeType"><Fraction>0.5</Fraction></{0}>'
+IMMEDIATE_SAMPLES = {
+    "SetAngleUnits": "<UnitName>degree</UnitName>", "SetLengthUnits": "<UnitName>millimeter</UnitName>",
+    "SetForceUnits": "<UnitName>newton</UnitName>",
+    "SetTorqueUnits": "<UnitName>newtonMeter</UnitName>",
+    "SetTransSpeed": RATE.format("TransSpeed"), "SetRotSpeed": RATE.format("RotSpeed"),
+    "SetTransAccel": RATE.format("TransAccel"), "SetRotAccel": RATE.format("RotAccel"),
+    "SetEndPoseTolerance": TOLERANCE, "SetIntermediatePoseTolerance": TOLERANCE,
+    # (the schema spells it so)
+    "SetDefaultJointPositonsTolerances": "<JointTolerances><Setting><JointNumber>1</JointNumber>"
+                                          "<JointPositionTolerance>0.01</JointPositionTolerance>"
+                                          "</Setting></JointTolerances>",
+    "SetMotionCoordination": "<Coordinated>true</Coordinated>",
+    "ConfigureJointReports": "<ResetAll>true</ResetAll>",
+    "ConfigureStatusReport": "".join(f"<Report{t}>true</Report{t}>" for t in (
+        "JointStatuses", "PoseStatus", "GripperStatus", "SettingsStatus", "SensorsStatus",
+        "GuardsStatus")),
+    "EnableRobotParameterStatus": "<RobotParameterName>ToolOffset</RobotParameterName>",
+    "DisableRobotParameterStatus": "<RobotParameterName>ToolOffset</RobotParameterName>",
+    "EnableGripper": "<GripperName>gripper</GripperName>",
+    "DisableGripper": "<GripperName>gripper</GripperName>",
+    "Dwell": "<DwellTime>0</DwellTime>",
+}
+
+
+def test_settings_are_done_for_the_very_next_get_status(client):
+    """Commands carried out without the device are Done before the next document is read:
+    a client polling at once after them needs one GetStatus (NIST's reference client's
+    pattern, and the CRCL bench's)."""
+    from landscape.gateway.handlers import IMMEDIATE
+    assert {c.KIND for c in IMMEDIATE} | {"Dwell"} == set(IMMEDIATE_SAMPLES)
+    client.run("InitCanon", 1)
+    for command_id, (kind, body) in enumerate(IMMEDIATE_SAMPLES.items(), start=2):
+        client.send(command(kind, command_id, body) + command("GetStatus", 900 + command_id))
+        status = client.read_status()
+        assert (field(status, "CommandID"), field(status, "CommandState")) == (
+            str(command_id), "CRCL_Done"), status

@@ -110,6 +110,19 @@ def test_truncated_and_interleaved_documents_are_errors(gateway, bystander):
     client.close()
 
 
+def test_a_document_cut_at_a_tag_boundary_then_undeclared_documents_are_answered(gateway, bystander):
+    """The next root element, with no XML declaration before it, resynchronises the wire."""
+    client = RawClient(gateway.port, timeout=10)
+    a = command("Dwell", 15, "<DwellTime>0</DwellTime>")
+    bare = [command("GetStatus", i).split(b"?>", 1)[1].strip() for i in (16, 17)]
+    client.send(a[:a.index(b"</CRCLCommand>")] + bare[0] + bare[1])
+    first, second = client.read_status(), client.read_status()
+    assert field(first, "CommandState") == "CRCL_Error"
+    assert "truncated" in field(first, "StateDescription")
+    assert int(field(second, "StatusID")) == int(field(first, "StatusID")) + 1
+    client.close()
+
+
 def test_nonsense_values_are_errors_not_crashes(gateway, bystander):
     client = RawClient(gateway.port)
     for body in ("<DwellTime>1e999999</DwellTime>", "<DwellTime>nan</DwellTime>",

@@ -83,3 +83,23 @@ def test_a_document_without_end_closes_the_stream_after_its_budget():
     with pytest.raises(WireError, match="without end"):
         for _ in range(1000):
             splitter.feed(b"x" * 100)
+
+
+@pytest.mark.parametrize("root", [b"CRCLCommandInstance", b"CRCLProgram"])
+def test_a_document_cut_at_a_tag_boundary_is_refused_where_the_next_root_starts(root):
+    """CRCL root elements never nest: a root start inside a document means it was cut, even
+    when the documents after it come without an XML declaration."""
+    cut = COMMANDS[0][:COMMANDS[0].rindex(b"</")]            # cut just before a closing tag
+    following = [c.split(b"?>", 1)[1].strip() if c.startswith(b"<?xml") else c
+                 for c in COMMANDS[1:3]]
+    if root == b"CRCLProgram":
+        following[0] = (b'<CRCLProgram><InitCanon><CommandID>1</CommandID></InitCanon>'
+                        b'<EndCanon><CommandID>2</CommandID></EndCanon></CRCLProgram>')
+    out = DocumentSplitter().feed(cut + b"".join(following))
+    assert isinstance(out[0], Refused) and "truncated" in out[0].reason
+    assert documents(out) == following
+
+
+def test_a_root_name_inside_a_longer_tag_name_is_no_new_document():
+    doc = b"<CRCLCommandInstance><CRCLCommandInstanceX/><CRCLProgramme>a</CRCLProgramme></CRCLCommandInstance>"
+    assert documents(DocumentSplitter().feed(doc)) == [doc]

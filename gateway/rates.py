@@ -1,0 +1,135 @@
+"""CRCL speeds and accelerations as the device's motion settings.
+
+The device (seed 3.2.1) holds the tool tip to the arm's Cartesian maximum times one percent
+(speed, and acceleration), each also capped by an absolute setting that the percent does not
+scale; the joints get the same percent of their maxima. So:
+- TransSpeed v and TransAccel a are percents, 100 v / v_max and 100 a / a_max, with the linear
+  caps at the maxima: straight moves get v and a exactly, joint moves the same share of the
+  joints' maxima (a path's points may carry percents of their own);
+- RotSpeed w and RotAccel alpha are the angular caps. The percent still scales the angular
+  maximum, so rotation may come out slower than asked, never faster (spec V allows less).
+
+The session's rates reach the device when a motion needs them, just before it starts (only
+those that changed since last sent), not when a Set*Speed / Set*Accel sets them: a setting is
+no device round trip. Per-command rates (a PoseAndSetType, a waypoint) are set the same way
+for that command's motion and the session's put back once it has started: the device plans at
+the start.
+"""
+from __future__ import annotations
+
+import asyncio
+
+from landscape.gateway import model as m
+from landscape.gateway.settings import SiRate, rate_si
+from landscape.v1 import settings_pb2, types_pb2
+
+MIN_PERCENT = 0.1            # the device needs a percent above 0
+PERCENT_SPEED = ("SetSpeed", types_pb2.SPEED_TYPE_PERCENT_SPEED)
+LINEAR_SPEED = ("SetSpeed", types_pb2.SPEED_TYPE_LINEAR_SPEED)
+ANGULAR_SPEED = ("SetSpeed", types_pb2.SPEED_TYPE_ANGULAR_SPEED)
+PERCENT_ACCEL = ("SetAcceleration", types_pb2.ACCEL_TYPE_PERCENT_ACCEL)
+LINEAR_ACCEL = ("SetAcceleration", types_pb2.ACCEL_TYPE_LINEAR_ACCEL)
+ANGULAR_ACCEL = ("SetAcceleration", types_pb2.ACCEL_TYPE_ANGULAR_ACCEL)
+
+
+def percent(value: float, maximum: float) -> float:
+    return min(100.0, max(MIN_PERCENT, 100.0 * value / maximum))
+
+
+def speed_percent(session, rate: SiRate | None = None) -> float:
+    v_max = session.control.limits.max_world_linear_velocity
+    return percent((rate or session.settings.trans_speed).value(v_max), v_max)
+
+
+def accel_percent(session, rate: SiRate | None = None) -> float:
+    a_max = session.control.accel_limits.max_world_linear_accel
+    return percent((rate or session.settings.trans_accel).value(a_max), a_max)
+
+
+def rot_speed(session, rate: SiRate | None = None) -> float:
+    return (rate or session.settings.rot_speed).value(
+        session.control.limits.max_world_angular_velocity)
+
+
+def rot_accel(session, rate: SiRate | None = None) -> float:
+    return (rate or session.settings.rot_accel).value(
+        session.control.accel_limits.max_world_angular_accel)
+
+
+def session_rates(session) -> dict[tuple[str, int], float]:
+    """The device settings that carry the session's rates."""
+    limits, accel_limits = session.control.limits, session.control.accel_limits
+    return {PERCENT_SPEED: speed_percent(session),
+            LINEAR_SPEED: limits.max_world_linear_velocity,
+            ANGULAR_SPEED: rot_speed(session),
+            PERCENT_ACCEL: accel_percent(session),
+            LINEAR_ACCEL: accel_limits.max_world_linear_accel,
+            ANGULAR_ACCEL: rot_accel(session)}
+
+
+async def push(session, wanted: dict[tuple[str, int], float]) -> None:
+    """These device settings, each sent only if it differs from what was sent last."""
+    control = session.control
+    for (rpc, kind), value in wanted.items():
+        if control.pushed.get((rpc, kind)) == value:
+            continue
+        request = (settings_pb2.SetSpeedRequest(speed=value, attribute=kind) if rpc == "SetSpeed"
+                   else settings_pb2.SetAccelerationRequest(accel=value, attribute=kind))
+        control.pushed.pop((rpc, kind), None)   # unknown until the device says yes
+        await control.call(rpc, request)
+        control.pushed[(rpc, kind)] = value
+
+
+async def push_rates(session) -> None:
+    """The session's speeds and accelerations, on the device."""
+    await push(session, session_rates(session))
+
+
+class RatesFor:
+    """The device's settings for one command's motion: the session's rates with the
+    command's own, set before it starts; the session's own put back once it has started."""
+
+    def __init__(self, session, overrides: dict[tuple[str, int], float]):
+        self.session, self.overrides = session, overrides
+
+    async def __aenter__(self):
+        await push(self.session, {**session_rates(self.session), **self.overrides})
+
+    async def __aexit__(self, *exc):
+        if self.overrides:
+            await asyncio.shield(push_rates(self.session))
+
+
+def pose_rates(session, pose: m.Pose) -> tuple[SiRate | None, ...]:
+    """(TransSpeed, RotSpeed, TransAccel, RotAccel) a PoseAndSetType asks for, in SI, each None
+    where it asks for none."""
+    settings, units = pose.settings, session.settings.units
+    if settings is None:
+        return None, None, None, None
+    length, angle = units.length_si(1.0), units.angle_si(1.0)
+    return tuple(None if rate is None else rate_si(rate, scale) for rate, scale in (
+        (settings.trans_speed, length), (settings.rot_speed, angle),
+        (settings.trans_accel, length), (settings.rot_accel, angle)))
+
+
+def motion_rates(session, poses: list[m.Pose]) -> tuple[list[tuple[float | None, float | None]],
+                                                       dict[tuple[str, int], float]]:
+    """For a motion through `poses`: each pose's (speed percent, accel percent) or None each,
+    and the device settings that differ from the session's for the whole motion: the angular
+    caps are the lowest any pose asks for (the session's where it asks none), so no segment
+    turns faster than its pose allows."""
+    percents, w, alpha = [], [rot_speed(session)], [rot_accel(session)]
+    for pose in poses:
+        trans_speed, rot_s, trans_accel, rot_a = pose_rates(session, pose)
+        percents.append((None if trans_speed is None else speed_percent(session, trans_speed),
+                         None if trans_accel is None else accel_percent(session, trans_accel)))
+        if rot_s is not None:
+            w.append(rot_speed(session, rot_s))
+        if rot_a is not None:
+            alpha.append(rot_accel(session, rot_a))
+    overrides = {}
+    if min(w) != rot_speed(session):
+        overrides[ANGULAR_SPEED] = min(w)
+    if min(alpha) != rot_accel(session):
+        overrides[ANGULAR_ACCEL] = min(alpha)
+    return percents, overrides
