@@ -180,8 +180,12 @@ def rate(results, n_events: int) -> float:
 
 # -- Runs ------------------------------------------------------------------------------------
 
-def wait_subscribed(bus: events.EventBus, count: int) -> None:
-    while bus.subscriber_count < count:
+def wait_subscribed(bus: events.EventBus, count: int, timeout: float = 60.0) -> None:
+    """Until the bus has exactly `count` subscribers (clients come and go asynchronously)."""
+    end = time.monotonic() + timeout
+    while bus.subscriber_count != count:
+        if time.monotonic() > end:
+            raise RuntimeError(f"the bus has {bus.subscriber_count} subscribers, not {count}")
         time.sleep(0.005)
 
 
@@ -212,6 +216,7 @@ def bus_throughput(served: Served, n_clients: int, stalled: bool = False):
     if stalled:
         stalled_call.cancel()
         stalled_channel.close()
+    wait_subscribed(bus, before)   # the next run counts from here
     return rate(results, N_EVENTS), sum(r[3] for r in results), in_publish / N_EVENTS * 1e6
 
 
@@ -229,7 +234,9 @@ def bus_latency(served: Served, n_clients: int) -> list[float]:
         next_t += PERIOD_S
         time.sleep(max(0.0, next_t - time.monotonic()))
         sample_event(bus, i)
-    return [x for r in clients.collect() for x in r[4]]
+    results = clients.collect()
+    wait_subscribed(bus, before)
+    return [x for r in results for x in r[4]]
 
 
 def baseline_latency(served: Served, n_clients: int) -> list[float]:

@@ -75,11 +75,12 @@ def unpack(reply: dict, message_class):
     return message
 
 
-def run_with_page(server, body, **config):
-    """Run body(page, server) against a backend on a free port, within a time limit."""
+def run_with_page(server, body, devices=None, **config):
+    """Run body(page, server) against a backend on a free port, within a time limit; its
+    devices (DeviceTargets) default to `server` as arm1."""
     async def main():
-        dashboard = await start(DashboardConfig(devices=(DeviceTarget("arm1", server.target),),
-                                                port=0, **config))
+        dashboard = await start(DashboardConfig(
+            devices=devices or (DeviceTarget("arm1", server.target),), port=0, **config))
         try:
             async with aiohttp.ClientSession() as http:
                 async with http.ws_connect(dashboard.url + "ws") as ws:
@@ -309,17 +310,9 @@ def test_each_device_describes_its_own_cell():
         assert "block_1" in _bodies({"reply": cells["arm1"]})
         assert "blank_1" in _bodies({"reply": cells["arm2"]})
 
-    async def main():
-        dashboard = await start(DashboardConfig(devices=(
-            DeviceTarget("arm1", first.target), DeviceTarget("arm2", second.target)), port=0))
-        try:
-            async with aiohttp.ClientSession() as http:
-                async with http.ws_connect(dashboard.url + "ws") as ws:
-                    await body(PageClient(ws), dashboard)
-        finally:
-            await dashboard.stop()
     try:
-        asyncio.run(asyncio.wait_for(main(), 60))
+        run_with_page(None, body, devices=(DeviceTarget("arm1", first.target),
+                                           DeviceTarget("arm2", second.target)))
     finally:
         first.stop(grace=None)
         second.stop(grace=None)
