@@ -36,9 +36,9 @@ from landscape.server.convert import event_to_proto
 from landscape.v1 import event_service_pb2 as pb
 from landscape.v1 import event_service_pb2_grpc
 
-N_EVENTS = 5_000         # per throughput run
+N_EVENTS = 3_000         # per throughput run
 WINDOW = 512             # events the publisher may run ahead of the slowest subscriber
-N_LATENCY = 500          # samples per latency run
+N_LATENCY = 300          # samples per latency run
 PERIOD_S = 0.01          # between latency samples: a busy device, 100 events/s
 BUS_ONLY = 100_000       # publishes per bus-only run
 

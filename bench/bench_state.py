@@ -34,6 +34,7 @@ from google.protobuf import wrappers_pb2
 from landscape.client import AsyncSession
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
+from landscape.server.limits import DEFAULT_CAPS, Cap
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
                           event_service_pb2_grpc, motion_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
@@ -412,18 +413,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="shorter runs, for CI")
     args = parser.parse_args()
-    server = serve(ServerConfig(port=0, clock="realtime"))
+    # Every watcher here comes from this machine's address: one client to the stream caps,
+    # whose per-client share (limits.DEFAULT_CAPS) is for a cell's supervisors, not 1,000.
+    caps = {**DEFAULT_CAPS, "watch": Cap(per_client=2_000, total=20_000)}
+    server = serve(ServerConfig(port=0, clock="realtime", stream_caps=caps))
     bare = bare_server()
     holder = Holder(server)
     try:
         print(f"state sample message: {_sample_size_message().ByteSize()} bytes; real-time "
               f"priority: {'no: ' + '; '.join(server.link.tuning_problems) if server.link.tuning_problems else 'yes'}")
-        fan_out(server, bare, holder, 3.0 if args.quick else 10.0)
+        fan_out(server, bare, holder, 3.0 if args.quick else 6.0)
         event_latency(server, bare, holder)
         holder.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
         holder.close()
         idle(server, bare, 200 if args.quick else 1000)
-        starts(server, bare, 10 if args.quick else 40)
+        starts(server, bare, 10 if args.quick else 25)
     finally:
         bare.stop()
         server.stop(grace=None)

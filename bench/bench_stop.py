@@ -21,7 +21,7 @@ import multiprocessing as mp
 import time
 
 import grpc
-from common import in_child, pct, record
+from common import collect, in_child, pct, record
 
 from landscape.client import AsyncSession
 from landscape.server.app import serve
@@ -129,7 +129,7 @@ def stop_latency(server, trials: int) -> None:
     ctx = mp.get_context("spawn")
     for load in ("idle (baseline)", STREAMING, "long paths being planned"):
         lease_out, go, busy = ctx.Queue(), ctx.Event(), None
-        _, result = in_child(stops, server.target, trials, load, lease_out, go)
+        stopper = in_child(stops, server.target, trials, load, lease_out, go)
         lease = lease_out.get(timeout=120)
         if load.startswith("idle"):
             go.set()
@@ -139,7 +139,7 @@ def stop_latency(server, trials: int) -> None:
             ready.wait(120)
             time.sleep(0.5)
             go.set()
-        latencies = result.get(timeout=trials * 10 + 300)
+        latencies = collect(stopper, trials * 10 + 120)
         del busy   # the loader's queue had to live until it started
         print(f"  {load:25s}: p50 {pct(latencies, 50):6.2f}  p99 {pct(latencies, 99):6.2f}  "
               f"max {max(latencies):6.2f}  (cycles: p99 {pct(latencies, 99) / 4:.1f})")
@@ -187,7 +187,7 @@ def main() -> None:
     try:
         problems = server.link.tuning_problems
         print(f"real-time priority: {'no: ' + '; '.join(problems) if problems else 'yes'}")
-        stop_latency(server, 8 if args.quick else 40)
+        stop_latency(server, 8 if args.quick else 25)
         handover(server)
     finally:
         server.stop(grace=None)

@@ -9,6 +9,8 @@ import math
 import multiprocessing as mp
 import os
 import threading
+import time
+from queue import Empty
 
 import grpc
 import numpy as np
@@ -75,6 +77,22 @@ def in_child(func, *args):
     proc = ctx.Process(target=_child_main, args=(queue, func, args), daemon=True)
     proc.start()
     return proc, queue
+
+
+def collect(child, timeout: float):
+    """The result of an in_child (process, queue): waits up to `timeout` s, and fails at once,
+    saying so, when the child exits without one (its traceback is on stderr above)."""
+    process, queue = child
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            return queue.get(timeout=1.0)
+        except Empty:
+            if not process.is_alive():
+                raise RuntimeError(f"a child exited (code {process.exitcode}) with no result; "
+                                   f"its error is above") from None
+            if time.monotonic() > end:
+                raise TimeoutError(f"a child gave no result within {timeout:g} s") from None
 
 
 def _child_main(queue, func, args):

@@ -6,7 +6,7 @@ and writes bench/results/latest.json with the machine it ran on; then prints one
 figure | value | baseline | goal | met. A bench that fails is a row saying so, and the run
 exits non-zero at the end; a bench that cannot run here (no Chromium, say) says why.
 
-    .venv/bin/python bench/report.py            # everything, about 10 minutes
+    .venv/bin/python bench/report.py            # everything, under 10 minutes
     .venv/bin/python bench/report.py --quick    # the same code paths, shorter (CI)
     .venv/bin/python bench/report.py --markdown # the table of latest.json, for the README
     .venv/bin/python bench/report.py --plot     # docs/bench_load.png from latest.json
@@ -37,18 +37,18 @@ BENCHES = {
     "bench_stop": ([], ["--quick"]),
     "bench_state": ([], ["--quick"]),
     "bench_lockstep": ([], ["--quick"]),
-    "bench_cycle": (["--seconds", "20", "--lock-step-seconds", "20"],
+    "bench_cycle": (["--seconds", "10", "--lock-step-seconds", "10"],
                     ["--seconds", "3", "--lock-step-seconds", "3"]),
     "bench_collision": ([], ["--repeat", "2"]),
     "bench_planning": ([], ["--repeat", "2", "--sizes", "10", "100"]),
     "bench_kinematics": ([], ["--poses", "200"]),
     "bench_crcl": ([], []),
-    "bench_dashboard": (["20"], ["5"]),
+    "bench_dashboard": (["10"], ["5"]),
     "bench_events": ([], ["--quick"]),
     "bench_tracking": ([], ["--quick"]),
     "bench_security": ([], ["--quick"]),
     "bench_cell_loops": ([], ["--cycles", "500"]),
-    "bench_soak": (["--seconds", "60"], ["--seconds", "20"]),
+    "bench_soak": (["--seconds", "45"], ["--seconds", "20"]),
 }
 # Every bench_*.py is in the report: one added without an entry fails the run at once.
 _UNLISTED = sorted({p.stem for p in HERE.glob("bench_*.py")} - set(BENCHES))
