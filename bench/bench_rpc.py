@@ -99,7 +99,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer calls, for CI")
     args = parser.parse_args()
-    calls = 200 if args.quick else 400
+    calls = 150 if args.quick else 250
     server = serve(ServerConfig(port=0, clock="realtime"))
     echo = echo_server()
     holder = Session(grpc.insecure_channel(server.target), "bench").open()

@@ -31,7 +31,7 @@ from landscape.server.app import serve
 from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.v1 import control_pb2, device_service_pb2_grpc, settings_pb2, types_pb2
 
-CALLS = 2000
+CALLS = 800
 WARMUP = 200
 
 

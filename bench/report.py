@@ -37,18 +37,18 @@ BENCHES = {
     "bench_stop": ([], ["--quick"]),
     "bench_state": ([], ["--quick"]),
     "bench_lockstep": ([], ["--quick"]),
-    "bench_cycle": (["--seconds", "10", "--lock-step-seconds", "10"],
+    "bench_cycle": (["--seconds", "8", "--lock-step-seconds", "8"],
                     ["--seconds", "3", "--lock-step-seconds", "3"]),
     "bench_collision": ([], ["--repeat", "2"]),
     "bench_planning": ([], ["--repeat", "2", "--sizes", "10", "100"]),
     "bench_kinematics": ([], ["--poses", "200"]),
     "bench_crcl": ([], []),
-    "bench_dashboard": (["10"], ["5"]),
+    "bench_dashboard": (["8"], ["5"]),
     "bench_events": ([], ["--quick"]),
     "bench_tracking": ([], ["--quick"]),
     "bench_security": ([], ["--quick"]),
     "bench_cell_loops": ([], ["--cycles", "500"]),
-    "bench_soak": (["--seconds", "45"], ["--seconds", "20"]),
+    "bench_soak": (["--seconds", "40"], ["--seconds", "20"]),
 }
 # Every bench_*.py is in the report: one added without an entry fails the run at once.
 _UNLISTED = sorted({p.stem for p in HERE.glob("bench_*.py")} - set(BENCHES))
