@@ -36,11 +36,13 @@ import os
 import queue
 import select
 import signal
+import struct
 import sys
 import threading
 import time
 import traceback
 from collections import deque
+from multiprocessing.reduction import ForkingPickler
 from typing import Any, Callable, Protocol
 
 from landscape.sim.cycle_stats import StatsRing
@@ -247,6 +249,48 @@ class _AsyncTask:
                 self.result = (call_id, False, exc)
 
 
+class _Frames:
+    """The parent's messages, as multiprocessing's Connection frames them (a 4-byte big-endian
+    length, or -1 and an 8-byte one, then the pickle), taken only once whole. A large message
+    is written in several writes, and a busy parent may take its time between them:
+    Connection.recv would wait for the rest inside a cycle; this reads what has arrived and
+    keeps it for later."""
+
+    def __init__(self, fd: int):
+        self.fd = fd
+        self.buffer = bytearray()
+        self.ended = False   # the parent closed its end, or died
+
+    def fill(self, limit: int = 1 << 20) -> None:
+        """Read what has arrived (up to `limit` bytes), never waiting for more."""
+        while limit > 0 and select.select((self.fd,), (), (), 0)[0]:
+            try:
+                chunk = os.read(self.fd, min(limit, 1 << 18))
+            except OSError:
+                chunk = b""
+            if not chunk:
+                self.ended = True
+                return
+            self.buffer += chunk
+            limit -= len(chunk)
+
+    def next(self) -> Any | None:
+        """The oldest whole message, unpickled; None until one has arrived whole."""
+        buffer = self.buffer
+        if len(buffer) < 4:
+            return None
+        size, start = struct.unpack_from("!i", buffer)[0], 4
+        if size == -1:
+            if len(buffer) < 12:
+                return None
+            size, start = struct.unpack_from("!Q", buffer, 4)[0], 12
+        if len(buffer) < start + size:
+            return None
+        item = ForkingPickler.loads(buffer[start:start + size])
+        del buffer[:start + size]
+        return item
+
+
 class _Server:
     """The child's side of the pipe, between cycles: sends what the cyclic function posted,
     reads what the parent sent, and serves calls in order within the time budget."""
@@ -255,6 +299,7 @@ class _Server:
                  guard: float):
         self.conn = conn
         self.fd = conn.fileno()
+        self.frames = _Frames(self.fd)
         self.controller = controller
         self.mailbox = mailbox
         self.stats = stats
@@ -294,13 +339,13 @@ class _Server:
     def _read(self, deadline: float) -> None:
         # At least one item per cycle, so even an overloaded loop still hears STOP.
         clock, count = time.perf_counter, 0
-        while self.running and self.conn.poll(0):
+        self.frames.fill()
+        while self.running:
             if count and clock() > deadline - self.guard:
                 return
-            try:
-                item = self.conn.recv()
-            except (EOFError, OSError):
-                self.running = False  # the parent closed its end or died
+            item = self.frames.next()
+            if item is None:
+                self.running = not self.frames.ended
                 return
             count += 1
             tag = item[0]
