@@ -8,3 +8,4 @@ CONTROLLER_LOST = 105     # the controller's process died or fell silent; Reset 
 OVERFLOW = 106            # a bounded queue overflowed (what was dropped is said)
 PANIC = 107               # a compliant motion panicked (force or travel beyond its envelope)
 DIGITAL_IO = 108          # a signalDigitalIO watch fired (its callback type CLIENT_ALARM)
+PLANNING_LOST = 109        # the planning process died: its job failed, another one started

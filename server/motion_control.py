@@ -21,14 +21,15 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from landscape.server import alarms, aux_commands, path_planning, states
-from landscape.server.collision import CheckResult, check_motion
-from landscape.server.errors import (Collision, ControllerFailure, ManualControlMode, NotFound,
-                                     WrongState)
+from landscape.server import alarms, aux_commands, states
+from landscape.server.collision import CheckResult
+from landscape.server.config import PROCESS_CLOCKS
+from landscape.server.errors import ControllerFailure, ManualControlMode, NotFound, WrongState
 from landscape.server.events import Phase, Severity
 from landscape.server.run_arrays import pack_run
 from landscape.server.moves import Planner
 from landscape.server.paths import PathLibrary, PathStore
+from landscape.server.planning_process import InProcessPlanning, PlanningProcess, check_run
 from landscape.server.states import State
 from landscape.server.targets import Frame
 from landscape.server.world_parts import WorldParts
@@ -76,6 +77,14 @@ class MotionControl:
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
         self.parts = WorldParts(device)  # the collision scene's parts follow the world
+        # Long paths are planned beside a cycle process in a process of their own as well.
+        self.planning = (PlanningProcess(device.collisions, device.link.cycle_time,
+                                         self._planning_lost)
+                         if getattr(device.link, "clock_kind", None) in PROCESS_CLOCKS
+                         else InProcessPlanning(self.planner, device.collisions))
+
+    def _planning_lost(self, why: str) -> None:
+        self.bus.alarm(Severity.ERROR, alarms.PLANNING_LOST, why)
 
     @property
     def running_id(self) -> str:
@@ -88,6 +97,7 @@ class MotionControl:
 
     def close(self) -> None:
         self.parts.close()
+        self.planning.close()
         self.paths.close()
 
     # ---- 3.4 single motions ----------------------------------------------------------------
@@ -115,17 +125,12 @@ class MotionControl:
 
     def path_load(self, name: str, frame: Frame, straight: bool, relative: bool, specs,
                   total: int | None = None) -> tuple[int, int]:
-        """Seed 3.5.1 pathLoad: resolve and check every point, then append them to the named
-        queue in one transaction; nothing is stored if any point fails. Returns (points
-        loaded, path length)."""
-        path = path_planning.load(self.planner, self.paths.get(name), name, frame, straight,
-                                  relative, specs, self.device.settings, self.outputs,
-                                  self.planning_start(), total)
-        # The whole path, as it would run from its first point, is checked against the cell
-        # now: a bad path is refused at load, naming the segment (the point it heads to).
-        self.check_collisions(path_planning.plan_run(
-            self.planner, path, np.array(path.points[0].joints), self.device.settings, 1),
-            what=f"path {name!r}")
+        """Seed 3.5.1 pathLoad: resolve and check every point, and the whole path against the
+        cell, then append them to the named queue in one transaction; nothing is stored if any
+        point fails. Returns (points loaded, path length)."""
+        path = self.planning.run("load_path", self.paths.get(name), name, frame, straight,
+                                 relative, specs, self.device.settings, self.outputs,
+                                 self.planning_start(), total)
         self.paths.put(path)
         return len(specs), len(path.points)
 
@@ -140,55 +145,38 @@ class MotionControl:
         path = self.paths.get(name)
         if path is None:
             raise NotFound(f"no path named {name!r}")
-        trajectories = path_planning.plan_run(self.planner, path, self.planning_start(),
-                                              self.device.settings, cycles)
+        trajectories = self.planning.run("plan_path_run", path, self.planning_start(),
+                                         self.device.settings, cycles, f"PathMove {name}")
         tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
         aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
                                       if p.aux_commands}
-        return self.start("PathMove", name, trajectories, tags, aux)
+        return self.start("PathMove", name, trajectories, tags, aux, checked=True)
 
     # ---- starting ----------------------------------------------------------------------------
 
     def check_collisions(self, trajectories: list, what: str = "the motion", *,
                          allow=(), model=None) -> CheckResult:
-        """Refuse trajectories (played back to back) that would bring two bodies of the cell
-        within the safety margin (collision/); `allow` names contacts meant to happen (a
-        guarded move's surface); `model`: what to check against (default: the cell
-        as it is now). A piece that comes again (the cycles of a path run) is checked once. A
-        refusal says where in the whole motion. Returns the counts of the check."""
-        model = model or self.device.collisions.model()
-        samples = sum(len(t) for t in trajectories)
-        checked: set[int] = set()
-        first = configurations = pair_checks = bound_checks = 0
-        for trajectory in trajectories:
-            if id(trajectory) not in checked:
-                checked.add(id(trajectory))
-                result = check_motion(model, trajectory.positions, trajectory.dt,
-                                      trajectory.marks, allow=allow)
-                configurations += result.configurations
-                pair_checks += result.pair_checks
-                bound_checks += result.bound_checks
-                if result.contact is not None:
-                    contact = result.contact.within(first, samples, trajectory.dt)
-                    raise Collision(f"{what} would collide: {contact}", **contact.metadata())
-            first += len(trajectory)
-        return CheckResult(None, configurations, pair_checks, bound_checks)
+        """planning_process.check_run against the cell as it is now (or `model`)."""
+        return check_run(self.device.collisions, trajectories, what, allow=allow, model=model)
 
     def start(self, command: str, point_name: str, trajectories: list,
               tags: dict | None = None, aux: dict | None = None, *, allow=(),
-              loops: dict | None = None, finish: Callable[[dict], str] | None = None) -> str:
+              loops: dict | None = None, finish: Callable[[dict], str] | None = None,
+              checked: bool = False) -> str:
         """Hand planned trajectories to the executor, to play back to back; Resting -> Moving.
         `tags` maps mark labels to (tag name, tag index) for tag events, `aux` to the aux
-        commands run there; `allow` as in check_collisions, which runs first;
+        commands run there; `allow` as in check_collisions, which runs first (unless the
+        planning checked them: `checked`);
         `loops` adds the sensor loops of the run message (executor.py: "guard", "comply") and
         `finish(report) -> message` words its end. Returns the command id that the started /
         tag / done / failed events name (seed: CMD_STARTED_OK)."""
         return self._start(command, point_name, trajectories, tags, aux, allow=allow,
-                           loops=loops, finish=finish).command_id
+                           loops=loops, finish=finish, checked=checked).command_id
 
     def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
-               loops=None, finish=None) -> RunningMotion:
-        self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
+               loops=None, finish=None, checked=False) -> RunningMotion:
+        if not checked:
+            self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
         arrays = self.device.link.share(pack_run(trajectories, self.planner.dt))
         motion = RunningMotion(f"{command}-{next(self._ids)}", command, point_name, tags or {},
                                aux or {}, arrays, finish=finish)

@@ -101,6 +101,24 @@ class CollisionScene:
             other._part_at, other._allowed = dict(self._part_at), list(self._allowed)
             return other
 
+    def state(self) -> tuple:
+        """What has changed in this scene since it was built from its cell: for `restore` on
+        a scene of the same cell in another process (planning_process.py)."""
+        with self._lock:
+            return (self.version, dict(self._gap), dict(self._tool_at), dict(self._part_at),
+                    self._mounted, self._held, tuple(self._allowed))
+
+    def restore(self, state: tuple) -> None:
+        """This scene as `state` (another's, from `state()`) says; nothing to do if it was
+        taken from there at the same version."""
+        with self._lock:
+            if state[0] == self.version:
+                return
+            (self.version, self._gap, self._tool_at, self._part_at, self._mounted, self._held,
+             allowed) = state
+            self._allowed = list(allowed)
+            self._model = None
+
     # ---- the world changes --------------------------------------------------------------------
 
     def mount_tool(self, name: str) -> None:

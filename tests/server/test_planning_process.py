@@ -1,0 +1,147 @@
+"""Issue 8.2: long paths are planned beside a cycle process in a process of their own, so that
+a stop arriving meanwhile finds the server's interpreter free. The planning process plans what
+the server would (the same path, the same refusals), follows the cell's collision scene, and
+a planning process that dies fails its job and is replaced. Stop latency itself is measured
+in bench/bench_stop.py."""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from landscape.server.app import serve
+from landscape.server.collision import CollisionScene
+from landscape.server.config import ServerConfig
+from landscape.server.convert import point_specs
+from landscape.server.errors import Collision, Internal
+from landscape.server.moves import Planner
+from landscape.server.planning_process import InProcessPlanning, PlanningProcess
+from landscape.server.settings import MotionSettings, Units
+from landscape.server.targets import Frame
+from landscape.sim.cell import load_cell
+from landscape.sim.kinematics import Kinematics
+from landscape.v1 import motion_pb2, types_pb2
+
+from support import locked_session, stubs, wait_until
+
+CYCLE = 0.004
+HOME = np.array([0.0, 0.0, math.pi / 2, 0.0, math.pi / 2, 0.0])
+
+
+def _ring(n: int, z: float = 0.6) -> list:
+    """n Cartesian points on a ring in front of the arm (m, rad), as PathLoad would parse them."""
+    tags = [types_pb2.TagStruct(x=0.5 + 0.1 * math.cos(i / 50), y=0.1 * math.sin(i / 50), z=z,
+                                roll=math.pi) for i in range(n)]
+    return point_specs(tags, Frame.BASE, Units())
+
+
+@pytest.fixture(scope="module")
+def cell():
+    return load_cell(None)
+
+
+@pytest.fixture
+def both(cell):
+    """The same jobs in this process and in a planning process, each with its own scene."""
+    scene = CollisionScene(cell)
+    here = InProcessPlanning(Planner(Kinematics(cell.arm), CYCLE), CollisionScene(cell))
+    there = PlanningProcess(scene, CYCLE)
+    yield here, there, scene
+    there.close()
+
+
+def _load(planning, specs, name="ring"):
+    settings = MotionSettings(load_cell(None).arm)
+    return planning.run("load_path", None, name, Frame.BASE, False, False, specs, settings,
+                        set(), HOME, None)
+
+
+def test_the_planning_process_plans_what_the_server_would(both):
+    here, there, _ = both
+    specs = _ring(200)
+    local, remote = _load(here, specs), _load(there, specs)
+    assert remote == local
+    settings = MotionSettings(load_cell(None).arm)
+    run_here = here.run("plan_path_run", local, HOME, settings, 2, "PathMove ring")
+    run_there = there.run("plan_path_run", remote, HOME, settings, 2, "PathMove ring")
+    assert len(run_there) == len(run_here)
+    for a, b in zip(run_here, run_there):
+        np.testing.assert_array_equal(a.positions, b.positions)
+        assert a.marks == b.marks
+
+
+def test_a_refusal_comes_back_as_the_server_would_raise_it(both):
+    here, there, _ = both
+    into_the_table = _ring(10) + _ring(10, z=0.15)   # the table's top is at 0.2 m
+    with pytest.raises(Exception) as local:
+        _load(here, into_the_table)
+    with pytest.raises(type(local.value)) as remote:
+        _load(there, into_the_table)
+    assert remote.value.message == local.value.message
+    assert remote.value.metadata == local.value.metadata
+
+
+def test_the_planning_process_follows_the_scene(both, cell):
+    _, there, scene = both
+    specs = _ring(160)
+    _load(there, specs)                      # clear as the cell is
+    # A part put down on the ring's way (its point 150, 0.2 m from its start), in the server's
+    # scene: the next job knows it.
+    on_the_way = np.eye(4)
+    on_the_way[:3, 3] = [0.5 + 0.1 * math.cos(3.0), 0.1 * math.sin(3.0), 0.6]
+    scene.place_part(cell.world.parts[0].name, on_the_way)
+    with pytest.raises(Collision) as refused:
+        _load(there, specs)
+    assert cell.world.parts[0].name in refused.value.message
+
+
+def test_a_planning_process_that_dies_fails_its_job_and_is_replaced(both):
+    _, there, _ = both
+    lost = []
+    there.on_lost = lost.append   # the device raises its alarm there
+    first = there.pid
+    os.kill(first, signal.SIGKILL)
+    wait_until(lambda: not os.path.exists(f"/proc/{first}/stat")
+               or open(f"/proc/{first}/stat").read().split(") ")[1][0] == "Z", timeout=10)
+    with pytest.raises(Internal, match="planning process ended"):
+        _load(there, _ring(5))
+    assert there.pid != first
+    assert len(lost) == 1 and "another one has started" in lost[0]
+    assert len(_load(there, _ring(5)).points) == 5
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = open(f"/proc/{pid}/stat").read().rsplit(") ", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def test_a_long_path_is_planned_outside_the_servers_interpreter():
+    """Before: the server's own threads did the work, and a stop's handler waited for them."""
+    server = serve(ServerConfig(port=0, clock="realtime"))
+    holder = locked_session(server)
+    try:
+        device, _, _ = stubs(holder.channel)
+        planning = server.device.motions.planning
+        assert isinstance(planning, PlanningProcess) and planning.pid != os.getpid()
+        tags = [types_pb2.TagStruct(x=0.5 + 0.1 * math.cos(i / 300), y=0.1 * math.sin(i / 300),
+                                    z=0.6, roll=math.pi) for i in range(2000)]
+        header = motion_pb2.PathHeader(path_name="long",
+                                       frame=types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME,
+                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+        server_before, planning_before = time.process_time(), _cpu_seconds(planning.pid)
+        reply = device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=tags)]),
+                                timeout=120)
+        server_cpu = time.process_time() - server_before
+        planning_cpu = _cpu_seconds(planning.pid) - planning_before
+        print(f"2,000-point path: planning process {planning_cpu:.2f} s of CPU, "
+              f"server {server_cpu:.2f} s")
+        assert reply.points_loaded == 2000
+        assert planning_cpu > 2 * server_cpu
+    finally:
+        holder.close()
+        server.stop(grace=None)
