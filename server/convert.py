@@ -227,21 +227,21 @@ class PathLoadStream:
     def __init__(self, units: Units, max_points: int):
         self.units, self.max_points = units, max_points
         self.header, self.frame, self.specs = None, None, []
-        self._messages = 0
+        self.messages = 0
 
     def feed(self, request) -> None:
         bounds.check(request)
         if len(self.specs) + len(request.tags) > self.max_points:
             raise OutOfRange(f"a path holds at most {self.max_points} points")
-        if self._messages == 0:
+        if self.messages == 0:
             if not request.HasField("header"):
                 raise ParamError("the first PathLoad message must carry the header")
             self.header = request.header
             self.frame = enum_value(PATH_FRAMES, self.header.frame, "frame (JOINT, BASE or WORLD)")
         elif request.HasField("header"):
-            raise ParamError(f"message {self._messages} of the PathLoad stream carries a "
+            raise ParamError(f"message {self.messages} of the PathLoad stream carries a "
                              f"second header")
-        self._messages += 1
+        self.messages += 1
         self.specs.extend(point_specs(request.tags, self.frame, self.units, len(self.specs)))
 
     def finish(self):

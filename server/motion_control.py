@@ -125,14 +125,15 @@ class MotionControl:
 
     def path_load(self, name: str, frame: Frame, straight: bool, relative: bool, specs,
                   total: int | None = None) -> tuple[int, int]:
-        """Seed 3.5.1 pathLoad: resolve and check every point, and the whole path against the
-        cell, then append them to the named queue in one transaction; nothing is stored if any
-        point fails. Returns (points loaded, path length)."""
-        path = self.planning.run("load_path", self.paths.get(name), name, frame, straight,
-                                 relative, specs, self.device.settings, self.outputs,
-                                 self.planning_start(), total)
+        """Seed 3.5.1 pathLoad: resolve and check every point (PointSpecs, or a StreamRef to
+        a PathLoad stream's), and the whole path against the cell, then append them to the
+        named queue in one transaction; nothing is stored if any point fails. Returns (points
+        loaded, path length)."""
+        path, loaded = self.planning.run("load_path", self.paths.get(name), name, frame,
+                                         straight, relative, specs, self.device.settings,
+                                         self.outputs, self.planning_start(), total)
         self.paths.put(path)
-        return len(specs), len(path.points)
+        return loaded, len(path.points)
 
     def path_clear(self, name: str) -> None:
         motion = self._motion

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import asyncio
 
-from landscape.server import cell_view, convert, path_planning, services
+from landscape.server import cell_view, convert, services
 from landscape.server.device import Device
 from landscape.server.errors import ControllerFailure, Stopped
+from landscape.server.planning_process import StreamRef
 from landscape.server.servicers.guard import blocking, guarded, lease_of
 from landscape.server.targets import Frame
 from landscape.server.units import Units, pose_matrix
@@ -170,23 +171,28 @@ class DeviceServicer(services.DEVICE.servicer_base):
     # ---- 3.5 paths ----
     async def PathLoad(self, request_iterator, context):
         # The points arrive without holding anything: stops and other commands go on while a
-        # long path streams in; only storing it takes the command lock. Each message is
-        # parsed on the parsing thread, never on the event loop.
-        stream = convert.PathLoadStream(self.device.settings.units, path_planning.MAX_POINTS)
-        async for request in request_iterator:
-            await self.dispatch.run(self.dispatch.parse, stream.feed, request)
-        header, frame, specs = stream.finish()
-        straight = convert.enum_value(convert.STRAIGHT, header.motion_type,
-                                      "motion_type (JOINT or STRAIGHT)")
-        relative = convert.enum_value(convert.OFFSETS, header.offset_type, "offset_type")
-        lease = lease_of(context)
+        # long path streams in; only storing it takes the command lock. Each message is parsed
+        # and kept by the planning (planning_process.py: in a process of its own beside a cycle
+        # process), reached from the parsing thread, never from the event loop.
+        planning, parse = self.device.motions.planning, self.dispatch.parse
+        key = await self.dispatch.run(parse, planning.open_stream, self.device.settings.units)
+        try:
+            async for request in request_iterator:
+                await self.dispatch.run(parse, planning.feed_stream, key, request)
+            header, frame = await self.dispatch.run(parse, planning.run, "finish_stream", key)
+            straight = convert.enum_value(convert.STRAIGHT, header.motion_type,
+                                          "motion_type (JOINT or STRAIGHT)")
+            relative = convert.enum_value(convert.OFFSETS, header.offset_type, "offset_type")
+            lease = lease_of(context)
 
-        def store():
-            with self.device.command("PathLoad", lease):
-                return self.device.motions.path_load(header.path_name, frame, straight,
-                                                     relative, specs,
-                                                     header.number_of_points or None)
-        loaded, length = await self.dispatch.run(self.dispatch.commands, store)
+            def store():
+                with self.device.command("PathLoad", lease):
+                    return self.device.motions.path_load(header.path_name, frame, straight,
+                                                         relative, StreamRef(key),
+                                                         header.number_of_points or None)
+            loaded, length = await self.dispatch.run(self.dispatch.commands, store)
+        finally:
+            planning.drop_stream(key)
         return motion_pb2.PathLoadResponse(ret_val=convert.ok(), points_loaded=loaded,
                                            path_length=length)
 

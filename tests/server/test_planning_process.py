@@ -10,6 +10,7 @@ import os
 import signal
 import time
 
+import grpc
 import numpy as np
 import pytest
 
@@ -17,16 +18,16 @@ from landscape.server.app import serve
 from landscape.server.collision import CollisionScene
 from landscape.server.config import ServerConfig
 from landscape.server.convert import point_specs
-from landscape.server.errors import Collision, Internal
+from landscape.server.errors import Collision, Internal, ParamError
 from landscape.server.moves import Planner
-from landscape.server.planning_process import InProcessPlanning, PlanningProcess
+from landscape.server.planning_process import InProcessPlanning, PlanningProcess, StreamRef
 from landscape.server.settings import MotionSettings, Units
 from landscape.server.targets import Frame
 from landscape.sim.cell import load_cell
 from landscape.sim.kinematics import Kinematics
 from landscape.v1 import motion_pb2, types_pb2
 
-from support import locked_session, stubs, wait_until
+from support import locked_session, stubs
 
 CYCLE = 0.004
 HOME = np.array([0.0, 0.0, math.pi / 2, 0.0, math.pi / 2, 0.0])
@@ -56,8 +57,10 @@ def both(cell):
 
 def _load(planning, specs, name="ring"):
     settings = MotionSettings(load_cell(None).arm)
-    return planning.run("load_path", None, name, Frame.BASE, False, False, specs, settings,
-                        set(), HOME, None)
+    path, loaded = planning.run("load_path", None, name, Frame.BASE, False, False, specs,
+                                settings, set(), HOME, None)
+    assert loaded == len(specs) if isinstance(specs, list) else loaded > 0
+    return path
 
 
 def test_the_planning_process_plans_what_the_server_would(both):
@@ -72,6 +75,49 @@ def test_the_planning_process_plans_what_the_server_would(both):
     for a, b in zip(run_here, run_there):
         np.testing.assert_array_equal(a.positions, b.positions)
         assert a.marks == b.marks
+
+
+def _messages(n: int, per_message: int = 100) -> list:
+    header = motion_pb2.PathHeader(path_name="ring",
+                                   frame=types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME,
+                                   motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+    tags = [types_pb2.TagStruct(x=0.5 + 0.1 * math.cos(i / 50), y=0.1 * math.sin(i / 50),
+                                z=0.6, roll=math.pi, tag_name=f"t{i}") for i in range(n)]
+    return [motion_pb2.PathLoadRequest(header=header)] + [
+        motion_pb2.PathLoadRequest(tags=tags[i:i + per_message])
+        for i in range(0, n, per_message)]
+
+
+def _stream(planning, messages) -> str:
+    key = planning.open_stream(Units())
+    for message in messages:
+        planning.feed_stream(key, message)
+    return key
+
+
+def test_a_path_load_stream_is_kept_and_loaded_where_it_is_planned(both):
+    here, there, _ = both
+    paths = []
+    for planning in (here, there):
+        key = _stream(planning, _messages(250))
+        header, frame = planning.run("finish_stream", key)
+        assert header.path_name == "ring" and frame is Frame.BASE
+        paths.append(_load(planning, StreamRef(key)))
+        planning.drop_stream(key)
+        with pytest.raises(Internal, match="lost"):   # dropped: nothing is kept
+            _load(planning, StreamRef(key))
+    assert paths[0] == paths[1] and len(paths[0].points) == 250
+    assert [p.tag_name for p in paths[1].points[:2]] == ["t0", "t1"]
+    # A message refused in the planning process is refused as the server would refuse it.
+    bad = _messages(10)
+    bad[1].tags[3].x = math.nan
+    refusals = []
+    for planning in (here, there):
+        with pytest.raises(ParamError) as refused:
+            _stream(planning, bad)
+        refusals.append((refused.value.message, refused.value.metadata))
+    assert refusals[0] == refusals[1] and refusals[0][1]["index"] == "3"
 
 
 def test_a_refusal_comes_back_as_the_server_would_raise_it(both):
@@ -104,14 +150,15 @@ def test_a_planning_process_that_dies_fails_its_job_and_is_replaced(both):
     lost = []
     there.on_lost = lost.append   # the device raises its alarm there
     first = there.pid
-    os.kill(first, signal.SIGKILL)
-    wait_until(lambda: not os.path.exists(f"/proc/{first}/stat")
-               or open(f"/proc/{first}/stat").read().split(") ")[1][0] == "Z", timeout=10)
+    key = _stream(there, _messages(10))
+    os.kill(there.pid, signal.SIGKILL)
     with pytest.raises(Internal, match="planning process ended"):
         _load(there, _ring(5))
     assert there.pid != first
     assert len(lost) == 1 and "another one has started" in lost[0]
     assert len(_load(there, _ring(5)).points) == 5
+    with pytest.raises(Internal, match="lost with the planning process"):   # its stream
+        there.feed_stream(key, _messages(20, per_message=10)[2])
 
 
 def _cpu_seconds(pid: int) -> float:
@@ -142,6 +189,16 @@ def test_a_long_path_is_planned_outside_the_servers_interpreter():
               f"server {server_cpu:.2f} s")
         assert reply.points_loaded == 2000
         assert planning_cpu > 2 * server_cpu
+        # The messages reach the planning process as the bytes they came in: bytes that are no
+        # PathLoadRequest are refused there, and nothing is stored.
+        raw = holder.channel.stream_unary("/landscape.v1.DeviceService/PathLoad")
+        first = motion_pb2.PathLoadRequest(header=header, tags=tags[:5]).SerializeToString()
+        with pytest.raises(grpc.RpcError) as refused:
+            raw(iter([first, b"\xff\xff\xff"]), timeout=30,
+                metadata=(("landscape-lease", holder.lease),))
+        assert refused.value.code() is grpc.StatusCode.INVALID_ARGUMENT
+        assert "message 1 of the PathLoad stream" in refused.value.details()
+        assert len(server.device.motions.paths.get("long").points) == 2000
     finally:
         holder.close()
         server.stop(grace=None)

@@ -67,7 +67,7 @@ def test_stop_motion_does_not_wait_for_a_path_load_streaming_in(arm, monkeypatch
     feed = convert.PathLoadStream.feed
 
     def held_feed(stream, request):
-        if stream._messages == 3:
+        if stream.messages == 3:
             parsing.set()
             proceed.wait(10)
         feed(stream, request)
