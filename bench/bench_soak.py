@@ -2,8 +2,8 @@
 over a long run. Prints figures, no pass/fail.
 
 The server runs as users start it (`python -m landscape.server`, real-time clock, audit log on),
-in a process of its own; its resident memory (VmRSS) and its cycle process's are read from
-/proc once a second. After a settled idle phase, the load is what a busy cell puts on it, each
+in a process of its own; its resident memory (VmRSS), its cycle process's and its planning
+process's are read from /proc once a second. After a settled idle phase, the load is what a busy cell puts on it, each
 part in a child process: the lock holder running a 20-point blended path again and again (its
 PathMove commands, tag events and done events; it first fills the server's bounded event
 history with operator messages, so that filling it is not taken for growth), 8 clients calling GetRobotPosition and
@@ -35,6 +35,7 @@ from common import in_child, record
 
 from landscape.client import AsyncSession
 from landscape.server.events import DEFAULT_HISTORY
+from landscape.server.planning_process import PROCESS_NAME
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
                           event_service_pb2_grpc, motion_pb2, settings_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
@@ -49,12 +50,19 @@ def rss_mb(pid: int) -> float:
     return kb / 1024
 
 
-def cycle_process(pid: int) -> int | None:
-    """The device server's largest child: its cycle process (the others are multiprocessing's
-    helpers)."""
-    with open(f"/proc/{pid}/task/{pid}/children") as children:
-        pids = [int(c) for c in children.read().split()]
-    return max(pids, key=rss_mb, default=None)
+def children(pid: int) -> tuple[int | None, int | None]:
+    """The device server's cycle process (its largest child but one: the others are
+    multiprocessing's helpers) and its planning process (named so)."""
+    with open(f"/proc/{pid}/task/{pid}/children") as listed:
+        pids = [int(c) for c in listed.read().split()]
+    planning = [p for p in pids if _comm(p) == PROCESS_NAME]
+    cycle = max((p for p in pids if p not in planning), key=rss_mb, default=None)
+    return cycle, planning[0] if planning else None
+
+
+def _comm(pid: int) -> str:
+    with open(f"/proc/{pid}/comm") as comm:
+        return comm.read().strip()
 
 
 # -- the load, each part in a child ----------------------------------------------------------
@@ -162,19 +170,20 @@ def start_server(folder: str) -> tuple[subprocess.Popen, str]:
     raise RuntimeError("the device server did not start")
 
 
-def sample(pid: int, cycle: int | None, seconds: float, rows: list) -> None:
-    """(t, server MB, cycle process MB) once a second for `seconds`."""
+def sample(pids: list, seconds: float, rows: list) -> None:
+    """(t, MB of each of `pids`: the server, its cycle and planning processes) once a second
+    for `seconds`."""
     began = time.monotonic()
     while (now := time.monotonic() - began) < seconds:
-        rows.append((now, rss_mb(pid), rss_mb(cycle) if cycle else math.nan))
+        rows.append((now, *(rss_mb(p) if p else math.nan for p in pids)))
         time.sleep(1.0)
 
 
-def growth(rows: list) -> tuple[float, float]:
-    """MB per minute of the server and of the cycle process (least squares)."""
+def growth(rows: list) -> tuple[float, ...]:
+    """MB per minute of each process sampled (least squares)."""
     t = np.array([r[0] for r in rows])
     return tuple(float(np.polyfit(t, np.array([r[k] for r in rows]), 1)[0]) * 60
-                 for k in (1, 2))
+                 for k in range(1, len(rows[0])))
 
 
 def main() -> None:
@@ -188,9 +197,9 @@ def main() -> None:
         proc, target = start_server(folder)
         try:
             time.sleep(3.0)   # the controller enabled, homed, the server settled
-            cycle = cycle_process(proc.pid)
+            pids = [proc.pid, *children(proc.pid)]
             idle: list = []
-            sample(proc.pid, cycle, 5.0, idle)
+            sample(pids, 5.0, idle)
             manager = mp.get_context("spawn").Manager()
             stop, ready = manager.Event(), manager.Event()
             loads = [in_child(holder, target, stop, ready)]
@@ -199,23 +208,23 @@ def main() -> None:
             loads += [in_child(readers, target, 8, stop), in_child(watchers, target, 8, 4, stop)]
             time.sleep(warm_up)
             loaded: list = []
-            sample(proc.pid, cycle, seconds - warm_up, loaded)
+            sample(pids, seconds - warm_up, loaded)
             stop.set()
             runs, calls, messages = (queue.get(timeout=120) for _, queue in loads)
         finally:
             proc.terminate()
             proc.wait(timeout=30)
-    server_idle = float(np.median([r[1] for r in idle]))
-    cycle_idle = float(np.median([r[2] for r in idle]))
-    server_load = float(np.median([r[1] for r in loaded]))
-    cycle_load = float(np.median([r[2] for r in loaded]))
-    server_growth, cycle_growth = growth(loaded)
+    (server_idle, cycle_idle, planning_idle), (server_load, cycle_load, planning_load) = (
+        [float(np.median([r[k] for r in rows])) for k in (1, 2, 3)] for rows in (idle, loaded))
+    server_growth, cycle_growth, planning_growth = growth(loaded)
     print(f"resident memory (MB), {seconds:g} s of load after {warm_up:g} s of warm-up: "
           f"{runs} path runs, {calls:,} read calls, {messages:,} streamed messages")
-    print(f"  device server   idle {server_idle:6.1f}   under load {server_load:6.1f}   "
-          f"growth {server_growth:+6.2f} MB/min")
-    print(f"  cycle process   idle {cycle_idle:6.1f}   under load {cycle_load:6.1f}   "
-          f"growth {cycle_growth:+6.2f} MB/min")
+    for name, at_idle, at_load, grew in (
+            ("device server", server_idle, server_load, server_growth),
+            ("cycle process", cycle_idle, cycle_load, cycle_growth),
+            ("planning process", planning_idle, planning_load, planning_growth)):
+        print(f"  {name:17s} idle {at_idle:6.1f}   under load {at_load:6.1f}   "
+              f"growth {grew:+6.2f} MB/min")
     print(f"  goal (issue 17): no growth (at most {GOAL_GROWTH:g} MB/min of allocator noise)")
     record("server memory, idle", server_idle, "MB")
     record("server memory, under load", server_load, "MB", baseline=server_idle,
@@ -224,9 +233,10 @@ def main() -> None:
            goal=GOAL_GROWTH)
     record(f"cycle process memory growth, {seconds:g} s of load", cycle_growth, "MB/min",
            goal=GOAL_GROWTH)
-    record("memory over time (server, cycle process)", server_load, "MB",
-           points=[list(r) for r in idle + [(warm_up + 5.0 + r[0], r[1], r[2])
-                                                for r in loaded]])
+    record(f"planning process memory growth, {seconds:g} s of load", planning_growth,
+           "MB/min", goal=GOAL_GROWTH)
+    record("memory over time (server, cycle process, planning process)", server_load, "MB",
+           points=[list(r) for r in idle + [(warm_up + 5.0 + r[0], *r[1:]) for r in loaded]])
 
 
 if __name__ == "__main__":

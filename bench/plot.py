@@ -68,12 +68,13 @@ def _stop_panel(ax, figures: dict) -> None:
 
 
 def _memory_panel(ax, figures: dict) -> None:
-    row = figures.get("memory over time (server, cycle process)")
+    row = figures.get("memory over time (server, cycle process, planning process)")
     if row is None:
         return
-    t, server, cycle = zip(*row["points"])
+    t, server, cycle, planning = zip(*row["points"])
     ax.plot(t, server, label="device server")
     ax.plot(t, cycle, label="cycle process")
+    ax.plot(t, planning, label="planning process")
     ax.set(xlabel="s (idle, then the load)", ylabel="resident memory (MB)",
            title="Memory through the soak", ylim=(0, max(server) * 1.2))
 
