@@ -164,6 +164,7 @@ class StateHub:
         tip = self.tool_pose(int(row[SEQ]), row[Q], view.frame)
         status = device.status()
         motion, mode = device.motion_control_state()
+        running = device.motions.running   # read once: the motion may end meanwhile
         sample = pb.StateSample(
             sequence=int(row[SEQ]), controller_time=float(row[TIME]),
             skipped=0, joint_positions=units.angle_from_si(row[Q]).tolist(),
@@ -172,7 +173,7 @@ class StateHub:
             joint_torques=row[TAU].tolist(), tool_pose=convert.matrix_to_pose(tip, units),
             device_state=convert.DEVICE_STATE_PB[status.state], motion_control_state=motion,
             control_mode=mode, command_id=status.command_id,
-            point_name=device.motions.running.point_name if device.motions.running else "",
+            point_name=running.point_name if running else "",
             tag_name=device.motions.last_tag[1], estop=status.estop,
             units=convert.units_to_pb(units))
         if self.workcell is not None:

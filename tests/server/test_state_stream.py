@@ -2,6 +2,7 @@
 watchers, on the real-time clock (250 Hz) and the lock-step one."""
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 import time
@@ -155,3 +156,17 @@ def test_many_watchers_share_the_samples(server):
         for call in calls:
             call.cancel()
     assert counts == [20] * 50, f"in {time.monotonic() - began:.1f} s"
+
+
+def test_a_motion_ending_while_its_sample_is_made_leaves_the_stream_alone(server, monkeypatch):
+    """Found from outside: the running motion can end between two reads of it, and a stream
+    whose sample read it twice ended with INTERNAL. Here every read alternates between a
+    running motion and none."""
+    from landscape.server.motion_control import MotionControl, RunningMotion
+    reads = itertools.cycle([RunningMotion("PathMove-1", "PathMove", "ring", {}), None])
+    monkeypatch.setattr(MotionControl, "running", property(lambda self: next(reads)))
+    with grpc.insecure_channel(server.target) as channel:
+        call, _ = _stream(channel)
+        samples = _samples(call, 6)
+        call.cancel()
+    assert {s.point_name for s in samples} <= {"ring", ""}
