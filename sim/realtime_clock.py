@@ -13,6 +13,7 @@ import threading
 import traceback
 from typing import Any, Callable
 
+from landscape.sim import cycle_child
 from landscape.sim import cycle_process as cp
 from landscape.sim.cycle_stats import CycleStats, StatsRing
 
@@ -95,7 +96,7 @@ class RealTimeClock:
         ctx = multiprocessing.get_context("spawn")
         parent_end, child_end = ctx.Pipe(duplex=True)
         self._process = ctx.Process(
-            target=cp.child_main, name="landscape-cycle", daemon=True,
+            target=cycle_child.child_main, name="landscape-cycle", daemon=True,
             args=(self._factory, child_end, self._stats, self._cycle_time, os.getpid(),
                   self._spin, self._guard, None if self.free else self._rt_priority, self.free))
         self._process.start()
