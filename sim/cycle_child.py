@@ -164,7 +164,8 @@ class _Server:
                 return
             item = self.frames.next()
             if item is None:
-                self.running = not self.frames.ended
+                if self.frames.ended:   # never set back to True: SIGTERM may have cleared it
+                    self.running = False
                 return
             count += 1
             tag = item[0]
