@@ -3,11 +3,12 @@ over a long run. Prints figures, no pass/fail.
 
 The server runs as users start it (`python -m landscape.server`, real-time clock, audit log on),
 in a process of its own; its resident memory (VmRSS), its cycle process's and its planning
-process's are read from /proc once a second. After a settled idle phase, the load is what a busy cell puts on it, each
-part in a child process: the lock holder running a 20-point blended path again and again (its
-PathMove commands, tag events and done events; it first fills the server's bounded event
-history with operator messages, so that filling it is not taken for growth), 8 clients calling GetRobotPosition and
-GetDeviceState back to back, 8 StreamState watchers at 50 Hz and 4 event subscribers.
+process's are read from /proc once a second. After a settled idle phase, the load is what a
+busy cell puts on it, each part in a child process: the lock holder running a 20-point
+blended path again and again (its PathMove commands, tag events and done events; it first
+fills the server's bounded event history with operator messages, so that filling it is not
+taken for growth), 8 clients calling GetRobotPosition and GetDeviceState back to back, 8
+StreamState watchers at 50 Hz and 4 event subscribers.
 
 Growth is the slope of a least-squares line through the samples after the warm-up (the first
 quarter of the load phase, at least 10 s: caches, pools and the ring fill), in MB per minute;
@@ -51,8 +52,8 @@ def rss_mb(pid: int) -> float:
 
 
 def children(pid: int) -> tuple[int | None, int | None]:
-    """The device server's cycle process (its largest child but one: the others are
-    multiprocessing's helpers) and its planning process (named so)."""
+    """The device server's planning process (named so) and its cycle process (the largest of
+    the other children: the rest are multiprocessing's helpers), as (cycle, planning)."""
     with open(f"/proc/{pid}/task/{pid}/children") as listed:
         pids = [int(c) for c in listed.read().split()]
     planning = [p for p in pids if _comm(p) == PROCESS_NAME]

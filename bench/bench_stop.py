@@ -148,7 +148,9 @@ def stop_latency(server, trials: int) -> None:
             time.sleep(0.5)
             go.set()
         latencies, missed = collect(stopper, trials * 10 + 120)
-        del busy   # the loader's queue had to live until it started
+        if busy is not None:   # its load ends with its phase (it would run into the next)
+            busy[0].terminate()
+            busy[0].join(10)
         print(f"  {load:25s}: p50 {pct(latencies, 50):6.2f}  p99 {pct(latencies, 99):6.2f}  "
               f"max {max(latencies):6.2f}  (cycles: p99 {pct(latencies, 99) / 4:.1f})"
               + (f", {missed} stop(s) after the move had ended" if missed else ""))

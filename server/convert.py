@@ -184,9 +184,6 @@ OFFSETS = {types_pb2.OFFSET_TYPE_ABSOLUTE_DATA: False, types_pb2.OFFSET_TYPE_REL
 PATH_FRAMES = {k: v for k, v in FRAMES.items() if v is not Frame.TOOL}
 
 
-_ROWS_AT_ONCE = 500
-
-
 def point_specs(tags, frame: Frame, units: Units, first: int = 0) -> list[PointSpec]:
     """The tag_structs of one PathLoad message in SI (joint_values for JOINT_FRAME, else x, y,
     z, roll, pitch, yaw), converted together: a message holds up to 10,000 of them. An error
@@ -196,14 +193,10 @@ def point_specs(tags, frame: Frame, units: Units, first: int = 0) -> list[PointS
             if len(tag.joint_values) != 6:
                 raise at_point(first + index, ParamError(
                     f"a move needs 6 values, got {len(tag.joint_values)}"))
-        rows = [tag.joint_values for tag in tags]
+        values = np.array([tag.joint_values for tag in tags], dtype=float).reshape(-1, 6)
     else:
-        rows = [(t.x, t.y, t.z, t.roll, t.pitch, t.yaw) for t in tags]
-    # In blocks: one np.array of 10,000 rows keeps the interpreter 2-3 ms, and a stop's
-    # handler needs it (the parse thread shares it with the event loop).
-    values = np.concatenate([np.zeros((0, 6))] + [
-        np.array(rows[i:i + _ROWS_AT_ONCE], dtype=float).reshape(-1, 6)
-        for i in range(0, len(rows), _ROWS_AT_ONCE)])
+        values = np.array([(t.x, t.y, t.z, t.roll, t.pitch, t.yaw) for t in tags],
+                          dtype=float).reshape(-1, 6)
     finite = np.isfinite(values).all(axis=1)
     if not finite.all():
         index = int(np.argmin(finite))

@@ -6,10 +6,10 @@ Parsing a PathLoad stream (50 ms of Python per 10,000-point message), loading a 
 planning its run keeps an interpreter busy for seconds. In the server's, a StopMotion
 arriving meanwhile waited for that interpreter before its message could leave for the cycle:
 p99 25 to 40 ms against 5.5 ms idle (bench_stop). The planning process has its own arm, its
-own copy of the cell's collision scene, brought up to date with each job, and the points of
-the PathLoad streams until their path is loaded; the server only hands it each message's
-bytes as they came (services.RAW_REQUESTS), and its threads wait for answers without holding
-the interpreter.
+own copy of the cell's collision scene, brought up to date by the first job after a change,
+and the points of the PathLoad streams until their path is loaded; the server only hands it
+each message's bytes as they came (services.RAW_REQUESTS), and its threads wait for answers
+without holding the interpreter.
 
 The jobs are plain functions of a PlanningContext, run here in the server when the cycle runs
 in the server as well (the lock-step clock: a stop waits for the cycle's thread anyway).
@@ -152,14 +152,13 @@ _keys = itertools.count(1)
 
 # ---- where they run --------------------------------------------------------------------------
 
-class InProcessPlanning:
-    """The jobs on the calling thread, with the server's planner and scene."""
-
-    def __init__(self, planner: Planner, scene: CollisionScene):
-        self.context = PlanningContext(planner, scene)
+class _Planning:
+    """Where the jobs run: `run(job, *args)`; a PathLoad stream is opened, fed message by
+    message, ended with the job "finish_stream" and dropped (`drop_stream` waits for
+    nothing)."""
 
     def run(self, job: str, *args):
-        return JOBS[job](self.context, *args)
+        raise NotImplementedError
 
     def open_stream(self, units: Units) -> str:
         key = f"stream-{next(_keys)}"
@@ -169,18 +168,27 @@ class InProcessPlanning:
     def feed_stream(self, key: str, message) -> None:
         self.run("feed_stream", key, message)
 
+
+class InProcessPlanning(_Planning):
+    """The jobs on the calling thread, with the server's planner and scene."""
+
+    def __init__(self, planner: Planner, scene: CollisionScene):
+        self.context = PlanningContext(planner, scene)
+
+    def run(self, job: str, *args):
+        return JOBS[job](self.context, *args)
+
     def drop_stream(self, key: str) -> None:
-        """The stream is over (loaded, refused or cancelled): its points go. Waits for nothing."""
         self.context.streams.pop(key, None)
 
     def close(self) -> None:
         pass
 
 
-class PlanningProcess(InProcessPlanning):
+class PlanningProcess(_Planning):
     """The jobs in a process of its own (spawned now, so that it is ready by the first job);
-    `scene` is the server's, whose state goes with every job. A stream's messages cross as
-    the bytes they came in (services.RAW_REQUESTS)."""
+    `scene` is the server's, whose state goes with the first job after it changed. A
+    stream's messages cross as the bytes they came in (services.RAW_REQUESTS)."""
 
     def __init__(self, scene: CollisionScene, cycle_time: float,
                  on_lost: Callable[[str], None] = lambda why: None):
@@ -190,6 +198,14 @@ class PlanningProcess(InProcessPlanning):
         self._dropped: deque[str] = deque()   # streams to forget, with the next job
         self._start()
 
+    def _scene_state(self) -> tuple | None:
+        """The scene's state if the planning process has not had it yet, else None."""
+        if self.scene.version == self._sent_version:
+            return None
+        state = self.scene.state()
+        self._sent_version = state[0]
+        return state
+
     def _start(self) -> None:
         ctx = multiprocessing.get_context("spawn")
         self._conn, child = ctx.Pipe()
@@ -198,6 +214,7 @@ class PlanningProcess(InProcessPlanning):
             name="landscape-planning", daemon=True)
         self._process.start()
         child.close()
+        self._sent_version: int | None = None   # a new process starts from the cell
 
     @property
     def pid(self) -> int | None:
@@ -209,7 +226,7 @@ class PlanningProcess(InProcessPlanning):
                 raise Internal("the planning process is closed")
             dropped = [self._dropped.popleft() for _ in range(len(self._dropped))]
             try:
-                self._conn.send((job, self.scene.state(), args, dropped))
+                self._conn.send((job, self._scene_state(), args, dropped))
                 ok, value = self._conn.recv()
             except (EOFError, OSError) as exc:
                 self._process.join(1.0)
@@ -257,7 +274,8 @@ def _main(conn, cell, margin: float, cycle_time: float) -> None:
         for key in dropped:
             context.streams.pop(key, None)
         try:
-            context.scene.restore(state)
+            if state is not None:
+                context.scene.restore(state)
             answer = (True, JOBS[job](context, *args))
         except Exception as exc:   # a refusal (CommandError) goes back as it is
             answer = (False, exc)

@@ -39,7 +39,7 @@ class ServiceSpec:
         servicer as their bytes: grpc would parse them on the event loop."""
         handlers = _Handlers()
         getattr(self.grpc, f"add_{self.name}Servicer_to_server")(servicer, handlers)
-        table = dict(handlers.table)
+        table = handlers.table
         for method in RAW_REQUESTS.get(self.name, ()):
             handler = table[method]
             table[method] = grpc.stream_unary_rpc_method_handler(
