@@ -62,7 +62,7 @@ def _stop_panel(ax, figures: dict) -> None:
     goals = [r["goal"] for _, r in rows if r.get("goal")]
     if goals:
         ax.axhline(goals[0], color="grey", lw=0.8, ls=":", label="goal: one cycle")
-    ax.set(ylabel="StopMotion to first decelerating cycle, p99 (ms)",
+    ax.set(ylabel="StopMotion arriving to first decelerating cycle, p99 (ms)",
            title="Stops with the server idle and busy")
     ax.tick_params(axis="x", labelsize=7)
 

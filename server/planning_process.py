@@ -21,6 +21,7 @@ from __future__ import annotations
 import itertools
 import logging
 import multiprocessing
+import os
 import signal
 import threading
 from collections import deque
@@ -259,6 +260,9 @@ def _main(conn, cell, margin: float, cycle_time: float) -> None:
     # and a mask of blocked signals inherited from the server's threads is dropped.
     signal.pthread_sigmask(signal.SIG_SETMASK, ())
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Background work: on a busy machine the server's command handling (a stop on its way to
+    # the cycle) goes first.
+    os.nice(10)
     try:   # its name in ps and top (and for bench_soak, which measures it)
         with open("/proc/self/comm", "w") as comm:
             comm.write(PROCESS_NAME)
