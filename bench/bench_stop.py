@@ -2,13 +2,13 @@
 costs the cycle. Prints figures beside their same-run baselines, no pass/fail.
 
 - Stop latency: StopMotion arriving at the server (its handler begins) -> the first
-  decelerating cycle (the cycle's own time stamp, from the state stream, every cycle), p50/p99,
+  decelerating cycle (its tick, the state stream's time stamp, every cycle), p50/p99,
   with the server idle (the baseline), while PathLoad streams send 10,000-point messages one
   after the other (parsed as they come), and while long paths are being planned (resolved,
-  timed and collision-checked). Goal: one cycle, 4 ms. A stop waits for the next cycle to
-  begin, up to one period (4 ms) after it reached the cycle process: that wait alone makes
-  the p99 at least 3.96 ms. Beside it, the same from the client's send, which adds the
-  client's own stack and the loopback transport.
+  timed and collision-checked). Goal: one cycle, 4 ms: once in the cycle process, a stop
+  waits for the next tick, up to one period. Beside it, the same from the client's send,
+  which adds the client's own stack and the loopback transport, and how late the server's
+  event loop (where the call arrives before its handler) wakes up.
 - Hand-over: cycle lateness p99/max and missed deadlines while a 10-minute trajectory is
   handed to the cycle process, beside the same window with no hand-over. Goal: 0 missed.
 

@@ -88,6 +88,7 @@ class Executor:
         self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
         self._sensors = CycleSensors()
         self._io = IoMonitor()
+        self._wall = 0.0   # this cycle's time stamp (unix s)
         self._tip = self._dynamics = None
         self._setpoints: np.ndarray | None = None   # (3, 6): the last three cycles', newest first
         if arm is not None:
@@ -103,6 +104,9 @@ class Executor:
         return self._sequence
 
     def __call__(self, ctrl: Controller) -> bool:
+        # The cycle's time stamp: its tick, when the controller says (a simulated one computes
+        # physics first, which a real one does not), else now.
+        self._wall = getattr(ctrl, "wall_time", None) or time.time()
         fbk = ctrl.get()
         state = ctrl.state()
         enabled = state.enable is EnableState.ENABLED
@@ -160,7 +164,7 @@ class Executor:
         row = self._row
         row[SEQ] = self._sequence
         row[TIME] = getattr(ctrl, "time", 0.0)
-        row[WALL] = time.time()
+        row[WALL] = self._wall
         row[Q], row[QD], row[CMD], row[TAU] = fbk.pos, fbk.vel, pos, fbk.torque
         row[ENABLE] = int(state.enable)
         row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
@@ -175,7 +179,7 @@ class Executor:
             motion.advance()
             marks = motion.marks
             while motion.next_mark < len(marks) and marks[motion.next_mark][0] <= motion.s:
-                self._reports.append({"op": "mark", "id": motion.id, "wall_time": time.time(),
+                self._reports.append({"op": "mark", "id": motion.id, "wall_time": self._wall,
                                       "label": int(marks[motion.next_mark][1])})
                 motion.next_mark += 1
             running = motion.target_rate == 1.0 and not motion.paused
@@ -303,7 +307,7 @@ class Executor:
             self._motion = Motion({**msg, "segments": Segments(self._arrays.open())},
                                    self.cycle_time)
             self._motion.stop_limit = np.asarray(msg["stop_acceleration"], dtype=float)
-            self._reports.append({"op": "started", "id": msg["id"], "wall_time": time.time()})
+            self._reports.append({"op": "started", "id": msg["id"], "wall_time": self._wall})
             if msg.get("comply") is not None and self._tip is None:
                 self._end("failed", message="this controller has no arm model for comply")
             else:
@@ -334,7 +338,7 @@ class Executor:
     def _handle_jog(self, msg: dict, fbk) -> None:
         op, jog = msg["op"], self._jog
         if op == "jog":
-            self._reports.append({"op": "started", "id": msg["id"], "wall_time": time.time()})
+            self._reports.append({"op": "started", "id": msg["id"], "wall_time": self._wall})
             if self._motion is not None or jog is not None or self._tip is None:
                 why = ("this controller has no arm model for jogging" if self._tip is None
                        else "the arm is moving")

@@ -51,7 +51,7 @@ class Sample:
 
     sequence: int          # the controller's cycle count, +1 per cycle
     time: float            # controller time, s
-    wall_time: float       # unix time the cycle ran, s
+    wall_time: float       # unix time of the cycle's tick (when it began), s
     position: np.ndarray   # rad
     velocity: np.ndarray   # rad/s
     command: np.ndarray    # rad: where the next motion starts

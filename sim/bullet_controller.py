@@ -34,6 +34,7 @@ import enum
 import functools
 import logging
 import math
+import time
 from typing import Any
 
 import numpy as np
@@ -99,6 +100,7 @@ class BulletController(Controller):
         self.cycle_time = spec.cycle_time
         self.cycles = 0
         self.time = 0.0
+        self.wall_time = 0.0   # unix s at which the latest cycle began (its tick)
         self.cyclic = cyclic
         self._event_func: EventFunc | None = None
 
@@ -177,6 +179,7 @@ class BulletController(Controller):
         the cyclic function."""
         if self._destroyed:
             raise RuntimeError("the controller was destroyed")
+        self.wall_time = time.time()
         if self._countdown:
             self._procedure()
         drive, motors, physics = self._drive, self._motors, self._physics_step

@@ -13,6 +13,9 @@ import pytest
 
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
+from landscape.server.controller_link import build_controller
+from landscape.server.feedback import FeedbackRing
+from landscape.sim.cycle_process import Mailbox
 from landscape.v1 import (settings_pb2, state_service_pb2, state_service_pb2_grpc, types_pb2)
 
 from support import locked_session, stubs
@@ -172,3 +175,19 @@ def test_a_motion_ending_while_its_sample_is_made_leaves_the_stream_alone(server
         samples = _samples(call, 6)
         call.cancel()
     assert {s.point_name for s in samples} <= {"ring", ""}
+
+
+def test_a_cycles_time_stamp_is_its_tick():
+    """A sample's time is when its cycle began, as a real controller's cyclic function runs at
+    the tick: the simulated one computes its physics first, which took 0.5 to 1.7 ms of every
+    cycle into a stop's latency. Before, the row was stamped after the physics."""
+    ring = FeedbackRing()
+    controller = build_controller(None, ring, Mailbox())
+    try:
+        for _ in range(3):
+            before = time.time()
+            controller.step()
+            sample = ring.latest()
+            assert sample.wall_time == controller.wall_time >= before
+    finally:
+        controller.destroy()
