@@ -60,7 +60,7 @@ async def stops(target: str, trials: int, load: str, lease_out, go):
         for i in range(trials):
             goal = [1.2 if i % 2 == 0 else -1.2, 0, 1.5708, 0, 1.5708, 0]
             await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
-                frame=JOINT, values=goal, speed=40), metadata=md)
+                frame=JOINT, values=goal, speed=10), metadata=md)   # cruising at the stop
             await asyncio.sleep(0.4)
             sent = time.time()
             stopping = asyncio.ensure_future(device.StopMotion(motion_pb2.StopMotionRequest(),
@@ -152,14 +152,18 @@ class Arrivals:
             return motion
         motions.request_stop = stamped
 
-    def latencies(self, trials: list[tuple[float, float]]) -> tuple[list, list]:
-        """ms from arrival, and from the client's send, to the decelerating cycle."""
-        arrived, sent = [], []
+    def latencies(self, trials: list[tuple[float, float]]) -> tuple[list, list, int]:
+        """ms from arrival, and from the client's send, to the decelerating cycle; and how
+        many trials slowed down before their stop arrived (not a stop's doing: left out)."""
+        arrived, sent, early = [], [], 0
         for send, cycle in trials:
-            arrival = next(t for t in self.times if send <= t <= cycle)
+            arrival = next((t for t in self.times if send <= t <= cycle), None)
+            if arrival is None:
+                early += 1
+                continue
             arrived.append((cycle - arrival) * 1000)
             sent.append((cycle - send) * 1000)
-        return arrived, sent
+        return arrived, sent, early
 
 
 class LoopLag:
@@ -205,14 +209,15 @@ def stop_latency(server, trials: int) -> None:
         if busy is not None:   # its load ends with its phase (it would run into the next)
             busy[0].terminate()
             busy[0].join(10)
-        latencies, from_client = arrivals.latencies(trials_done)
+        latencies, from_client, early = arrivals.latencies(trials_done)
         loop_late = lag.end()
         name = load.split(" (")[0]
         print(f"  {load:25s}: p50 {pct(latencies, 50):5.2f} ({pct(from_client, 50):5.2f})  "
               f"p99 {pct(latencies, 99):5.2f} ({pct(from_client, 99):5.2f})  "
               f"max {max(latencies):5.2f} ({max(from_client):5.2f}); event loop late p99 "
               f"{pct(loop_late, 99):5.2f}"
-              + (f", {missed} stop(s) after the move had ended" if missed else ""))
+              + (f", {missed} stop(s) after the move had ended" if missed else "")
+              + (f", {early} slowed down before their stop arrived" if early else ""))
         if load.startswith("idle"):
             idle_p99, idle_client_p99 = pct(latencies, 99), pct(from_client, 99)
         record(f"stop latency p99, {name}", pct(latencies, 99), "ms",

@@ -1,8 +1,9 @@
 """The simulated CS8: the LLI-shaped `Controller` on pybullet (DIRECT mode, a client of its own).
 
 `step()` is the drive interrupt: it advances the physics by one cycle, then calls the cyclic
-function (which calls `get()` then `set()`). Clocks call `step()`; nothing here knows wall time.
-`time` is simulated seconds since construction.
+function (which calls `get()` then `set()`). Clocks call `step()`; nothing here depends on wall
+time. `time` is simulated seconds since construction; `wall_time` stamps each cycle's tick (the
+start of step(), when a real controller would run the cyclic function) for its records.
 
 The drives (LLI 5.3.12). Each cycle runs `substeps` pybullet steps; in position/velocity mode
 the drives micro-interpolate linearly from the last command to the new one, one target per
