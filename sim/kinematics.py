@@ -147,7 +147,6 @@ class Kinematics:
         if np.any(o[4, :2] != 0.0) or np.any(o[5, :2] != 0.0):
             raise ValueError("unsupported kinematics: the wrist axes do not meet in one point")
         self.arm = arm
-        self._origins = o
         g = o.tolist()   # plain floats: numpy scalars would slow the one-pose solver down
         self._base = o[0]                                   # the J1 axis passes through it
         self._base_xyz = tuple(g[0])
