@@ -95,7 +95,7 @@ def pybullet_alone(cycles: int) -> tuple[float, float]:
     cell = load_cell(None)
     ctrl = BulletController(cell)
     steps = cycles * cell.controller.substeps
-    step = ctrl._physics_step   # the same bound stepSimulation the controller's cycle calls
+    step = ctrl._drives._physics_step   # the same bound stepSimulation the drives' cycle calls
     began = time.perf_counter()
     for _ in range(steps):
         step()

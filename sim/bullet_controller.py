@@ -5,34 +5,19 @@ function (which calls `get()` then `set()`). Clocks call `step()`; nothing here 
 time. `time` is simulated seconds since construction; `wall_time` stamps each cycle's tick (the
 start of step(), when a real controller would run the cyclic function) for its records.
 
-The drives (LLI 5.3.12). Each cycle runs `substeps` pybullet steps; in position/velocity mode
-the drives micro-interpolate linearly from the last command to the new one, one target per
-substep, with pybullet's constraint motor set dead-beat (position gain 1, velocity gain 1,
-target velocity 0: each substep ends on its target when the torque suffices), torque limited
-to effort_factor * max effort and speed to max velocity. The velocity command is checked and
-recorded but the intra-cycle path is the straight line (robust to commands whose velocity is
-zero or inconsistent). The torque feed-forward adds to the motor torque. In torque mode the
-motors are off and the torque command (clipped to the same limit) drives the joints.
+The arm's drives and brakes, their physics and the feedback they measure (what `get()`
+returns) are bullet_drives.py's; this module is the controller's LLI side.
 
-Power (LLI 5.3.3, 5.3.4, 5.3.10). DISABLED means brakes on: the joints stop (a zero-velocity
-hold, limited to brake_factor * max effort) and, once still, are held where they stopped (a
-position hold), so nothing drifts and nothing jumps. ENABLING (enable_time) and DISABLING
-(disable_time) hold the measured position with the drives; once ENABLED the held command is
-the measured position. An invalid set(), a failing cyclic function (an exception or False)
-or the e-stop disable at once, with an error event. While not ENABLED, set() is accepted and
-ignored: there is nothing to command.
-
-Feedback (`get()`): measured position, velocity, following error (command, or the held
-position, minus measured) and torque (motor, averaged over the cycle's substeps, plus
-feed-forward; the torque command in torque mode; 0 while DISABLED: the drives are off and the
-brakes carry the load).
+Power (LLI 5.3.3, 5.3.4, 5.3.10). DISABLED means brakes on. ENABLING (enable_time) and
+DISABLING (disable_time) hold the measured position with the drives; once ENABLED the held
+command is the measured position. An invalid set(), a failing cyclic function (an exception or
+False) or the e-stop disable at once, with an error event. While not ENABLED, set() is accepted
+and ignored: there is nothing to command.
 
 Single-threaded: call everything from the thread that steps (the cycle process).
 """
 from __future__ import annotations
 
-import enum
-import functools
 import logging
 import math
 import time
@@ -40,30 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from landscape.sim.native_output import silenced
-
-with silenced():   # pybullet's banner
-    import pybullet as pb
-    from pybullet_utils.bullet_client import BulletClient
-
-
-class _BoundClient(BulletClient):
-    """pybullet's client wrapper with each function bound to the client once, on first use:
-    BulletClient binds it again on every call (a partial and an inspect per call: a third of
-    what the world's per-cycle reads cost)."""
-
-    def __getattr__(self, name: str):
-        attribute = super().__getattr__(name)
-        if name != "disconnect":   # (which also marks the client gone)
-            self.__dict__[name] = attribute
-        return attribute
-
-
+from landscape.sim.bullet_drives import Drives, connect
 from landscape.sim.cell import PANEL_WIRES, Cell
 from landscape.sim.controller import (
     CalibState, Controller, CyclicFunction, DioStatus, DoutValue, EnableState, EstopState,
     EventFunc, InitState, IoctrlCode, IoId, IoType, IoUnit, JointCmd, JointFbk, SensorInfo,
-    SettleState, State, Status)
+    State, Status)
 from landscape.sim.dio import DigitalIO
 from landscape.sim.kinematics import Config, Kinematics, ReversingResult
 from landscape.sim.panel import Panel
@@ -74,17 +41,7 @@ log = logging.getLogger(__name__)
 
 SOFTWARE_VERSION = "landscape-sim CS8 LLI s7.4 0.1"
 SYNCHRO_TASK_PRIORITY = 10     # VxWorks-style, 0 is highest; fixed, as on a CS8
-SETTLE_SPEED = 1e-3            # rad/s: slower than this on every joint ...
-SETTLE_ERROR = 1e-4            # rad: ... and this close to the command is SETTLED
-BRAKE_LATCH_SPEED = 1e-3       # rad/s: braked joints slower than this are held in place
 _SLACK = 1e-9                  # rad, rad/s: rounding allowance of the command checks
-
-
-class _Drive(enum.Enum):
-    BRAKED = "braked"          # drives off, brakes on
-    HOLDING = "holding"        # drives on, holding a fixed position (enabling, disabling)
-    POSVEL = "posvel"          # following set() commands in position/velocity mode
-    TORQUE = "torque"          # following set() torques in torque mode
 
 
 class BulletController(Controller):
@@ -105,10 +62,7 @@ class BulletController(Controller):
         self.cyclic = cyclic
         self._event_func: EventFunc | None = None
 
-        with silenced():   # "argv[0]="
-            self._bc = _BoundClient(pb.DIRECT)
-        self._bc.setPhysicsEngineParameter(fixedTimeStep=spec.cycle_time / spec.substeps,
-                                           deterministicOverlappingPairs=1)
+        self._bc = connect(spec.cycle_time, spec.substeps)
         self.world = World(self._bc, cell)
         self.panel = Panel(self.world, self._on_estop)
         self.dio = DigitalIO(cell.io, self._read_wire, self.world.set_output)
@@ -120,6 +74,7 @@ class BulletController(Controller):
         self._kin = Kinematics(arm)
         self._recorder = None
         self.last_record_path: str | None = None
+        self._drives = Drives(self._bc, self.world, arm, spec)   # braked
 
         # Limits, (6,) arrays.
         self._lower, self._upper = arm.lower, arm.upper
@@ -129,121 +84,40 @@ class BulletController(Controller):
         # The per-joint limits of the command checks, as plain lists (numpy is slow on 6
         # values): (min, max, max |vel|, max |pos step|, max |vel step|, max |torque|), with the
         # rounding allowance the checks grant.
-        self._effort = spec.effort_factor * np.array(arm.max_effort)
-        self._effort_list = self._effort.tolist()
         self._limits = list(zip(self._lower.tolist(), self._upper.tolist(),
                                 (self._vmax + _SLACK).tolist(), (self._max_step + _SLACK).tolist(),
-                                (self._max_dvel + _SLACK).tolist(), self._effort_list))
-        self._brake_list = (spec.brake_factor * np.array(arm.max_effort)).tolist()
+                                (self._max_dvel + _SLACK).tolist(), self._drives.effort))
         self._enable_cycles = max(1, round(spec.enable_time / self.cycle_time))
         self._disable_cycles = max(1, round(spec.disable_time / self.cycle_time))
         self._user_marks = np.array(spec.user_marks)
-
-        # The per-cycle pybullet calls, bound once to this client, arm and joints.
-        cid, body, joints = self._bc._client, self.world.arm, self.world.joints
-        self._physics_step = functools.partial(pb.stepSimulation, physicsClientId=cid)
-        self._motors = functools.partial(pb.setJointMotorControlArray, body, joints,
-                                         physicsClientId=cid)
-        self._joint_states = functools.partial(pb.getJointStates, body, joints,
-                                               physicsClientId=cid)
-        self._fractions = [(k + 1) / spec.substeps for k in range(spec.substeps)]
-        self._zeros, self._ones = [0.0] * 6, [1.0] * 6
 
         # LLI state.
         self._init = InitState.NOT_INITIALIZED
         self._calib = CalibState.NOT_CALIBRATED
         self._enable = EnableState.DISABLED
-        self._settle = SettleState.NOT_SETTLED
         self._countdown = 0
         self._torque_mode = False
         self._cyclic_failing = False
         self._destroyed = False
 
-        # Commands: the last accepted one (arrays for the checks, lists for the per-cycle path)
-        # and where this cycle's interpolation starts; the held position when not following.
-        self._drive = _Drive.BRAKED
-        self._braking = False
-        self._hold = [s[0] for s in self._joint_states()]
-        self._fbk = JointFbk(np.array(self._hold), np.zeros(6), np.zeros(6), np.zeros(6))
-        self._command(self._hold, self._zeros, self._zeros)
-        self._brake()
-
-    def _command(self, pos: list, vel: list, tau: list) -> None:
-        """Take a command (rad, rad/s, N*m; lists of 6 floats) as the one to follow."""
-        self._cmd_list, self._vel_list, self._tau_list = pos, vel, tau
-        self._ffw = any(tau)
-
     # ---- the cycle ----------------------------------------------------------------------------
 
     def step(self) -> None:
-        """One cycle: power procedures, cycle_time of physics, feedback, world, recorder, then
-        the cyclic function."""
+        """One cycle: power procedures, cycle_time of physics and its feedback, world, recorder,
+        then the cyclic function."""
         if self._destroyed:
             raise RuntimeError("the controller was destroyed")
         self.wall_time = time.time()
         if self._countdown:
             self._procedure()
-        drive, motors, physics = self._drive, self._motors, self._physics_step
-        following = drive is _Drive.POSVEL or drive is _Drive.TORQUE
-        if drive is _Drive.POSVEL:
-            start = self._start
-            delta = [e - s for s, e in zip(start, self._cmd_list)]
-            tau = self._tau_list if self._ffw else None
-            applied = [0.0] * 6   # the motors' torques summed over the substeps
-            for f in self._fractions:
-                target = [s + f * d for s, d in zip(start, delta)]
-                motors(pb.POSITION_CONTROL, targetPositions=target, targetVelocities=self._zeros,
-                       positionGains=self._ones, velocityGains=self._ones,
-                       forces=self._effort_list)
-                if tau is not None:
-                    motors(pb.TORQUE_CONTROL, forces=tau)
-                physics()
-                states = self._joint_states()
-                applied = [a + s[3] for a, s in zip(applied, states)]
-            self._start = self._cmd_list
-        elif drive is _Drive.TORQUE:
-            for _ in self._fractions:
-                motors(pb.TORQUE_CONTROL, forces=self._tau_list)
-                physics()
-        else:
-            for _ in self._fractions:
-                physics()
-
-        # Feedback, in plain lists until the arrays are built: numpy is slow on 6 values.
-        if drive is not _Drive.POSVEL:   # (following, the last substep has read them)
-            states = self._joint_states()
-        pos = [s[0] for s in states]
-        vel = [s[1] for s in states]
-        speed = max(map(abs, vel))
-        if drive is _Drive.POSVEL:
-            # Averaged over the cycle, as a drive's current filtered at the cycle rate: the
-            # dead-beat motors change speed in the first substep, so the last one alone would
-            # miss the inertial torque.
-            n = len(self._fractions)
-            torque = ([a / n + t for a, t in zip(applied, self._tau_list)] if self._ffw
-                      else [a / n for a in applied])
-        elif drive is _Drive.TORQUE:
-            torque = self._tau_list
-        elif drive is _Drive.HOLDING:
-            torque = [s[3] for s in states]
-        else:
-            torque = self._zeros
-            if self._braking and speed < BRAKE_LATCH_SPEED:
-                self._hold_position(pos, self._brake_list)
-                self._braking = False
-        reference = self._cmd_list if following else self._hold
-        err = [c - p for c, p in zip(reference, pos)]
-        self._settle = (SettleState.SETTLED
-                        if speed < SETTLE_SPEED and max(map(abs, err)) < SETTLE_ERROR
-                        else SettleState.NOT_SETTLED)
-        fbk = self._fbk = JointFbk(np.array(pos), np.array(vel), np.array(err), np.array(torque))
-
+        drives = self._drives
+        drives.cycle()
         self.world.update()
         self.cycles += 1
         self.time = self.cycles * self.cycle_time
         if self._recorder is not None:
-            self._recorder.append(self.time, reference, self._vel_list if following else self._zeros,
-                                  fbk.pos, fbk.vel, fbk.torque)
+            fbk = drives.fbk
+            self._recorder.append(self.time, *drives.reference(), fbk.pos, fbk.vel, fbk.torque)
         if self.cyclic is not None:
             self._run_cyclic()
 
@@ -269,55 +143,15 @@ class BulletController(Controller):
             return
         if self._enable is EnableState.ENABLING:
             self._enable = EnableState.ENABLED
-            self._command(self._fbk.pos.tolist(), self._zeros, self._zeros)
-            self._engage()
+            self._drives.engage(self._torque_mode)
         elif self._enable is EnableState.DISABLING:
             self._power_off()
-
-    # ---- drive modes --------------------------------------------------------------------------
-
-    def _clamp_velocity(self) -> None:
-        # setJointMotorControlArray cannot pass maxVelocity; the motors keep it once set.
-        for j, q, vmax in zip(self.world.joints, self._fbk.pos.tolist(), self._vmax.tolist()):
-            self._bc.setJointMotorControl2(self.world.arm, j, pb.POSITION_CONTROL,
-                                           targetPosition=q, force=0.0, maxVelocity=vmax)
-
-    def _hold_position(self, pos, forces) -> None:
-        """Dead-beat position hold at `pos` (rad, 6 values) with torques up to `forces`."""
-        self._hold = [float(q) for q in pos]
-        self._motors(pb.POSITION_CONTROL, targetPositions=self._hold,
-                     targetVelocities=self._zeros, positionGains=self._ones,
-                     velocityGains=self._ones, forces=forces)
-
-    def _brake(self) -> None:
-        """Brakes on: stop the joints (zero velocity, brake torque); once they are still, hold
-        them there (step() switches; at once if they are still already)."""
-        self._drive = _Drive.BRAKED
-        if float(np.max(np.abs(self._fbk.vel))) < BRAKE_LATCH_SPEED:
-            self._hold_position(self._fbk.pos, self._brake_list)
-            self._braking = False
-        else:
-            self._hold = self._fbk.pos.tolist()
-            self._motors(pb.VELOCITY_CONTROL, targetVelocities=self._zeros,
-                         forces=self._brake_list)
-            self._braking = True
 
     def _power_off(self) -> None:
         self._countdown = 0
         self._enable = EnableState.DISABLED
-        if self._drive is not _Drive.BRAKED:
-            self._brake()
-
-    def _engage(self) -> None:
-        """Drives follow the commands in the current control mode, from the last command."""
-        self._start = self._cmd_list
-        if self._torque_mode:
-            self._motors(pb.VELOCITY_CONTROL, targetVelocities=self._zeros, forces=self._zeros)
-            self._drive = _Drive.TORQUE
-        else:
-            self._clamp_velocity()
-            self._hold_position(self._cmd_list, self._effort_list)
-            self._drive = _Drive.POSVEL
+        if not self._drives.braked:
+            self._drives.brake()
 
     # ---- LLI: life cycle and power ------------------------------------------------------------
 
@@ -376,10 +210,7 @@ class BulletController(Controller):
         if self._enable is EnableState.DISABLED:
             self._enable = EnableState.ENABLING
             self._countdown = self._enable_cycles
-            self._clamp_velocity()
-            self._hold_position(self._fbk.pos, self._effort_list)
-            self._drive = _Drive.HOLDING
-            self._braking = False
+            self._drives.power_on()
         return Status.OK
 
     def disable(self) -> Status:
@@ -388,8 +219,7 @@ class BulletController(Controller):
         if self._enable in (EnableState.ENABLED, EnableState.ENABLING):
             self._enable = EnableState.DISABLING
             self._countdown = self._disable_cycles
-            self._hold_position(self._fbk.pos, self._effort_list)
-            self._drive = _Drive.HOLDING
+            self._drives.hold()
         return Status.OK
 
     def _on_estop(self, pressed: bool) -> None:
@@ -402,13 +232,13 @@ class BulletController(Controller):
             self._event("emergency stop pressed: drives disabled")
 
     def state(self) -> State:
-        return State(self._init, self._enable, self._calib, self._settle,
+        return State(self._init, self._enable, self._calib, self._drives.settle,
                      EstopState.ESTOP if self.panel.estop_pressed else EstopState.NO_ESTOP)
 
     # ---- LLI: the synchronous calls -----------------------------------------------------------
 
     def get(self) -> JointFbk:
-        f = self._fbk
+        f = self._drives.fbk
         return JointFbk(f.pos.copy(), f.vel.copy(), f.pos_err.copy(), f.torque.copy())
 
     def set(self, cmd: JointCmd) -> Status:
@@ -419,7 +249,8 @@ class BulletController(Controller):
             return self._reject(f"a command needs 6 values per field, got {pos.shape}, "
                                 f"{vel.shape}, {tau.shape}")
         pos, vel, tau = pos.tolist(), vel.tolist(), tau.tolist()
-        last_pos, last_vel = self._cmd_list, self._vel_list
+        drives = self._drives
+        last_pos, last_vel = drives.cmd_pos, drives.cmd_vel
         clipped = []
         # NaN fails every comparison, so these checks reject it too.
         for i, (lo, hi, vmax, step, dvel, effort) in enumerate(self._limits):
@@ -428,7 +259,7 @@ class BulletController(Controller):
                     and -dvel <= v - last_vel[i] <= dvel and -math.inf < t < math.inf):
                 return self._reject(self._explain(i, p, v, t))
             clipped.append(-effort if t < -effort else effort if t > effort else t)
-        self._command(pos, vel, clipped)
+        drives.command(pos, vel, clipped)
         return Status.OK
 
     def _reject(self, problem: str) -> Status:
@@ -447,11 +278,11 @@ class BulletController(Controller):
         if abs(v) > self._vmax[i] + _SLACK:
             return (f"joint {j} velocity {v:.6f} rad/s exceeds its maximum "
                     f"{self._vmax[i]:.6f} rad/s")
-        step = abs(p - self._cmd_list[i])
+        step = abs(p - self._drives.cmd_pos[i])
         if step > self._max_step[i] + _SLACK:
             return (f"joint {j} position changes by {step:.6f} rad in one cycle, more than its "
                     f"maximum velocity allows ({self._max_step[i]:.6f} rad)")
-        return (f"joint {j} velocity changes by {abs(v - self._vel_list[i]):.6f} rad/s in one "
+        return (f"joint {j} velocity changes by {abs(v - self._drives.cmd_vel[i]):.6f} rad/s in one "
                 f"cycle, more than a drive can follow ({self._max_dvel[i]:.6f} rad/s)")
 
     # ---- LLI: ioctrl --------------------------------------------------------------------------
@@ -489,12 +320,7 @@ class BulletController(Controller):
             if torque != self._torque_mode:
                 self._torque_mode = torque
                 if self._enable is EnableState.ENABLED:
-                    # A bumpless switch: carry on from where the arm is, and into torque mode
-                    # with the torque the drives spend now, until the next set().
-                    fbk = self._fbk
-                    self._command(fbk.pos.tolist(), fbk.vel.tolist() if torque else self._zeros,
-                                  fbk.torque.tolist() if torque else self._zeros)
-                    self._engage()
+                    self._drives.engage(torque, bumpless=True)
             return Status.OK
         # SET_ABS_JNT_POS, RECOVER_ABS_JNT_POS: a simulated arm never loses its calibration.
         return self._refuse(f"ioctrl {code.name} refused: not supported by the simulated CS8")
