@@ -282,8 +282,9 @@ class BulletController(Controller):
         if step > self._max_step[i] + _SLACK:
             return (f"joint {j} position changes by {step:.6f} rad in one cycle, more than its "
                     f"maximum velocity allows ({self._max_step[i]:.6f} rad)")
-        return (f"joint {j} velocity changes by {abs(v - self._drives.cmd_vel[i]):.6f} rad/s in one "
-                f"cycle, more than a drive can follow ({self._max_dvel[i]:.6f} rad/s)")
+        change = abs(v - self._drives.cmd_vel[i])
+        return (f"joint {j} velocity changes by {change:.6f} rad/s in one cycle, more than a "
+                f"drive can follow ({self._max_dvel[i]:.6f} rad/s)")
 
     # ---- LLI: ioctrl --------------------------------------------------------------------------
 
