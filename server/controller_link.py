@@ -13,7 +13,9 @@
 between cycles), `send` (messages to the Executor), `between_cycles`, `feedback` (every
 cycle's row, feedback.py) and `share` (large arrays for the cycle, without copying them
 through the pipe). It watches the controller: the cycle process exiting, or its feedback
-falling silent for `silence_cycles` cycles, is reported once to `on_lost(reason)`. A silent
+falling silent for `silence_cycles` cycles (on the fast clock, for FAST_SILENCE: its process
+runs in the normal policy, which a busy machine may hold off the cores for tens of ms), is
+reported once to `on_lost(reason)`. A silent
 process is killed before it is reported: one that was only stalled must never wake up and
 go on commanding the arm after the device has said it is lost. `restart()` starts a fresh
 controller (after a loss); the feedback ring survives, so cycle numbers go on, and so does
@@ -35,6 +37,7 @@ from landscape.sim.cycle_process import Mailbox
 from landscape.sim.shared_array import SharedArrays
 
 log = logging.getLogger(__name__)
+FAST_SILENCE = 0.5   # s without feedback that count as a hung cycle process, fast clock
 
 
 def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox,
@@ -62,7 +65,7 @@ class ControllerLink:
     on_message(msg): the Executor's reports, in order, on the clock's dispatch thread.
     on_lost(reason): once per loss, on a thread of the link's (never a gRPC thread).
     pace: lock-step only, at most this many simulated seconds per wall second (None: flat out).
-    silence_cycles: real time only, cycles without feedback that count as a hung controller.
+    silence_cycles: cycles without feedback that count as a hung cycle process (real time).
     """
 
     def __init__(self, clock: str, cell_path: str | None, on_message: Callable[[Any], None],
@@ -161,9 +164,12 @@ class ControllerLink:
         self._on_lost(reason)
 
     def _watch(self) -> None:
-        """Real time: the ring must advance; `silence_cycles` cycles without a row is a hang."""
+        """The ring must advance; `silence_cycles` cycles without a row is a hang (on the fast
+        clock, FAST_SILENCE)."""
         period = self._clock.cycle_time
         limit = self.silence_cycles * period
+        if self.clock_kind == "fast":
+            limit = max(limit, FAST_SILENCE)
         seen, since = self.feedback.head, time.monotonic()
         while not self._closing:
             time.sleep(period)

@@ -21,6 +21,7 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
+from landscape.server.controller_link import FAST_SILENCE
 from landscape.server.states import State
 from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, sensing_pb2, types_pb2
 
@@ -161,6 +162,34 @@ def test_a_hung_cycle_process_is_noticed_by_its_silence(realtime):
         reply = device.Reset(control_pb2.ResetRequest(), timeout=60)
     assert reply.state == types_pb2.DEVICE_STATE_UNLOCKED
     assert server.link.clock.pid != pid
+
+
+def test_on_the_fast_clock_a_cycle_process_held_off_the_cpu_is_not_a_hung_one():
+    """The fast clock's cycle process runs in the normal policy (free-running under SCHED_FIFO
+    it would starve the machine), so a busy machine may hold it off the cores for tens of ms:
+    before, 10 cycles (40 ms) of silence killed it as hung (test_fast_clock failed under
+    load). Silent for FAST_SILENCE it is one."""
+    server = serve(ServerConfig(port=0, clock="fast"))
+    pid = server.link.clock.pid
+    try:
+        os.kill(pid, signal.SIGSTOP)
+        time.sleep(0.15)
+        os.kill(pid, signal.SIGCONT)
+        head = server.link.feedback.head
+        wait_until(lambda: server.link.feedback.head > head + 100, timeout=5)
+        assert server.link.lost is None and _alive(pid)
+        stopped = time.monotonic()
+        os.kill(pid, signal.SIGSTOP)
+        wait_until(lambda: server.link.lost is not None, timeout=5)
+        noticed = time.monotonic() - stopped
+        print(f"fast clock: silence noticed after {noticed * 1000:.0f} ms")
+        assert "no feedback" in server.link.lost and noticed >= FAST_SILENCE
+        assert server.device.state is State.ERROR
+        wait_until(lambda: not _alive(pid), timeout=5)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
+        server.stop(grace=None)
 
 
 def _alive(pid: int) -> bool:
