@@ -9,8 +9,7 @@ costs the cycle. Prints figures beside their same-run baselines, no pass/fail.
   waits for the next tick, up to one period. Beside it, the same from the client's send,
   which adds the client's own stack and the loopback transport; by when the stop was in the
   cycle process's pipe (an upper bound: when the handler's call that writes it returned);
-  and how late the server's event loop (where the call
-  arrives before its handler) wakes up.
+  and how late the server's event loop (where the call arrives before its handler) wakes up.
 - Hand-over: cycle lateness p99/max and missed deadlines while a 10-minute trajectory is
   handed to the cycle process, beside the same window with no hand-over. Goal: 0 missed.
 
