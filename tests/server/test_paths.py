@@ -3,11 +3,13 @@ cycles and dry runs, and their survival across a restart; real server, simulated
 from __future__ import annotations
 
 import math
+import pickle
 
 import grpc
 import numpy as np
 import pytest
 
+from landscape.server.paths import PathPoint, StoredPath
 from landscape.server.states import State
 from landscape.sim.controller import DioStatus
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
@@ -207,3 +209,23 @@ def test_a_relative_straight_path_draws_its_square_and_get_tag_id_follows(arm):
     assert np.linalg.norm(arm.tip()[:3, 3] - start) < 0.1e-3
     reply = arm.device.GetTagId(settings_pb2.GetTagIdRequest())
     assert (reply.path_name, reply.tag_id) == ("square", "c3")
+
+
+def test_a_path_crosses_to_the_planning_process_as_columns():
+    """Paths go to the planning process and back pickled. As 2,000 PathPoint objects that was
+    one C call holding the server's interpreter for 2.6 ms (a stop arriving meanwhile missed
+    its cycle); as columns, rebuilt in Python, the same path comes back equal, field types
+    included."""
+    points = tuple(PathPoint(joints=tuple(i / 7 + j for j in range(6)), tag_name=f"t{i}",
+                             tag_index=i, time_delay=0.5 * (i % 3), transition_speed=20.0,
+                             speed=1 / 3, accel=50.0,
+                             aux_commands=("dout gripper_close 1",) if i % 4 == 0 else ())
+                   for i in range(2000))
+    path = StoredPath("long", True, tuple(float(v) for v in np.eye(4).flat), points)
+    pickled = pickle.dumps(path, protocol=5)
+    assert b"PathPoint" not in pickled   # no object per point
+    back = pickle.loads(pickled)
+    assert back == path
+    assert type(back.points[3].joints[0]) is float and type(back.points[3].tag_index) is int
+    empty = StoredPath("empty", False, path.tcp)
+    assert pickle.loads(pickle.dumps(empty)) == empty
