@@ -35,6 +35,7 @@ from landscape.client import AsyncSession
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
 from landscape.server.limits import DEFAULT_CAPS, Cap
+from landscape.server.states import State
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
                           event_service_pb2_grpc, motion_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
@@ -263,6 +264,7 @@ class Holder:
 
     def __init__(self, server):
         from landscape.client import Session
+        self.server = server
         self.session = Session(grpc.insecure_channel(server.target), "holder").open()
         self.session.lock()
         self.device = device_service_pb2_grpc.DeviceServiceStub(self.session.channel)
@@ -285,11 +287,21 @@ class Holder:
                                                                number_of_cycles=cycles))
 
     def stop(self):
-        try:
-            self.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=10)
-            self.device.AbortMotion(motion_pb2.AbortMotionRequest(), timeout=10)
-        except grpc.RpcError:
-            pass   # it had ended already
+        """Stop and drop the path; returns once the device rests (a server loaded by 50
+        watchers may answer a call after its deadline: asked again)."""
+        device, end = self.server.device, time.monotonic() + 60
+        while device.state is not State.RESTING:
+            if time.monotonic() > end:
+                raise RuntimeError(f"the holder's path did not stop: the device is "
+                                   f"{device.state.value}, locked by "
+                                   f"{device.status().lock_holder or 'nobody'}")
+            for call, request in ((self.device.StopMotion, motion_pb2.StopMotionRequest()),
+                                  (self.device.AbortMotion, motion_pb2.AbortMotionRequest())):
+                try:
+                    call(request, timeout=10)
+                except grpc.RpcError:
+                    pass   # ended already, or answered late: the state says
+            time.sleep(0.05)
 
     def close(self):
         self.session.close()

@@ -75,8 +75,10 @@ def run(name: str, args: list[str]) -> dict:
             done = subprocess.run([sys.executable, str(HERE / f"{name}.py"), *args], env=env,
                                   cwd=HERE.parent, text=True, capture_output=True,
                                   timeout=TIMEOUT)
+            # The error's last lines (a gRPC status spans several), to say why it failed.
             error = "" if done.returncode == 0 else \
-                f"exit code {done.returncode}: {done.stderr.strip().splitlines()[-1:] or ''}"
+                f"exit code {done.returncode}: " + " | ".join(
+                    line.strip() for line in done.stderr.strip().splitlines()[-8:])
             output = done.stdout
         except subprocess.TimeoutExpired as timeout:
             error, output = f"no result within {TIMEOUT} s", str(timeout.stdout or "")
