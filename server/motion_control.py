@@ -57,7 +57,6 @@ class RunningMotion:
     aux: dict[int, tuple[str, ...]] = field(default_factory=dict)   # run at marks
     arrays: SharedArrays | None = None
     phase: str = "running"        # running, paused, done, failed, aborted
-    started_wall: float | None = None   # unix s of its first cycle, from the cycle
     # The final report's message, from the report (sensor loops: guarded.py); may act on it.
     finish: Callable[[dict], str] | None = None
     report: dict = field(default_factory=dict)   # the final report, once it came
@@ -331,8 +330,7 @@ class MotionControl:
             return
         op = msg["op"]
         if op == "started":
-            motion.started_wall = msg.get("wall_time")
-            return
+            return   # the state moved when the run was sent
         if op == "mark":
             self._mark(motion, msg["label"])
             return
