@@ -68,13 +68,20 @@ class GatewaySpec:
 
 @dataclass(frozen=True)
 class SupervisorSpec:
-    """The web supervisor (landscape.supervisor) showing `devices`."""
+    """The web supervisor (landscape.supervisor) showing `devices`. sign_in_tokens: the
+    folder of role tokens people sign in with (made on first run when absent); token: its
+    own, viewer-level, for the feeds (with tokens on); allowed_origins: other front ends'
+    origins it accepts; sign_in_idle / sign_in_max_age: s a sign-in lasts idle / at most."""
 
     enabled: bool = True
     address: str = "127.0.0.1"
     port: int = 8080
     devices: tuple[str, ...] = ()
     token: Path | None = None
+    sign_in_tokens: Path = Path("var/tokens")
+    allowed_origins: tuple[str, ...] = ()
+    sign_in_idle: float = 1800.0
+    sign_in_max_age: float = 43200.0
 
 
 @dataclass(frozen=True)
@@ -252,8 +259,8 @@ def _security(r: _Reader) -> SecuritySpec:
     return spec
 
 
-def _client_token(r: _Reader, security: SecuritySpec) -> Path | None:
-    default = security.tokens / "operator.tokens" if security.tokens else None
+def _client_token(r: _Reader, security: SecuritySpec, role: str = "operator") -> Path | None:
+    default = security.tokens / f"{role}.tokens" if security.tokens else None
     token = r.path("token", default, exists=True)
     if security.tokens is not None and token is None:
         r.t.fail("token", "a token file is needed: the device servers want tokens")
@@ -284,9 +291,25 @@ def _supervisor(r: _Reader, devices, security) -> SupervisorSpec:
     for name in shown:
         if name not in names:
             r.t.fail("devices", f"no device is named {name!r} (devices: {', '.join(names)})")
+    origins = r.t.raw("allowed_origins", [])
+    if not isinstance(origins, list) or not all(isinstance(o, str) for o in origins):
+        r.t.fail("allowed_origins", f"must be a list of origins, got {origins!r}")
+    from landscape.supervisor.origins import normalize
+    try:
+        origins = tuple(normalize(origin) for origin in origins)
+    except ValueError as error:
+        r.t.fail("allowed_origins", str(error))
     spec = SupervisorSpec(enabled=r.t.boolean("enabled", d.enabled),
                           address=r.address("address", d.address), port=r.port("port", d.port),
-                          devices=tuple(dict.fromkeys(shown)), token=_client_token(r, security))
+                          devices=tuple(dict.fromkeys(shown)),
+                          token=_client_token(r, security, "viewer"),
+                          sign_in_tokens=r.path("sign_in_tokens",
+                                                security.tokens or r.base / "var" / "tokens",
+                                                folder=True),
+                          allowed_origins=origins,
+                          sign_in_idle=r.t.number("sign_in_idle", d.sign_in_idle, positive=True),
+                          sign_in_max_age=r.t.number("sign_in_max_age", d.sign_in_max_age,
+                                                     positive=True))
     r.t.done()
     return spec
 

@@ -28,6 +28,7 @@ from typing import TextIO
 from landscape.cell.config import CellConfig
 from landscape.cell.services import (ServiceSpec, device_service, gateway_service,
                                      supervisor_missing, supervisor_service)
+from landscape.cell.tokens import make_tokens
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 POLL = 0.1           # s between looks at the children
@@ -157,11 +158,22 @@ class Cell:
                 if why_not:
                     self.out.say(f"web supervisor not started: {why_not}")
                 else:
+                    self._sign_in_tokens(config.supervisor.sign_in_tokens)
                     self._launch(supervisor_service(config, targets, workdir))
         except BaseException:
             self.stop()
             raise
         self._summary()
+
+    def _sign_in_tokens(self, folder: Path) -> None:
+        """People sign in to the supervisor with a role token: on a first run the folder is
+        made as `landscape-cell tokens` makes it."""
+        if folder.exists():
+            return
+        make_tokens(folder)
+        self.out.say(f"made role tokens for signing in to the web supervisor in {folder} "
+                     f"(`landscape-cell tokens`): operator.tokens to command, viewer.tokens "
+                     f"to watch, admin.tokens for the operator panel")
 
     def _launch(self, spec: ServiceSpec) -> Child:
         child = Child(spec, self.out)

@@ -105,10 +105,16 @@ def supervisor_service(config: CellConfig, targets: dict[str, str],
     argv = [*_python(SUPERVISOR_MODULE)]
     for name in supervisor.devices:
         argv += ["--device", f"{name}={targets[name]}"]
-    argv += ["--host", supervisor.address, "--port", str(supervisor.port)]
+    argv += ["--host", supervisor.address, "--port", str(supervisor.port),
+             "--sign-in-tokens", str(supervisor.sign_in_tokens),
+             "--sign-in-idle", f"{supervisor.sign_in_idle:g}",
+             "--sign-in-max-age", f"{supervisor.sign_in_max_age:g}"]
+    for origin in supervisor.allowed_origins:
+        argv += ["--allowed-origin", origin]
     argv += client_arguments(config.security, supervisor.token)
     return ServiceSpec("supervisor", "web supervisor", argv, workdir,
-                       note=f"shows {', '.join(supervisor.devices)}")
+                       note=f"shows {', '.join(supervisor.devices)}; sign in with a token "
+                            f"from {supervisor.sign_in_tokens / 'operator.tokens'}")
 
 
 def supervisor_missing(page: Path | None = None) -> str | None:

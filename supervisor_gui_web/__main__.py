@@ -1,4 +1,4 @@
-"""`python -m landscape.supervisor --device arm1=127.0.0.1:50051 --port 8080`"""
+"""`python -m landscape.supervisor --device arm1=127.0.0.1:50051 --sign-in-tokens var/tokens`"""
 from __future__ import annotations
 
 import argparse
@@ -9,9 +9,11 @@ import signal
 import socket
 
 from landscape.client import credentials
+from landscape.server.auth import TokenStore
 from landscape.supervisor import app
 from landscape.supervisor.config import (DEFAULT_DISPLAY_RATE_HZ, DEFAULT_HOST, DEFAULT_PORT,
                                          DashboardConfig, parse_device)
+from landscape.supervisor.sign_in import DEFAULT_IDLE_S, DEFAULT_MAX_AGE_S
 
 
 def _device(text: str):
@@ -31,13 +33,29 @@ def parse_args(argv=None) -> DashboardConfig:
     parser.add_argument("--port", type=int, default=DEFAULT_PORT, help="0 picks a free port")
     parser.add_argument("--display-rate", type=float, default=DEFAULT_DISPLAY_RATE_HZ,
                         help="state samples per second sent to the page")
+    people = parser.add_argument_group("signing in")
+    people.add_argument("--sign-in-tokens", required=True, metavar="DIR",
+                        help="folder of the role tokens people sign in with (viewer.tokens, "
+                             "operator.tokens, admin.tokens: `landscape-cell tokens`)")
+    people.add_argument("--allowed-origin", action="append", default=[], metavar="URL",
+                        help="another front end's origin allowed to use the supervisor, "
+                             "scheme://host[:port] (repeatable; its own is always allowed)")
+    people.add_argument("--sign-in-idle", type=float, default=DEFAULT_IDLE_S, metavar="S",
+                        help="seconds a sign-in lasts with no request and no page open "
+                             "(default %(default)g)")
+    people.add_argument("--sign-in-max-age", type=float, default=DEFAULT_MAX_AGE_S, metavar="S",
+                        help="seconds a sign-in lasts at most (default %(default)g)")
     credentials.add_arguments(parser)
     args = parser.parse_args(argv)
     try:
         tls, token = credentials.from_arguments(args)
+        TokenStore.load(args.sign_in_tokens)   # TokenFileError names the file and line
         return DashboardConfig(devices=tuple(args.device), host=args.host, port=args.port,
-                               display_rate_hz=args.display_rate, tls=tls,
-                               token=token)
+                               display_rate_hz=args.display_rate, tls=tls, token=token,
+                               sign_in_tokens=args.sign_in_tokens,
+                               allowed_origins=tuple(args.allowed_origin),
+                               sign_in_idle_s=args.sign_in_idle,
+                               sign_in_max_age_s=args.sign_in_max_age)
     except (OSError, ValueError) as error:
         parser.error(str(error))
 
@@ -53,9 +71,11 @@ def _loopback(host: str) -> bool:
 async def serve(config: DashboardConfig) -> None:
     running = await app.start(config)
     print(f"web supervisor on {running.url}", flush=True)
+    print(f"sign in with a token from {config.sign_in_tokens} (operator.tokens to command, "
+          f"viewer.tokens to watch)", flush=True)
     if not _loopback(config.host):
-        logging.warning("serving beyond loopback without TLS or login: whoever reaches %s can "
-                        "command the devices through it", running.url)
+        logging.warning("serving beyond loopback over plain HTTP: sign-in tokens and cookies "
+                        "cross the network readable; put TLS in front of %s", running.url)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -1,5 +1,8 @@
-"""The web supervisor's backend: aiohttp serving the built page, the device list and one
-WebSocket per browser (wire.py says what travels on it).
+"""The web supervisor's backend: aiohttp serving the built page, sign-in, the device list and
+one WebSocket per browser (wire.py says what travels on it).
+
+Every request passes http_guard.py first (origin, cross-site, sign-in); connections that
+never show a sign-in are bounded in time and number (connections.py).
 
 aiohttp, because one well-kept package gives the HTTP server, WebSockets and static files on
 the asyncio loop that grpc.aio already runs on: no second server process, no ASGI layer.
@@ -7,17 +10,25 @@ the asyncio loop that grpc.aio already runs on: no second server process, no ASG
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
+import socket
 from dataclasses import dataclass
 from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
+from landscape.server.auth import TokenStore
+from landscape.supervisor import sign_in_routes
 from landscape.supervisor.config import DashboardConfig
+from landscape.supervisor.connections import HEADER_TIMEOUT_S, ConnectionGuard
 from landscape.supervisor.console import Console
 from landscape.supervisor.device_link import DeviceLink
+from landscape.supervisor.http_guard import GUARD, POLICY, SIGN_INS, WS_PATH, guard, signed_in
+from landscape.supervisor.origins import OriginPolicy, own_origins
 from landscape.supervisor.outbox import Outbox, TooSlow
+from landscape.supervisor.sign_in import SignIn, SignIns
 
 log = logging.getLogger(__name__)
 
@@ -26,24 +37,47 @@ LINKS = web.AppKey("links", dict)
 CONFIG = web.AppKey("config", DashboardConfig)
 # WebSocket close code 1013 "try again later": the page reconnects and is sent the history.
 CLOSE_TOO_SLOW = 1013
+# The person's sign-in ended (signed out, expired): the page shows the sign-in form and why.
+CLOSE_SIGNED_OUT = 4001
+SWEEP_PERIOD_S = 10.0   # how often expired sign-ins are ended (and their pages closed)
 
 
-def create_app(config: DashboardConfig) -> web.Application:
+def create_app(config: DashboardConfig, origins: tuple[str, ...]) -> web.Application:
+    """The app; `origins`: the supervisor's own (origins.own_origins of where it serves)."""
     static = Path(config.static_dir) if config.static_dir else STATIC_DIR
     if not (static / "index.html").is_file():
         raise FileNotFoundError(f"the page is not built: {static / 'index.html'} is missing "
                                 "(`make install` builds it with npm)")
-    app = web.Application()
+    app = web.Application(middlewares=[guard])
     app[CONFIG] = config
-    app.router.add_get("/ws", _websocket)
+    app[POLICY] = OriginPolicy(origins, config.allowed_origins)
+    app[SIGN_INS] = SignIns(TokenStore.load(config.sign_in_tokens),
+                            forward_tokens=config.token is not None,
+                            idle_s=config.sign_in_idle_s, max_age_s=config.sign_in_max_age_s)
+    app[GUARD] = ConnectionGuard(config.max_unauthenticated)
+    app.router.add_get(WS_PATH, _websocket)
     app.router.add_get("/api/devices", _devices)
+    sign_in_routes.add_routes(app)
     async def index(request: web.Request) -> web.FileResponse:
         return web.FileResponse(static / "index.html")
 
     app.router.add_get("/", index)
     app.router.add_static("/", static)
     app.cleanup_ctx.append(_device_links)
+    app.cleanup_ctx.append(_sweeper)
     return app
+
+
+async def _sweeper(app: web.Application):
+    async def sweep():
+        while True:
+            await asyncio.sleep(SWEEP_PERIOD_S)
+            app[SIGN_INS].sweep()
+    task = asyncio.create_task(sweep())
+    yield
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
 
 
 async def _device_links(app: web.Application):
@@ -63,14 +97,18 @@ async def _devices(request: web.Request) -> web.Response:
 
 
 async def _websocket(request: web.Request) -> web.WebSocketResponse:
+    person = signed_in(request)   # the guard checked the Origin and the sign-in already
     ws = web.WebSocketResponse(heartbeat=10.0)
     await ws.prepare(request)
     links = request.app[LINKS]
+    sign_ins = request.app[SIGN_INS]
     outbox = Outbox()
-    console = Console(links, outbox)
+    console = Console(links, outbox, person)
+    sign_ins.page_opened(person)
     for link in links.values():
         link.join(outbox)
     sender = asyncio.create_task(_send(ws, outbox))
+    ender = asyncio.create_task(_close_when_signed_out(ws, person))
     try:
         async for message in ws:
             if message.type is not WSMsgType.TEXT:
@@ -79,15 +117,23 @@ async def _websocket(request: web.Request) -> web.WebSocketResponse:
                 body = json.loads(message.data)
             except json.JSONDecodeError:
                 continue   # not a frame of ours; nothing to answer it with
-            if isinstance(body, dict):
+            if isinstance(body, dict) and not person.ended.is_set():
+                sign_ins.touch(person)
                 console.receive(body)
     finally:
+        ender.cancel()
+        sign_ins.page_closed(person)
         for link in links.values():
             link.leave(outbox)
         outbox.close()
         await console.close()   # ends this page's sessions: the device's disconnect handler runs
         await sender
     return ws
+
+
+async def _close_when_signed_out(ws: web.WebSocketResponse, person: SignIn) -> None:
+    await person.ended.wait()
+    await ws.close(code=CLOSE_SIGNED_OUT, message=person.why_ended.encode()[:120])
 
 
 async def _send(ws: web.WebSocketResponse, outbox: Outbox) -> None:
@@ -105,17 +151,28 @@ async def _send(ws: web.WebSocketResponse, outbox: Outbox) -> None:
 @dataclass
 class RunningDashboard:
     runner: web.AppRunner
+    server: asyncio.base_events.Server
     url: str
 
     async def stop(self) -> None:
+        self.server.close()
         await self.runner.cleanup()
 
 
 async def start(config: DashboardConfig) -> RunningDashboard:
     """Serve on config.host:config.port (0 picks a free port); returns once listening."""
-    runner = web.AppRunner(create_app(config), access_log=None)
+    listening = socket.create_server((config.host.strip("[]"), config.port),
+                                     family=_family(config.host))
+    host, port = listening.getsockname()[:2]
+    app = create_app(config, own_origins(config.host, port))
+    # keepalive_timeout is also how long a request's head may take to arrive (connections.py)
+    runner = web.AppRunner(app, access_log=None, keepalive_timeout=HEADER_TIMEOUT_S)
     await runner.setup()
-    site = web.TCPSite(runner, config.host, config.port)
-    await site.start()
-    host, port = runner.addresses[0][:2]
-    return RunningDashboard(runner, f"http://{host}:{port}/")
+    server = await asyncio.get_running_loop().create_server(app[GUARD].serve(runner.server),
+                                                            sock=listening)
+    shown = f"[{host}]" if ":" in host else host
+    return RunningDashboard(runner, server, f"http://{shown}:{port}/")
+
+
+def _family(host: str) -> socket.AddressFamily:
+    return socket.AF_INET6 if ":" in host else socket.AF_INET

@@ -1,9 +1,14 @@
 """One browser's commands: its sessions (one per device), its calls and its jog streams.
 
-The backend decides nothing for the device: each call goes to the device server as the browser
-asked, with the lease of the browser's own session when it holds the lock, and the server's
-answer (reply, or google.rpc.Status with its ErrorInfo) goes back as it came. The session's
-secret and the lease stay here; the page never sees them.
+The browser belongs to a signed-in person (sign_in.py). Each frame is first checked against
+the person's role (roles.py: a viewer watches and may press the e-stop; commanding needs an
+operator): a frame the role does not allow is refused here with the reason, and nothing is
+sent. Otherwise the call goes to the device server as the browser asked, as that person
+(caller.py: their own token where the devices use tokens, and who it is for), with the lease
+of the browser's own session when it holds the lock; the server's answer (reply, or
+google.rpc.Status with its ErrorInfo) goes back as it came. The session's secret and the lease
+stay here; the page never sees them. A session the device ends is reported to the page with
+the device's reason ("no keep-alive for 2 s").
 
 Every call runs in its own task, so a StopMotion never waits behind an Activate in progress.
 Closing the console (the page closed or lost its connection) ends its sessions: the device's
@@ -19,9 +24,12 @@ import grpc
 from google.protobuf import json_format
 
 from landscape.supervisor import wire
+from landscape.supervisor.caller import CallerChannel, identity_metadata
 from landscape.supervisor.device_link import DeviceLink
 from landscape.supervisor.outbox import Outbox
+from landscape.supervisor.roles import OPERATE_PANEL, needed_role, refusal
 from landscape.supervisor.rpc_table import CONNECT, JOG, LOCK, RPCS, Rpc
+from landscape.supervisor.sign_in import SignIn
 from landscape.client import AsyncSession
 from landscape.v1 import control_pb2, session_service_pb2, types_pb2
 
@@ -42,6 +50,7 @@ class Refused(Exception):
 @dataclass
 class _DeviceSide:
     """What this browser has open on one device."""
+    caller: CallerChannel                  # calls as the signed-in person
     session: AsyncSession | None = None
     session_call_id: int | None = None
     rsvp_answers: dict[str, asyncio.Future] = field(default_factory=dict)
@@ -62,11 +71,13 @@ class _Stream:
 
 
 class Console:
-    def __init__(self, links: dict[str, DeviceLink], outbox: Outbox, client_name: str = "dashboard"):
+    def __init__(self, links: dict[str, DeviceLink], outbox: Outbox, person: SignIn):
         self.links = links
         self.outbox = outbox
-        self.client_name = client_name
-        self._sides = {name: _DeviceSide() for name in links}
+        self.person = person
+        self._metadata = identity_metadata(person.name, person.token)
+        self._sides = {name: _DeviceSide(link.caller(self._metadata))
+                       for name, link in links.items()}
         self._tasks: set[asyncio.Task] = set()
 
     # ---- frames from the browser
@@ -86,6 +97,7 @@ class Console:
             if rpc is None or rpc_name in FED:
                 raise Refused(grpc.StatusCode.UNIMPLEMENTED,
                               f"{rpc_name!r} is not a landscape.v1 call the page can make")
+            self._check_role(rpc, body)
             if rpc_name == CONNECT:
                 await self._session(link, call_id, body)
             elif rpc_name == JOG:
@@ -100,6 +112,15 @@ class Console:
         except grpc.aio.AioRpcError as error:
             self._send(device, rpc_name, call_id, status=wire.status_of(error))
 
+    def _check_role(self, rpc: Rpc, body: dict) -> None:
+        """Refused unless the person's role allows the call (OperatePanel: its action)."""
+        request = (wire.parse_request(rpc.request_class, body.get("request"))
+                   if rpc.name == OPERATE_PANEL else None)
+        needed = needed_role(rpc.name, request)
+        if self.person.role < needed:
+            raise Refused(grpc.StatusCode.PERMISSION_DENIED,
+                          refusal(rpc.name, needed, self.person.role))
+
     def _send(self, device, rpc, call_id, reply=None, status=None) -> None:
         self.outbox.put(wire.frame(str(device), str(rpc), reply=reply, status=status, call_id=call_id))
 
@@ -107,7 +128,7 @@ class Console:
     async def _call(self, link: DeviceLink, rpc: Rpc, call_id, body) -> None:
         side = self._sides[link.name]
         metadata = side.session.metadata() if side.session else ()
-        invoke = rpc.callable(link.channel)
+        invoke = rpc.callable(side.caller)
         if rpc.kind == "unary":
             request = wire.parse_request(rpc.request_class, body.get("request"))
             if rpc.name == LOCK:
@@ -150,8 +171,9 @@ class Console:
             if side.session is not None and not side.session.ended.is_set():
                 raise Refused(grpc.StatusCode.ALREADY_EXISTS,
                               f"this page already has session {side.session.session_id}")
-            name = message.hello.client_name or self.client_name
-            session = AsyncSession(link.channel, name,
+            # The session bears the person's name (the device shows it as the lock holder),
+            # whatever name the page asked for.
+            session = AsyncSession(side.caller, self.person.name,
                                    on_rsvp=lambda request: self._ask_page(link, side, request))
             await session.open()
             side.session, side.session_call_id = session, call_id
@@ -210,7 +232,7 @@ class Console:
     async def _run_jog(self, link: DeviceLink, rpc: Rpc, side: _DeviceSide, stream: _Stream) -> None:
         metadata = side.session.metadata() if side.session else ()
         try:
-            call = rpc.callable(link.channel)(stream.requests(), metadata=metadata)
+            call = rpc.callable(side.caller)(stream.requests(), metadata=metadata)
             async for reply in call:
                 self._send(link.name, rpc.name, stream.call_id, reply=reply)
             self._send(link.name, rpc.name, stream.call_id,

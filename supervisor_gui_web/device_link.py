@@ -4,6 +4,10 @@ watching it.
 
 One StreamState and one Subscribe per device serve every browser: the device server thins the
 state to the display rate once, and each browser's outbox keeps only the newest sample.
+
+One channel per device carries everyone's calls; who a call is for rides on the call
+(caller.py). The feeds go as the supervisor itself, with its own (viewer) token when the
+devices use tokens; a person's calls go through `caller(...)` with theirs.
 """
 from __future__ import annotations
 
@@ -13,6 +17,7 @@ from collections import deque
 
 from landscape.client.credentials import ClientTLS, open_aio_channel
 from landscape.supervisor import wire
+from landscape.supervisor.caller import CallerChannel, identity_metadata
 from landscape.supervisor.config import DeviceTarget
 from landscape.supervisor.feeds import EventFeed, StatusPoll
 from landscape.supervisor.outbox import Outbox
@@ -21,14 +26,17 @@ from landscape.supervisor.world_feed import WorldFeed
 
 log = logging.getLogger(__name__)
 
+FEEDS_FOR = "every browser"   # landscape-on-behalf-of of the shared feeds
+
 
 class DeviceLink:
     def __init__(self, target: DeviceTarget, display_rate_hz: float, tls: ClientTLS | None = None,
                  token: str | None = None, history: int = 500):
         self.name = target.name
         self.target = target.address
-        # Every call of every browser goes with this token: the device's roles decide.
-        self.channel = open_aio_channel(target.address, tls, token)
+        self._channel = open_aio_channel(target.address, tls)
+        # What the feeds call through: as the supervisor, for every browser.
+        self.channel = CallerChannel(self._channel, identity_metadata(FEEDS_FOR, token))
         self._watchers: set[Outbox] = set()
         self._history: deque[str] = deque(maxlen=history)   # the newest event frames, for joiners
         self._latest: dict[str, str] = {}                   # feed -> its newest frame, for joiners
@@ -47,7 +55,11 @@ class DeviceLink:
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
-        await self.channel.close()
+        await self._channel.close()
+
+    def caller(self, metadata: tuple[tuple[str, str], ...]) -> CallerChannel:
+        """The device's channel for calls with `metadata` (caller.identity_metadata)."""
+        return CallerChannel(self._channel, metadata)
 
     def _state_changed(self) -> None:
         self.status_poll.kick()

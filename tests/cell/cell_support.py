@@ -51,12 +51,13 @@ def move_as_operator(target: str, keys: Keys, goal, name: str = "cell-test") -> 
         return reached
 
 
-def through_the_supervisor(url: str, devices, timeout: float = 60.0) -> dict[str, dict]:
+def through_the_supervisor(url: str, devices, token: str,
+                           timeout: float = 60.0) -> dict[str, dict]:
     """What the web supervisor at `url` gets from each device, seen as its page sees it (its
-    WebSocket, wire.py): the first reply of each read it keeps for the page, by device and
-    method ("GetDeviceState", ...). A read the device refused fails with the device's status.
-    Then a session and the lock on the last device, through the backend, as an operator (the
-    lock ends with the page's connection)."""
+    WebSocket, wire.py), signed in with `token`: the first reply of each read it keeps for
+    the page, by device and method ("GetDeviceState", ...). A read the device refused fails
+    with the device's status. Then a session and the lock on the last device, through the
+    backend, as that person (an operator; the lock ends with the page's connection)."""
     import asyncio
     import json
 
@@ -66,10 +67,14 @@ def through_the_supervisor(url: str, devices, timeout: float = 60.0) -> dict[str
 
     async def main():
         seen: dict[str, dict] = {name: {} for name in devices}
-        async with aiohttp.ClientSession() as http:
+        origin = url.rstrip("/")
+        async with aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True)) as http:
             async with http.get(url) as page:
                 assert "LandScape supervisor" in await page.text()
-            async with http.ws_connect(url + "ws") as ws:
+            async with http.post(url + "api/sign-in", json={"token": token}, headers={
+                    "Origin": origin, "X-Landscape-Request": "page"}) as signed_in:
+                assert signed_in.status == 200, await signed_in.text()
+            async with http.ws_connect(url + "ws", origin=origin) as ws:
                 async def frame():
                     return json.loads((await ws.receive()).data)
                 while any(wanted - set(got) for got in seen.values()):

@@ -2,7 +2,8 @@
 engine here), and its services run without Docker, from the file's own commands, health
 checks and environment (compose_run.py): every health check passes, an operator moves each
 arm over TLS with a token, a CRCL client drives the first arm through the gateway, and the
-web supervisor serves its page and reaches both arms over TLS with its own token."""
+web supervisor serves its page, reaches both arms over TLS with its own token, and a person
+signed in to it with an operator's token takes a lock."""
 from __future__ import annotations
 
 import os
@@ -65,8 +66,9 @@ def test_the_compose_services_run_without_docker_and_each_arm_moves(tmp_path):
         for arm, goal in ARMS.items():
             reached = move_as_operator(run.target(arm, 50051), keys, goal)
             print(f"{arm} moved to {reached.round(4).tolist()}")
-        seen = through_the_supervisor(f"http://{run.target('supervisor', 8080)}/", list(ARMS))
-        for arm in ARMS:   # its reads reached each arm, over TLS, with the operator's token
+        seen = through_the_supervisor(f"http://{run.target('supervisor', 8080)}/", list(ARMS),
+                                      keys.token("operator"))
+        for arm in ARMS:   # its reads reached each arm over TLS with its own (viewer) token
             assert seen[arm]["GetDeviceState"]["state"].startswith("DEVICE_STATE_")
         assert [seen[arm]["GetCellDescription"]["cellName"] for arm in ARMS] == [
             "default", "press_tending"]   # each arm in its own world

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from landscape.cell.config import CellConfigError, load_config, parse_config
-from landscape.cell.services import device_service, gateway_service
+from landscape.cell.services import device_service, gateway_service, supervisor_service
 
 from cell_support import make_keys
 
@@ -31,6 +31,19 @@ def test_the_built_in_default_is_one_arm_the_gateway_and_the_supervisor_on_loopb
     assert argv[argv.index("--audit-log") + 1] == str(tmp_path / "var" / "arm1" / "audit.log")
 
 
+def test_the_supervisor_signs_people_in_from_var_tokens_and_shows_its_keys(tmp_path):
+    config = parse_config("[supervisor]\nallowed_origins = ['HTTPS://Panel.lan:443']\n"
+                          "sign_in_idle = 600", "<t>", tmp_path)
+    supervisor = config.supervisor
+    assert supervisor.sign_in_tokens == tmp_path / "var" / "tokens"   # made on the first run
+    assert supervisor.token is None                                   # devices without tokens
+    argv = supervisor_service(config, {"arm1": "127.0.0.1:50051"}, tmp_path).argv
+    assert argv[argv.index("--sign-in-tokens") + 1] == str(tmp_path / "var" / "tokens")
+    assert argv[argv.index("--allowed-origin") + 1] == "https://panel.lan"
+    assert argv[argv.index("--sign-in-idle") + 1] == "600"
+    assert "--token-file" not in argv
+
+
 def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     make_keys(tmp_path / "var")
     shutil.copy(LAN, tmp_path / "cell.toml")
@@ -43,6 +56,9 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     assert "--token-file" in gateway
     server = device_service(config.devices[1], config.security).argv
     assert "--tokens" in server and "--tls-cert" in server
+    # The supervisor: people sign in with the devices' tokens; its own feeds are a viewer's.
+    assert config.supervisor.sign_in_tokens == tmp_path / "var" / "tokens"
+    assert config.supervisor.token == tmp_path / "var" / "tokens" / "viewer.tokens"
 
 
 @pytest.mark.parametrize("text, message", [
@@ -58,6 +74,10 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     ("[[devices]]\nname = 'a'\ncollision_margin = 0.5", r"collision_margin: must be within"),
     ("[gateway]\ndevice = 'arm9'", r"gateway\.device: no device is named 'arm9'"),
     ("[supervisor]\ndevices = []", r"supervisor\.devices: must be a non-empty list"),
+    ("[supervisor]\nallowed_origins = 'x'", r"supervisor\.allowed_origins: must be a list"),
+    ("[supervisor]\nallowed_origins = ['panel.lan']",
+     r"supervisor\.allowed_origins: an origin is http\(s\)://host\[:port\]"),
+    ("[supervisor]\nsign_in_idle = 0", r"supervisor\.sign_in_idle: must be positive"),
     ("[gateway]\nport = 50051", r"gateway\.port: port 50051 on 127.0.0.1 is taken by devices"),
     ("[[devices]]\nname = 'a'\naddress = '0.0.0.0'",
      r"devices\[0\]\.address: a would listen on 0\.0\.0\.0 without TLS and tokens"),

@@ -116,7 +116,7 @@ def test_the_cell_starts_says_where_and_stops_safely(launch, tmp_path):
     for arm in ("arm1", "arm2"):
         assert probe.grpc_health(services[arm][1]) is None
     assert probe.tcp(services["gateway"][1]) is None
-    assert probe.http(services["supervisor"][1]) is None   # with the operator's token
+    assert probe.http(services["supervisor"][1]) is None   # its page
 
     # A lock holder on arm1 when the cell is stopped: its device stops safely all the same.
     from landscape.client import open_channel
@@ -138,6 +138,22 @@ def test_the_cell_starts_says_where_and_stops_safely(launch, tmp_path):
         time.sleep(0.05)
     channel.close()
     assert (tmp_path / "var" / "arm1" / "audit.log").read_text().count('"DeviceService/Lock"') == 1
+
+
+def test_a_first_run_makes_the_sign_in_tokens_and_says_where_they_are(launch, tmp_path):
+    """Devices without tokens (loopback): people still sign in to the supervisor, with a
+    token from the folder the launcher makes on the first run."""
+    cell = launch(_device("arm1") + "[gateway]\nenabled = false\n[supervisor]\nport = 0\n")
+    services = cell.up()
+    folder = tmp_path / "var" / "tokens"
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "admin.tokens", "operator.tokens", "viewer.tokens"]
+    assert any(f"made role tokens for signing in to the web supervisor in {folder}" in line
+               for line in cell.output), cell.text()
+    assert any(f"sign in with a token from {folder}" in line for line in cell.output)
+    assert probe.http(services["supervisor"][1]) is None   # the page itself is public
+    cell.process.send_signal(signal.SIGINT)
+    assert cell.finish() == 0, cell.text()
 
 
 def test_a_service_that_dies_is_reported_and_the_cell_stops(launch):

@@ -8,14 +8,15 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from dashboard_support import DashboardThread, browser  # noqa: E402
+from dashboard_support import DashboardThread, People, browser  # noqa: E402
 from support import start_server
 
 
 # The backend serves the built page: without Node.js and npm it is not built (the Makefile says
 # so), and the tests that start the backend skip, naming what is missing.
 PAGE = Path(__file__).resolve().parents[2] / "supervisor_gui_web" / "frontend" / "dist"
-NEED_THE_PAGE = {"test_backend.py", "test_page.py"}
+NEED_THE_PAGE = {"test_backend.py", "test_page.py", "test_page_panels.py", "test_http_guard.py",
+                 "test_page_trust.py", "test_jog_press.py"}
 
 
 def pytest_collection_modifyitems(items):
@@ -35,9 +36,15 @@ def cell_server():
     running.stop(grace=None)
 
 
+@pytest.fixture(scope="session")
+def people(tmp_path_factory) -> People:
+    """The people who sign in (dashboard_support.PEOPLE), with their tokens."""
+    return People.make(tmp_path_factory.mktemp("people"))
+
+
 @pytest.fixture
-def dashboard(cell_server):
-    running = DashboardThread({"arm1": cell_server.target})
+def dashboard(cell_server, people):
+    running = DashboardThread({"arm1": cell_server.target}, people)
     yield running
     running.stop()
 

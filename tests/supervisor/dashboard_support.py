@@ -1,12 +1,18 @@
-"""The real dashboard backend in a thread of the test process, and a real Chromium from Debian."""
+"""The real dashboard backend in a thread of the test process, the people who sign in to it,
+and a real Chromium from Debian."""
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import os
+import secrets
 import threading
 from concurrent.futures import Future
+from dataclasses import dataclass
+from pathlib import Path
 
+import aiohttp
 import pytest
 
 from landscape.supervisor import DashboardConfig, DeviceTarget, start
@@ -17,16 +23,118 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-background-networking", "--disable-g
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 
 
+# Who may sign in, by role: the names their tokens carry in the folder's files.
+PEOPLE = {"viewer": ("vera", "watcher", "supervisor"),
+          "operator": ("olga", "operator-1", "owner-page", "watcher-page"),
+          "admin": ("ada",)}
+
+
+@dataclass(frozen=True)
+class People:
+    """A token folder as `landscape-cell tokens` writes it (`<token> <name>` a line), one
+    token per person of PEOPLE. The device servers of a test may use the same folder."""
+
+    folder: Path
+    tokens: dict[str, str]     # name -> token
+
+    @classmethod
+    def make(cls, folder: Path) -> "People":
+        folder.mkdir(parents=True, exist_ok=True)
+        tokens = {}
+        for role, names in PEOPLE.items():
+            lines = []
+            for name in names:
+                tokens[name] = secrets.token_urlsafe(32)
+                lines.append(f"{tokens[name]} {name}\n")
+            (folder / f"{role}.tokens").write_text("".join(lines))
+        return cls(folder, tokens)
+
+    def token(self, name: str) -> str:
+        return self.tokens[name]
+
+
+def origin_of(url: str) -> str:
+    """The origin of a supervisor's URL ("http://127.0.0.1:8080/" -> "http://127.0.0.1:8080")."""
+    return url.rstrip("/")
+
+
+def page_headers(url: str) -> dict[str, str]:
+    """What the page's own requests that change something carry."""
+    return {"Origin": origin_of(url), "X-Landscape-Request": "page"}
+
+
+async def signed_in_http(url: str, token: str) -> aiohttp.ClientSession:
+    """An HTTP client signed in to the supervisor at `url` (its cookie kept; IP hosts too)."""
+    http = aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True))
+    reply = await http.post(url + "api/sign-in", json={"token": token}, headers=page_headers(url))
+    if reply.status != 200:
+        await http.close()
+        raise AssertionError(f"sign-in refused: {reply.status} {await reply.text()}")
+    return http
+
+
+DEVICE = "landscape.v1.DeviceService/"
+CONNECT = "landscape.v1.SessionService/Connect"
+TIMEOUT = 30.0
+
+
+async def open_page(url: str, token: str):
+    """A signed-in HTTP client and its page's WebSocket (from the supervisor's own origin)."""
+    http = await signed_in_http(url, token)
+    return http, await http.ws_connect(url + "ws", origin=origin_of(url))
+
+
+class PageClient:
+    """The page's side of the WebSocket: numbered calls, and every frame kept for inspection."""
+
+    def __init__(self, ws):
+        self.ws = ws
+        self.frames: list[dict] = []
+        self._next = 1
+
+    async def send(self, rpc: str, request=None, *, call_id=None, device="arm1", **extra) -> int:
+        call_id = call_id if call_id is not None else self._next
+        self._next = max(self._next, call_id) + 1
+        body = {"device": device, "rpc": rpc, "id": call_id, **extra}
+        if request is not None:
+            body["request"] = request
+        await self.ws.send_str(json.dumps(body))
+        return call_id
+
+    async def until(self, predicate, timeout: float = TIMEOUT) -> dict:
+        """The first frame (kept or new) for which predicate holds."""
+        for frame in self.frames:
+            if predicate(frame):
+                return frame
+        async with asyncio.timeout(timeout):
+            while True:
+                message = await self.ws.receive()
+                assert message.type is aiohttp.WSMsgType.TEXT, message
+                frame = json.loads(message.data)
+                self.frames.append(frame)
+                if predicate(frame):
+                    return frame
+
+    async def answer(self, call_id: int) -> dict:
+        return await self.until(lambda f: f.get("id") == call_id and ("reply" in f or "status" in f))
+
+    async def call(self, rpc: str, request=None) -> dict:
+        return await self.answer(await self.send(rpc, request))
+
+
+
 class DashboardThread:
     """`python -m landscape.supervisor` as a test runs it: the same app on its own event loop,
-    in a thread, on a free loopback port."""
+    in a thread, on a free loopback port; people sign in with `people`'s tokens."""
 
-    def __init__(self, devices: dict[str, str], **config):
+    def __init__(self, devices: dict[str, str], people: People, **config):
+        self.people = people
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="dashboard", daemon=True)
         self._thread.start()
         targets = tuple(DeviceTarget(name, target) for name, target in devices.items())
-        self._running = self.run(start(DashboardConfig(devices=targets, port=0, **config)))
+        self._running = self.run(start(DashboardConfig(
+            devices=targets, port=0, sign_in_tokens=str(people.folder), **config)))
         self.url = self._running.url
 
     def run(self, coroutine, timeout: float = 30.0):
@@ -61,23 +169,33 @@ def browser():
 
 
 class Page:
-    """One browser tab on the dashboard, as an operator uses it: buttons by their ids, what the
-    page shows by its ids. Every wait has a timeout; errors in the page fail the test."""
+    """One browser tab on the dashboard, as a person uses it: signed in through the form with
+    their token, buttons by their ids, what the page shows by its ids. Every wait has a
+    timeout; errors in the page fail the test."""
 
     TIMEOUT_MS = 30_000
 
-    def __init__(self, chromium, url: str, name: str | None = None):
-        self.context = chromium.new_context(viewport={"width": 1400, "height": 1000})
+    def __init__(self, chromium, dashboard: DashboardThread, name: str = "olga", query: str = "",
+                 context=None):
+        self.context = context or chromium.new_context(viewport={"width": 1400, "height": 1000})
         self.page = self.context.new_page()
         self.errors: list[str] = []
         self.page.on("pageerror", lambda error: self.errors.append(str(error)))
-        self.page.goto(url)
-        if name:
-            self.page.fill("#client-name", name)
         from playwright.sync_api import expect
         self.expect = expect
+        self.page.goto(dashboard.url + query)
+        self.sign_in(dashboard.people.token(name))
+        expect(self.page.locator("#person")).to_have_text(
+            f"{name} ({next(r for r, names in PEOPLE.items() if name in names)})")
         expect(self.page.locator("#connection")).to_have_text("connected", timeout=self.TIMEOUT_MS)
         expect(self.page.locator("#joints .joint")).to_have_count(6, timeout=self.TIMEOUT_MS)
+
+    def sign_in(self, token: str) -> None:
+        """Through the form, as a person does (the page reloads, signed in)."""
+        self.expect(self.page.locator("#sign-in")).to_be_visible(timeout=self.TIMEOUT_MS)
+        self.page.fill("#sign-in-token", token)
+        self.page.click("#btn-sign-in")
+        self.expect(self.page.locator("#app")).to_be_visible(timeout=self.TIMEOUT_MS)
 
     def click(self, element_id: str) -> None:
         self.page.click(f"#{element_id}", timeout=self.TIMEOUT_MS)
@@ -114,6 +232,13 @@ class Page:
     def joint(self, index: int) -> str:
         return self.page.inner_text(f"#joints .joint:nth-child({index + 1}) .jvalue",
                                     timeout=self.TIMEOUT_MS)
+
+    def screenshot(self, name: str) -> Path:
+        """A picture of the page under var/screenshots (not in git), for the test's record."""
+        path = Path(__file__).resolve().parents[2] / "var" / "screenshots" / f"{name}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.page.screenshot(path=str(path))
+        return path
 
     def close(self) -> None:
         self.context.close()

@@ -1,5 +1,6 @@
 """The dashboard backend on its WebSocket, without a browser: a real device server, the real
-backend, and an aiohttp client speaking the page's frames (wire.py)."""
+backend, and an aiohttp client speaking the page's frames (wire.py), signed in as one of the
+test's people (olga, an operator, unless a test says otherwise)."""
 from __future__ import annotations
 
 import asyncio
@@ -7,6 +8,7 @@ import json
 import logging
 import subprocess
 import sys
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -15,56 +17,16 @@ import pytest
 from google.protobuf import any_pb2, json_format
 from google.rpc import error_details_pb2
 
+from dashboard_support import CONNECT, DEVICE, PageClient, open_page, signed_in_http
 from landscape.server.app import serve
-from landscape.server.config import ServerConfig
+from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.server.states import State
 from landscape.supervisor import DashboardConfig, DeviceTarget, start
 from landscape.v1 import event_service_pb2, settings_pb2, state_service_pb2, types_pb2
 from support import start_server, wait_until
 
-DEVICE = "landscape.v1.DeviceService/"
-CONNECT = "landscape.v1.SessionService/Connect"
 CELL = DEVICE + "GetCellDescription"
-TIMEOUT = 30.0
 ROOT = Path(__file__).resolve().parents[2]
-
-
-class PageClient:
-    """The page's side of the WebSocket: numbered calls, and every frame kept for inspection."""
-
-    def __init__(self, ws):
-        self.ws = ws
-        self.frames: list[dict] = []
-        self._next = 1
-
-    async def send(self, rpc: str, request=None, *, call_id=None, device="arm1", **extra) -> int:
-        call_id = call_id if call_id is not None else self._next
-        self._next = max(self._next, call_id) + 1
-        body = {"device": device, "rpc": rpc, "id": call_id, **extra}
-        if request is not None:
-            body["request"] = request
-        await self.ws.send_str(json.dumps(body))
-        return call_id
-
-    async def until(self, predicate, timeout: float = TIMEOUT) -> dict:
-        """The first frame (kept or new) for which predicate holds."""
-        for frame in self.frames:
-            if predicate(frame):
-                return frame
-        async with asyncio.timeout(timeout):
-            while True:
-                message = await self.ws.receive()
-                assert message.type is aiohttp.WSMsgType.TEXT, message
-                frame = json.loads(message.data)
-                self.frames.append(frame)
-                if predicate(frame):
-                    return frame
-
-    async def answer(self, call_id: int) -> dict:
-        return await self.until(lambda f: f.get("id") == call_id and ("reply" in f or "status" in f))
-
-    async def call(self, rpc: str, request=None) -> dict:
-        return await self.answer(await self.send(rpc, request))
 
 
 def unpack(reply: dict, message_class):
@@ -75,22 +37,34 @@ def unpack(reply: dict, message_class):
     return message
 
 
-def run_with_page(server, body, devices=None, **config):
-    """Run body(page, server) against a backend on a free port, within a time limit; its
-    devices (DeviceTargets) default to `server` as arm1."""
+def run_with_page(server, body, people, devices=None, person="olga", **config):
+    """Run body(page, dashboard) against a backend on a free port, within a time limit, the
+    page signed in as `person`; its devices (DeviceTargets) default to `server` as arm1."""
     async def main():
         dashboard = await start(DashboardConfig(
-            devices=devices or (DeviceTarget("arm1", server.target),), port=0, **config))
+            devices=devices or (DeviceTarget("arm1", server.target),), port=0,
+            sign_in_tokens=str(people.folder), **config))
         try:
-            async with aiohttp.ClientSession() as http:
-                async with http.ws_connect(dashboard.url + "ws") as ws:
-                    await body(PageClient(ws), dashboard)
+            http, ws = await open_page(dashboard.url, people.token(person))
+            async with http, ws:
+                await body(PageClient(ws), dashboard)
         finally:
             await dashboard.stop()
     asyncio.run(asyncio.wait_for(main(), 120))
 
 
-def test_feeds_are_landscape_messages_in_canonical_json(server):
+@pytest.fixture
+def secured_people(keys, people):
+    """A device server with TLS whose role tokens are the people's (the supervisor forwards
+    each person's own token to it)."""
+    running = start_server(security=SecurityConfig(
+        tls_cert=str(keys.certs.server_cert), tls_key=str(keys.certs.server_key),
+        tokens=str(people.folder)))
+    yield running
+    running.stop(grace=None)
+
+
+def test_feeds_are_landscape_messages_in_canonical_json(people, server):
     async def body(page, dashboard):
         started = await page.until(lambda f: f["rpc"].endswith("StreamState") and "started" in f["reply"])
         terms = unpack(started["reply"], state_service_pb2.StreamStateResponse).started
@@ -103,10 +77,10 @@ def test_feeds_are_landscape_messages_in_canonical_json(server):
         assert unpack(event["reply"], event_service_pb2.SubscribeResponse).event.sequence == 1
         units = await page.until(lambda f: f["rpc"] == DEVICE + "GetUnits")
         assert unpack(units["reply"], settings_pb2.GetUnitsResponse).linear_units == types_pb2.LINEAR_UNIT_METERS
-    run_with_page(server, body)
+    run_with_page(server, body, people)
 
 
-def test_the_lease_and_the_secret_stay_in_the_backend(server):
+def test_the_lease_and_the_secret_stay_in_the_backend(people, server):
     async def body(page, dashboard):
         opened = await page.call(CONNECT, {"hello": {"clientName": "page-1"}})
         assert opened["reply"]["opened"]["sessionId"]
@@ -115,10 +89,10 @@ def test_the_lease_and_the_secret_stay_in_the_backend(server):
         assert locked["reply"]["lease"] == ""
         assert (await page.call(DEVICE + "Activate"))["reply"]["retVal"]["retCode"] == "RETURN_CODE_CMD_EXEC_OK"
         assert server.device.state is State.RESTING   # the backend sent the lease
-    run_with_page(server, body)
+    run_with_page(server, body, people)
 
 
-def test_a_refusal_is_the_servers_status_with_its_error_info(server):
+def test_a_refusal_is_the_servers_status_with_its_error_info(people, server):
     async def body(page, dashboard):
         refused = await page.call(DEVICE + "Activate")
         status = refused["status"]
@@ -129,7 +103,7 @@ def test_a_refusal_is_the_servers_status_with_its_error_info(server):
         assert info.Unpack(error_info)
         assert (error_info.reason, error_info.metadata["ret_code"]) == ("WRONG_STATE", "-1")
         assert server.device.state is State.UNLOCKED
-    run_with_page(server, body)
+    run_with_page(server, body, people)
 
 
 @pytest.mark.parametrize("frame, code", [
@@ -142,30 +116,30 @@ def test_a_refusal_is_the_servers_status_with_its_error_info(server):
     ({"rpc": CONNECT, "request": {"keepAlive": {}}}, 3),                    # the backend's job
     ({"rpc": CONNECT, "request": {"rsvpAnswer": {"rsvpId": "rsvp-9", "choice": "x"}}}, 5),
 ])
-def test_frames_the_backend_cannot_send_are_refused_and_change_nothing(server, frame, code):
+def test_frames_the_backend_cannot_send_are_refused_and_change_nothing(people, server, frame, code):
     async def body(page, dashboard):
         call_id = await page.send(**{"device": "arm1", **frame})
         answer = await page.answer(call_id)
         assert answer["status"]["code"] == code, answer
         assert server.device.state is State.UNLOCKED
-    run_with_page(server, body)
+    run_with_page(server, body, people)
 
 
-def test_a_second_hello_is_refused(server):
+def test_a_second_hello_is_refused(people, server):
     async def body(page, dashboard):
         await page.call(CONNECT, {"hello": {"clientName": "page-1"}})
         assert (await page.call(CONNECT, {"hello": {"clientName": "again"}}))["status"]["code"] == 6
-    run_with_page(server, body)
+    run_with_page(server, body, people)
 
 
-def test_closing_the_page_ends_its_session_and_the_device_releases(server):
+def test_closing_the_page_ends_its_session_and_the_device_releases(people, server):
     async def body(page, dashboard):
         await page.call(CONNECT, {"hello": {"clientName": "leaving"}})
         await page.call(DEVICE + "Lock")
         await page.call(DEVICE + "Activate")
         assert server.device.state is State.RESTING
         await page.ws.close()
-    run_with_page(server, body)
+    run_with_page(server, body, people)
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
 
@@ -182,7 +156,7 @@ async def _estop_question(page, server, name: str) -> tuple[int, dict]:
         lambda f: f.get("id") == session and "rsvpRequest" in f.get("reply", {}))
 
 
-def test_the_estop_rsvp_reaches_the_page_and_its_answer_the_device(server):
+def test_the_estop_rsvp_reaches_the_page_and_its_answer_the_device(people, server):
     async def body(page, dashboard):
         session, question = await _estop_question(page, server, "operator")
         request = question["reply"]["rsvpRequest"]
@@ -191,44 +165,54 @@ def test_the_estop_rsvp_reaches_the_page_and_its_answer_the_device(server):
                         call_id=session)
         await page.until(lambda f: f.get("reply", {}).get("event", {}).get("rsvpAnswer", {}).get("choice") == "reset")
         await asyncio.to_thread(wait_until, lambda: server.device.state is State.INACTIVE, 5)
-    run_with_page(server, body)
+    run_with_page(server, body, people)
 
 
-def test_a_late_page_is_sent_the_kept_events_and_the_newest_state(server):
+def test_a_late_page_is_sent_the_kept_events_and_the_newest_state(people, server):
     async def body(page, dashboard):
         await page.call(CONNECT, {"hello": {"clientName": "first"}})
         await page.call(DEVICE + "Lock")
-        async with aiohttp.ClientSession() as http:
-            async with http.ws_connect(dashboard.url + "ws") as ws:
-                late = PageClient(ws)
-                await late.until(lambda f: "locked by first" in json.dumps(f))
-                holder = await late.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState"
-                                          and f["reply"]["lockHolder"] == "first")
-                assert holder["reply"]["locked"] is True
-                await late.until(lambda f: "sample" in f.get("reply", {}))
-    run_with_page(server, body)
+        http, ws = await open_page(dashboard.url, people.token("vera"))   # a viewer watches
+        async with http, ws:
+            late = PageClient(ws)
+            await late.until(lambda f: "locked by olga" in json.dumps(f))
+            holder = await late.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState"
+                                      and f["reply"]["lockHolder"] == "olga")
+            assert holder["reply"]["locked"] is True
+            await late.until(lambda f: "sample" in f.get("reply", {}))
+    run_with_page(server, body, people)
 
 
-def test_make_run_command_line_serves_the_page(server):
-    """`python -m landscape.supervisor` as users start it: prints its address, serves, stops."""
+def test_make_run_command_line_serves_the_page(server, people):
+    """`python -m landscape.supervisor` as users start it: prints its address and where to
+    find a sign-in token, serves the page to anyone and the API to the signed in, stops."""
     proc = subprocess.Popen([sys.executable, "-m", "landscape.supervisor", "--device",
-                             f"arm1={server.target}", "--port", "0"],
+                             f"arm1={server.target}", "--port", "0",
+                             "--sign-in-tokens", str(people.folder)],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         line = proc.stdout.readline()
         assert line.startswith("web supervisor on http://127.0.0.1:"), line
         url = line.split()[-1]
-        with urllib.request.urlopen(url + "api/devices", timeout=10) as reply:
-            assert json.load(reply) == [{"name": "arm1", "target": server.target}]
+        assert f"sign in with a token from {people.folder}" in proc.stdout.readline()
         with urllib.request.urlopen(url, timeout=10) as reply:
             assert b"LandScape supervisor" in reply.read()
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(url + "api/devices", timeout=10)
+        assert refused.value.code == 401   # not signed in
+
+        async def devices():
+            async with await signed_in_http(url, people.token("vera")) as http:
+                async with http.get(url + "api/devices") as reply:
+                    return await reply.json()
+        assert asyncio.run(devices()) == [{"name": "arm1", "target": server.target}]
     finally:
         proc.terminate()
         code = proc.wait(timeout=20)
     assert code == 0
 
 
-def test_a_restarted_device_server_is_followed_from_its_first_event():
+def test_a_restarted_device_server_is_followed_from_its_first_event(people):
     first = start_server()
     port = first.port
     second = None
@@ -237,7 +221,7 @@ def test_a_restarted_device_server_is_followed_from_its_first_event():
         nonlocal second
         await page.call(CONNECT, {"hello": {"clientName": "before-restart"}})
         await page.call(DEVICE + "Lock")   # events 2 and on: the first run gets ahead
-        await page.until(lambda f: "locked by before-restart" in json.dumps(f))
+        await page.until(lambda f: "locked by olga" in json.dumps(f))
         await asyncio.to_thread(first.stop, None)
         second = await asyncio.to_thread(serve, ServerConfig(port=port, clock="lockstep"))
         page.frames.clear()
@@ -246,57 +230,64 @@ def test_a_restarted_device_server_is_followed_from_its_first_event():
         assert restarted["reply"]["event"]["stateChange"]["toState"] == "unlocked"
 
     try:
-        run_with_page(first, body)
+        run_with_page(first, body, people)
     finally:
         if second is not None:
             second.stop(grace=None)
 
 
-def test_the_backend_commands_over_tls_with_its_token_and_the_role_decides(secured, keys):
-    """An operator's token: sessions, the lock and commands; the e-stop (admin only) refused
-    with the device's reason, and nothing pressed."""
+def test_over_tls_a_persons_commands_go_with_their_own_token(people, secured_people, keys):
+    """The supervisor's own token is a viewer's: the session, the lock and Activate work only
+    because olga's operator token goes with them."""
+    server = secured_people
+
     async def body(page, dashboard):
         state = await page.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState")
-        assert state["reply"]["state"] == "DEVICE_STATE_UNLOCKED"
-        await page.call(CONNECT, {"hello": {"clientName": "tls-page"}})
+        assert state["reply"]["state"] == "DEVICE_STATE_UNLOCKED"   # the feeds: its own token
+        await page.call(CONNECT, {"hello": {}})
         assert "reply" in await page.call(DEVICE + "Lock")
         assert "reply" in await page.call(DEVICE + "Activate")
-        assert secured.device.state is State.RESTING
-        refused = (await page.call(DEVICE + "OperatePanel",
-                                   {"action": "PANEL_ACTION_PRESS_ESTOP"}))["status"]
-        assert refused["code"] == 7 and "admin" in refused["message"]   # PERMISSION_DENIED
-        assert secured.device.state is State.RESTING   # not pressed
-    run_with_page(secured, body, tls=keys.tls(), token=keys.token("operator"))
+        assert server.device.state is State.RESTING
+        assert server.device.status().lock_holder == "olga"
+    run_with_page(server, body, people, tls=keys.tls(), token=people.token("supervisor"))
 
 
-def test_an_admin_token_presses_the_estop_through_the_backend(secured, keys):
+def test_an_admin_presses_the_estop_through_the_backend_with_their_token(people, secured_people,
+                                                                          keys):
+    server = secured_people
+
     async def body(page, dashboard):
         pressed = await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
         assert pressed["reply"]["estopPressed"] is True
-        await asyncio.to_thread(wait_until, lambda: secured.device.state is State.ERROR, 5)
+        await asyncio.to_thread(wait_until, lambda: server.device.state is State.ERROR, 5)
         await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"})
-    run_with_page(secured, body, tls=keys.tls(), token=keys.token("admin"))
+    run_with_page(server, body, people, person="ada", tls=keys.tls(),
+                  token=people.token("supervisor"))
 
 
-def test_without_a_token_every_read_is_refused_and_shown_so(secured, keys):
+def test_without_a_token_every_read_is_refused_and_shown_so(people, secured_people, keys):
     async def body(page, dashboard):
         refused = await page.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState")
         assert refused["status"]["code"] == 16   # UNAUTHENTICATED
-    run_with_page(secured, body, tls=keys.tls())
+    run_with_page(secured_people, body, people, tls=keys.tls())
 
 
-def test_the_command_line_takes_the_client_credentials(keys):
+def test_the_command_line_takes_the_client_credentials(keys, people):
     from landscape.supervisor.__main__ import parse_args
     config = parse_args(["--device", "a=127.0.0.1:1", "--tls-ca", str(keys.certs.ca),
-                         "--token-file", str(keys.token_file("viewer"))])
-    assert config.tls.ca == str(keys.certs.ca) and config.token == keys.token("viewer")
+                         "--token-file", str(people.folder / "viewer.tokens"),
+                         "--sign-in-tokens", str(people.folder),
+                         "--allowed-origin", "https://Panel.example:443"])
+    assert config.tls.ca == str(keys.certs.ca) and config.token == people.token("vera")
+    assert config.sign_in_tokens == str(people.folder)
+    assert config.allowed_origins == ("https://panel.example",)
 
 
 def _bodies(frame: dict) -> dict[str, dict]:
     return {body["name"]: body for body in frame["reply"]["bodies"]}
 
 
-def test_each_device_describes_its_own_cell():
+def test_each_device_describes_its_own_cell(people):
     first = start_server()
     second = start_server(cell=str(ROOT / "sim" / "cells" / "press_tending.toml"))
 
@@ -311,14 +302,14 @@ def test_each_device_describes_its_own_cell():
         assert "blank_1" in _bodies({"reply": cells["arm2"]})
 
     try:
-        run_with_page(None, body, devices=(DeviceTarget("arm1", first.target),
+        run_with_page(None, body, people, devices=(DeviceTarget("arm1", first.target),
                                            DeviceTarget("arm2", second.target)))
     finally:
         first.stop(grace=None)
         second.stop(grace=None)
 
 
-def test_the_world_follows_tool_changes_and_parts_taken_and_put(server):
+def test_the_world_follows_tool_changes_and_parts_taken_and_put(people, server):
     """examples/02 fetches the gripper, carries block_1 to the place zone and puts the gripper
     back: each change of the cell reaches the page as a new GetCellDescription."""
     async def next_cell(page):   # each description once, in order
@@ -343,11 +334,11 @@ def test_the_world_follows_tool_changes_and_parts_taken_and_put(server):
         assert seen == [("", ""), ("flange", ""), ("flange", "tool"), ("flange", ""), ("", "")]
         block = bodies["block_1"]["pose"]
         assert (block["x"], block["y"]) == pytest.approx((0.73, -0.15), abs=0.01)   # placed
-    run_with_page(server, body)
+    run_with_page(server, body, people)
 
 
 def test_an_unanswered_question_times_out_on_the_device_and_the_backend_sends_nothing(
-        server, caplog):
+        people, server, caplog):
     """The device's own timer decides: the backend answers nothing when the page does not (a
     default sent for it would race that timer and be logged as an answer)."""
     server.device.rsvp_timeout = 0.5
@@ -360,7 +351,7 @@ def test_an_unanswered_question_times_out_on_the_device_and_the_backend_sends_no
         await asyncio.sleep(1.0)   # an answer the backend sent would have arrived by now
 
     with caplog.at_level(logging.WARNING, logger="landscape.server.servicers.session"):
-        run_with_page(server, body)
+        run_with_page(server, body, people)
     late = [r.getMessage() for r in caplog.records if "no such question waits" in r.getMessage()]
     assert not late
     assert server.device.state is State.ERROR   # "stay": the default kept it there

@@ -19,21 +19,40 @@ def test_malformed_devices_are_refused(text):
         parse_device(text)
 
 
-def test_the_command_line_serves_loopback_by_default():
-    config = parse_args(["--device", "a=127.0.0.1:1", "--device", "b=127.0.0.1:2"])
+def test_the_command_line_serves_loopback_by_default(people):
+    config = parse_args(["--device", "a=127.0.0.1:1", "--device", "b=127.0.0.1:2",
+                         "--sign-in-tokens", str(people.folder)])
     assert config.host == "127.0.0.1" and config.port == 8080
     assert [d.name for d in config.devices] == ["a", "b"]
+    assert config.allowed_origins == () and config.token is None
 
 
-@pytest.mark.parametrize("devices, rate, message", [
-    ((), 30.0, "at least one"),
-    ((DeviceTarget("a", "h:1"), DeviceTarget("a", "h:2")), 30.0, "must differ"),
-    ((DeviceTarget("a", "h:1"),), 0.0, "display rate"),
-    ((DeviceTarget("a", "h:1"),), 1000.0, "display rate"),
+def test_the_command_line_needs_a_usable_folder_of_sign_in_tokens(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        parse_args(["--device", "a=127.0.0.1:1"])
+    assert "--sign-in-tokens" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        parse_args(["--device", "a=127.0.0.1:1", "--sign-in-tokens", str(tmp_path)])
+    assert "none of viewer.tokens, operator.tokens, admin.tokens" in capsys.readouterr().err
+
+
+ARM = (DeviceTarget("a", "h:1"),)
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"devices": ()}, "at least one"),
+    ({"devices": (DeviceTarget("a", "h:1"), DeviceTarget("a", "h:2"))}, "must differ"),
+    ({"display_rate_hz": 0.0}, "display rate"),
+    ({"display_rate_hz": 1000.0}, "display rate"),
+    ({"sign_in_tokens": None}, "sign-in tokens"),
+    ({"allowed_origins": ("panel.example",)}, "an origin is"),
+    ({"allowed_origins": ("http://panel.example/page",)}, "an origin is"),
+    ({"sign_in_idle_s": 0.0}, "positive seconds"),
+    ({"max_unauthenticated": 0}, "at least 1"),
 ])
-def test_settings_that_cannot_work_are_refused(devices, rate, message):
+def test_settings_that_cannot_work_are_refused(settings, message):
     with pytest.raises(ValueError, match=message):
-        DashboardConfig(devices=devices, display_rate_hz=rate)
+        DashboardConfig(**{"devices": ARM, "sign_in_tokens": "var/tokens", **settings})
 
 
 @pytest.mark.parametrize("host, loopback", [("127.0.0.1", True), ("localhost", True),

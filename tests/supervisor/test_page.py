@@ -30,7 +30,7 @@ def path_lines() -> str:
 
 
 def test_lock_and_activate_through_the_buttons(chromium, dashboard, cell_server):
-    page = Page(chromium, dashboard.url, name="operator-1")
+    page = Page(chromium, dashboard, name="operator-1")
     assert page.page.locator("#btn-activate").is_disabled()   # no lock yet: watching
     page.take_control()
     assert cell_server.device.state is State.RESTING
@@ -42,7 +42,7 @@ def test_lock_and_activate_through_the_buttons(chromium, dashboard, cell_server)
 
 
 def test_path_run_reaches_every_tag_in_the_log(chromium, dashboard, cell_server):
-    page = Page(chromium, dashboard.url + "?render=full")   # a sharp picture for the README
+    page = Page(chromium, dashboard, query="?render=full")   # a sharp picture for the README
     page.take_control()
     page.page.fill("#speed", "30")
     page.click("btn-speed")
@@ -70,7 +70,7 @@ def test_path_run_reaches_every_tag_in_the_log(chromium, dashboard, cell_server)
 
 
 def test_estop_release_asks_the_lock_holder_and_the_dialog_answers(chromium, dashboard, cell_server):
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard)
     page.take_control()
     page.click("btn-estop-press")
     page.shows("st-state", "error")
@@ -90,7 +90,7 @@ def test_estop_release_asks_the_lock_holder_and_the_dialog_answers(chromium, das
 
 
 def test_a_refused_command_shows_the_servers_code_and_message(chromium, dashboard, cell_server):
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard)
     page.take_control()
     page.page.fill("#speed", "250")   # out of range: the server judges, not the page
     page.click("btn-speed")
@@ -105,8 +105,8 @@ def test_a_refused_command_shows_the_servers_code_and_message(chromium, dashboar
 
 
 def test_a_second_browser_watches_live_and_cannot_command(chromium, dashboard, cell_server):
-    owner = Page(chromium, dashboard.url, name="owner-page")
-    watcher = Page(chromium, dashboard.url, name="watcher-page")
+    owner = Page(chromium, dashboard, name="owner-page")
+    watcher = Page(chromium, dashboard, name="watcher-page")
     owner.take_control()
     watcher.shows("st-lock", "owner-page")
     watcher.shows("role", "held by owner-page")
@@ -132,7 +132,7 @@ def test_a_second_browser_watches_live_and_cannot_command(chromium, dashboard, c
 
 
 def test_jog_a_joint_from_the_pendant(chromium, dashboard, cell_server):
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard)
     page.take_control()
     page.manual_control(True)
     before = cell_server.device.feedback().position[0]

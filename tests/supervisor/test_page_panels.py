@@ -1,9 +1,11 @@
 """The dashboard's other panels end to end, in Debian's headless Chromium on the real backend
 and a real device server: another client's path run followed tag by tag, world-frame points
 drawn where the device's world frame puts them, the Cartesian jog, teaching, tools, digital
-I/O, and the e-stop refused by the role the backend's token has."""
+I/O, and a person's commands reaching a device that uses tokens with the person's own token,
+recorded under their name."""
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -12,8 +14,9 @@ from scipy.spatial.transform import Rotation
 
 from dashboard_support import DashboardThread, Page
 from landscape.client import Frame, Pose, Robot, TagPoint
+from landscape.server.config import SecurityConfig
 from landscape.server.states import State
-from support import start_secured_server, wait_until
+from support import start_server, wait_until
 
 HOME = [0.0, 0.0, 1.5708, 0.0, 1.5708, 0.0]
 
@@ -44,7 +47,7 @@ def _open_panel(page: Page, title: str) -> None:
 
 
 def test_another_clients_path_run_is_followed_tag_by_tag(chromium, dashboard, cell_server):
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard)
     tags = [TagPoint([0.3, 0.0, 1.5, 0.0, 1.5, 0.0], tag_name="near"),
             TagPoint([0.6, 0.1, 1.4, 0.0, 1.4, 0.0], tag_name="far")]
     with Robot(cell_server.target, "script") as robot, robot.control():
@@ -70,7 +73,7 @@ def test_world_frame_points_are_drawn_through_the_devices_world_frame(chromium, 
         point = np.linalg.inv(in_base) @ [*goal, 1.0]
         rpy = Rotation.from_matrix(in_base[:3, :3].T @ down).as_euler("xyz")
         lines.append(f"w{index} " + " ".join(f"{v:.6f}" for v in (*point[:3], *rpy)))
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard)
     page.take_control()
     page.page.select_option("#path-frame", "REFERENCE_FRAME_WORLD_CARTESIAN_FRAME")
     page.page.fill("#path-name", "in-world")
@@ -85,7 +88,7 @@ def test_world_frame_points_are_drawn_through_the_devices_world_frame(chromium, 
 
 
 def test_a_cartesian_jog_moves_the_tool_tip_along_the_axis(chromium, dashboard, cell_server):
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard)
     page.take_control()
     page.manual_control(True)
     page.page.select_option("#jog-frame", "REFERENCE_FRAME_BASE_CARTESIAN_FRAME")
@@ -100,7 +103,7 @@ def test_a_cartesian_jog_moves_the_tool_tip_along_the_axis(chromium, dashboard, 
 
 def test_teach_stores_the_current_poses_as_a_path_that_then_runs(chromium, dashboard,
                                                                  cell_server):
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard)
     page.take_control()
     page.page.fill("#path-name", "taught")
     taught = []
@@ -124,15 +127,15 @@ def test_teach_stores_the_current_poses_as_a_path_that_then_runs(chromium, dashb
 
 
 @pytest.fixture
-def fast_dashboard(server):
+def fast_dashboard(server, people):
     """The backend on a lock-step server that runs flat out: a tool change in seconds."""
-    running = DashboardThread({"arm1": server.target})
+    running = DashboardThread({"arm1": server.target}, people)
     yield running
     running.stop()
 
 
 def test_tools_get_close_open_and_put_from_the_panel(chromium, fast_dashboard, server):
-    page = Page(chromium, fast_dashboard.url)
+    page = Page(chromium, fast_dashboard)
     page.take_control()
     _open_panel(page, "Tools")
     page.expect(page.page.locator("#tool-id option")).to_have_text(["gripper", "vacuum"])
@@ -152,7 +155,7 @@ def test_tools_get_close_open_and_put_from_the_panel(chromium, fast_dashboard, s
 
 def test_the_io_panel_shows_bits_by_name_and_toggles_an_output(chromium, dashboard,
                                                                cell_server):
-    page = Page(chromium, dashboard.url)
+    page = Page(chromium, dashboard)
     _open_panel(page, "Digital I/O")
     page.click("btn-io-list")
     lamp = page.page.locator("#io button.bit", has_text="lamp_green")
@@ -169,18 +172,27 @@ def test_the_io_panel_shows_bits_by_name_and_toggles_an_output(chromium, dashboa
     page.close()
 
 
-def test_the_estop_is_refused_with_the_reason_when_the_backends_role_lacks_it(chromium, keys):
-    secured = start_secured_server(keys, lockstep_pace=1.0)
-    running = DashboardThread({"arm1": secured.target}, tls=keys.tls(),
-                              token=keys.token("operator"))
+def test_a_persons_commands_reach_the_device_with_their_token_and_are_recorded_as_theirs(
+        chromium, keys, people, tmp_path):
+    """The device uses tokens; the supervisor's own is a viewer's (its feeds). Olga, an
+    operator, takes control from the page: her own token goes with each call, the device's
+    audit names her, and the lock holder is her."""
+    audit = tmp_path / "audit.log"
+    secured = start_server(lockstep_pace=1.0, security=SecurityConfig(
+        tls_cert=str(keys.certs.server_cert), tls_key=str(keys.certs.server_key),
+        tokens=str(people.folder), audit_log=str(audit)))
+    running = DashboardThread({"arm1": secured.target}, people, tls=keys.tls(),
+                              token=people.token("supervisor"))
     try:
-        page = Page(chromium, running.url)
-        page.click("btn-estop-press")
-        page.shows("refusal", "OperatePanel — PERMISSION_DENIED ROLE_TOO_LOW")
-        page.log_has("refused: OperatePanel")
-        assert secured.device.state is State.UNLOCKED   # nothing pressed
-        page.take_control()                             # an operator may command
+        page = Page(chromium, running, name="olga")
+        page.take_control()
+        page.shows("st-lock", "olga")
         page.close()
+        wait_until(lambda: audit.exists() and "Activate" in audit.read_text(), timeout=10)
+        records = [json.loads(line) for line in audit.read_text().splitlines()]
+        made = {r["rpc"].rpartition("/")[2]: (r["who"], r["role"]) for r in records}
+        for rpc in ("Connect", "Lock", "Activate"):
+            assert made[rpc] == ("olga", "operator"), (rpc, made)
     finally:
         running.stop()
         secured.stop(grace=None)

@@ -1,5 +1,5 @@
-// What the panels of one device share: the link, the device's latest messages (the model), the
-// page's own session and lock, and `command`, which calls an RPC and shows a refusal as the
+// What the panels of one device share: the link, the device's latest messages (the model), who
+// is signed in, the page's own session and lock, and `command`, which calls an RPC and shows a refusal as the
 // server gave it.
 import { Refused, describeStatus } from './link.js';
 import { SI } from './units.js';
@@ -7,10 +7,11 @@ import { SI } from './units.js';
 export const DEVICE = 'landscape.v1.DeviceService/';
 
 export class DeviceContext {
-  constructor(link, device, log) {
+  constructor(link, device, log, person) {
     this.link = link;
     this.device = device;
     this.log = log;
+    this.person = person;   // {name, role} of who is signed in
     this.model = {
       started: null,        // StreamStarted: the stream's rate, frame, units, note
       sample: null,         // the newest StateSample

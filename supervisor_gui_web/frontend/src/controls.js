@@ -1,16 +1,21 @@
 // The control panel: the page's session and lock, power, reset, the operator panel's e-stop,
-// speed and units; and the read-only view: buttons that need the lock are disabled, with the
-// reason, while this page does not hold it. What is allowed in which state is the server's call:
-// a button enabled here may still be refused, and the refusal is shown as the server gave it.
+// speed and units; and what may be pressed: a control the person's role does not allow is
+// disabled with the reason (the backend refuses it anyway), and so is one that needs the lock
+// while this page does not hold it. What is allowed in which state is the server's call: a
+// button enabled here may still be refused, and the refusal is shown as the server gave it.
 const $ = (id) => document.getElementById(id);
 const CONNECT = 'landscape.v1.SessionService/Connect';
+const RANK = { viewer: 1, operator: 2, admin: 3 };
+const MAY = {
+  viewer: 'a viewer watches and may press the e-stop',
+  operator: 'an operator commands',
+  admin: 'an admin also works the operator panel and resets',
+};
 
 export class Controls {
   constructor(ctx, { onRsvp }) {
     this.ctx = ctx;
     this.onRsvp = onRsvp;
-    const name = $('client-name');
-    name.value = name.value || `dashboard-${Math.random().toString(36).slice(2, 6)}`;
     const on = (id, handler) => $(id).addEventListener('click', handler);
     on('btn-session', () => this.openSession());
     on('btn-session-close', () => this.ctx.session && this.ctx.session.stream.cancel());
@@ -28,29 +33,38 @@ export class Controls {
     this.updateRole();
   }
 
+  // Opens the page's session; resolves true once the device opened it.
   openSession() {
     const ctx = this.ctx;
-    if (ctx.session) return;
-    const stream = ctx.link.open(ctx.device, CONNECT, (frame) => {
-      if (frame.reply?.opened) {
-        ctx.session = { stream, sessionId: frame.reply.opened.sessionId };
-        ctx.changed('session');
-      } else if (frame.reply?.rsvpRequest) {
-        this.onRsvp(frame.reply.rsvpRequest, (choice, data) => stream.send({ rsvpAnswer: { rsvpId: frame.reply.rsvpRequest.rsvpId, choice, data } }));
-      }
-      if (frame.status) {
-        if (frame.status.code) ctx.refused('session', frame.status);
-        ctx.session = null;
-        this.setLock(false);
-      }
+    if (ctx.session) return Promise.resolve(Boolean(ctx.session.sessionId));
+    return new Promise((resolve) => {
+      const stream = ctx.link.open(ctx.device, CONNECT, (frame) => {
+        if (frame.reply?.opened) {
+          ctx.session = { stream, sessionId: frame.reply.opened.sessionId };
+          ctx.changed('session');
+          resolve(true);
+        } else if (frame.reply?.rsvpRequest) {
+          this.onRsvp(frame.reply.rsvpRequest, (choice, data) => stream.send({ rsvpAnswer: { rsvpId: frame.reply.rsvpRequest.rsvpId, choice, data } }));
+        }
+        if (frame.status) {
+          if (frame.status.code) ctx.refused('session', frame.status);
+          ctx.session = null;
+          this.setLock(false);
+          resolve(false);
+        }
+      });
+      ctx.session = { stream, sessionId: '' };
+      stream.send({ hello: {} });
+      ctx.changed('session');
     });
-    ctx.session = { stream, sessionId: '' };
-    stream.send({ hello: { clientName: $('client-name').value } });
-    ctx.changed('session');
   }
 
   async lock() {
-    if (await this.ctx.command('Lock')) this.setLock(true);
+    if (await this.ctx.command('Lock')) {
+      this.setLock(true);
+      return true;
+    }
+    return false;
   }
 
   setLock(holds) {
@@ -67,20 +81,28 @@ export class Controls {
     // may still arrive after its reply, and is not taken as losing it.
     if (ctx.holdsLock && status?.locked) this.lockSeen = true;
     if (ctx.holdsLock && this.lockSeen && status && !status.locked) ctx.holdsLock = false;
+    const rank = RANK[ctx.person.role] || 0;
+    const asWho = `you are signed in as ${ctx.person.role} (${MAY[ctx.person.role]})`;
     const holder = status?.locked ? status.lockHolder : '';
     const hasSession = Boolean(ctx.session?.sessionId);
     let reason = '';
-    if (!ctx.holdsLock) {
+    if (rank < RANK.operator) reason = `commanding needs the operator role; ${asWho}`;
+    else if (!ctx.holdsLock) {
       reason = holder ? `watching: the lock is held by ${holder}` :
         hasSession ? 'take the lock to command' : 'open a session and take the lock to command';
     }
     for (const element of document.querySelectorAll('[data-needs]')) {
       const needs = element.dataset.needs;
-      const blocked = needs === 'lock' ? !ctx.holdsLock : !hasSession;
+      const blocked = rank < RANK.operator || (needs === 'lock' ? !ctx.holdsLock : !hasSession);
       element.disabled = blocked;
-      element.title = blocked ? (needs === 'lock' ? reason : 'open a session first') : '';
+      element.title = !blocked ? '' : rank < RANK.operator || needs === 'lock' ? reason : 'open a session first';
     }
-    $('btn-session').disabled = Boolean(ctx.session);
+    for (const element of document.querySelectorAll('[data-role]')) {
+      const needed = element.dataset.role;
+      element.disabled = rank < RANK[needed];
+      element.title = element.disabled ? `${element.textContent} needs the ${needed} role; ${asWho}` : '';
+    }
+    if (rank >= RANK.operator) $('btn-session').disabled = Boolean(ctx.session);
     const role = $('role');
     role.textContent = ctx.holdsLock ? `commanding (${ctx.session?.sessionId})` : reason;
     role.className = `pill ${ctx.holdsLock ? 'owner' : 'watcher'}`;

@@ -1,7 +1,10 @@
 // The jog pendant: hold-to-move buttons over DeviceService.Jog. Holding a button is the
 // deadman: while it is held the page sends a JogRequest every period; letting go (or leaving the
-// button, or the page losing focus) sends deadman=false and ends the stream. The backend only
+// button, or the page losing focus) sends deadman=false and ends the stream. The backend
 // forwards these messages, so the device's own deadman timeout stops the arm if they stop coming.
+// Each press is a stream of its own with a fresh id (the link's ids only grow): once a press's
+// stream has ended (released, the deadman, an abort), the backend drops any message of it still
+// on its way, so nothing moves until the button is pressed again.
 const $ = (id) => document.getElementById(id);
 const JOG = 'landscape.v1.DeviceService/Jog';
 const PERIOD_MS = 50;

@@ -12,27 +12,37 @@ export class Refused extends Error {
   }
 }
 
+// The backend closes a page's socket with this code when the person's sign-in ended.
+export const CLOSE_SIGNED_OUT = 4001;
+
 export class Link {
   constructor(url) {
     this.url = url;
-    this.nextId = 1;
+    this.nextId = 1;               // call ids only grow: a jog press's id is newer than all before
     this.pending = new Map();      // id -> {resolve, reject} of a unary call
     this.streams = new Map();      // id -> handler(frame) of a stream the page opened
     this.feedHandlers = [];        // handler(frame) for frames that answer no call of ours
-    this.onConnection = () => {};
+    this.connectionHandlers = [];  // handler(up, closeEvent?) when the socket opens or closes
+    this.onSignedOut = () => {};   // (why): the sign-in ended; no reconnecting
+    this.mayReconnect = async () => true;
     this.connect();
   }
 
   connect() {
     this.ws = new WebSocket(this.url);
-    this.ws.onopen = () => this.onConnection(true);
-    this.ws.onclose = () => {
-      this.onConnection(false);
-      for (const [, call] of this.pending) call.reject(new Refused('', { code: 14, message: 'connection to the dashboard lost', details: [] }));
+    this.ws.onopen = () => this.connectionHandlers.forEach((handler) => handler(true));
+    this.ws.onclose = (event) => {
+      const signedOut = event.code === CLOSE_SIGNED_OUT;
+      const why = signedOut ? `signed out: ${event.reason}`
+        : `connection to the supervisor lost (WebSocket closed, code ${event.code})`;
+      const lost = { code: 14, message: why, details: [] };
+      this.connectionHandlers.forEach((handler) => handler(false, event));
+      for (const [, call] of this.pending) call.reject(new Refused('', lost));
       this.pending.clear();
-      for (const [id, handler] of this.streams) handler({ id, status: { code: 14, message: 'connection to the dashboard lost', details: [] } });
+      for (const [id, handler] of this.streams) handler({ id, status: lost });
       this.streams.clear();
-      setTimeout(() => this.connect(), 1000);
+      if (signedOut) { this.onSignedOut(event.reason); return; }
+      setTimeout(async () => { if (await this.mayReconnect()) this.connect(); }, 1000);
     };
     this.ws.onmessage = (event) => this.dispatch(JSON.parse(event.data));
   }
@@ -52,6 +62,8 @@ export class Link {
   }
 
   onFeed(handler) { this.feedHandlers.push(handler); }
+
+  onConnection(handler) { this.connectionHandlers.push(handler); }
 
   send(body) {
     if (this.ws.readyState !== WebSocket.OPEN) return false;

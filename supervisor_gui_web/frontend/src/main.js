@@ -8,6 +8,7 @@ import { Controls } from './controls.js';
 import { EventLog } from './event_log.js';
 import { JogPendant } from './jog.js';
 import { Link, describeStatus } from './link.js';
+import { showPerson, showSignIn, whoAmI } from './sign_in.js';
 import { PathPanel } from './paths.js';
 import { Plots } from './plots.js';
 import { RsvpDialog } from './rsvp.js';
@@ -28,6 +29,10 @@ function timestampMs(text) {
 }
 
 async function main() {
+  const person = await whoAmI();
+  if (!person) { showSignIn(); return; }
+  showPerson(person);
+  $('app').hidden = false;
   const devices = await (await fetch('/api/devices')).json();
   const params = new URLSearchParams(location.search);
   const device = params.get('device') || devices[0].name;
@@ -40,8 +45,18 @@ async function main() {
   }));
 
   const link = new Link(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`);
+  link.onSignedOut = (why) => showSignIn(`Your sign-in ended: ${why}`);
+  link.mayReconnect = async () => {
+    try {
+      if (await whoAmI()) return true;
+    } catch {
+      return true;   // the supervisor is not there: try again
+    }
+    showSignIn('Your sign-in ended: sign in again.');
+    return false;
+  };
   const log = new EventLog();
-  const ctx = new DeviceContext(link, device, log);
+  const ctx = new DeviceContext(link, device, log, person);
   const view = new CellView($('scene'));
   const state = new StatePanel(ctx);
   const plots = new Plots();
@@ -62,7 +77,7 @@ async function main() {
   const stats = window.dashboardStats = { samples: [] };
   window.cellView = view;   // the 3D view, for the console and the page tests
 
-  link.onConnection = async (up) => {
+  link.onConnection(async (up) => {
     $('connection').textContent = up ? 'connected' : 'disconnected: reconnecting…';
     $('connection').className = `pill ${up ? 'ok' : 'alert'}`;
     if (!up || view.robot) return;
@@ -71,7 +86,7 @@ async function main() {
     ctx.model.robotType = description?.robotType || '?';
     showCell();
     ctx.changed('robot');
-  };
+  });
 
   link.onFeed((frame) => {
     if (frame.device !== device) return;
