@@ -55,6 +55,7 @@ class _DeviceSide:
     session_call_id: int | None = None
     rsvp_answers: dict[str, asyncio.Future] = field(default_factory=dict)
     jog: "_Stream | None" = None
+    last_press: int = 0                    # the newest jog press id seen
 
 
 class _Stream:
@@ -211,22 +212,28 @@ class Console:
         finally:
             side.rsvp_answers.pop(request.rsvp_id, None)
 
-    # ---- jogging: the page's messages go straight to the device's deadman
+    # ---- jogging: one device stream per button press; its messages feed the deadman
     async def _jog(self, link: DeviceLink, rpc: Rpc, call_id, body) -> None:
         side = self._sides[link.name]
         stream = side.jog
+        if stream is not None and stream.call_id == call_id:   # the press going on
+            stream.queue.put_nowait(None if body.get("cancel") else
+                                    wire.parse_request(rpc.request_class, body.get("request")))
+            return   # (after a cancel the stream reads nothing more)
         if body.get("cancel"):
-            if stream is not None and stream.call_id == call_id:
-                stream.queue.put_nowait(None)   # half-close: the device stops the arm
-            return
+            return   # a press with no stream open: nothing to end
+        if isinstance(call_id, bool) or not isinstance(call_id, int) or call_id <= side.last_press:
+            raise Refused(grpc.StatusCode.FAILED_PRECONDITION,
+                          f"jog press {call_id} is over (or older than press {side.last_press}):"
+                          f" nothing moves until the button is pressed again")
         request = wire.parse_request(rpc.request_class, body.get("request"))
-        if stream is None or stream.call_id != call_id:
-            if stream is not None:
-                stream.queue.put_nowait(None)
-            stream = side.jog = _Stream(call_id)
-            stream.task = asyncio.create_task(self._run_jog(link, rpc, side, stream))
-            self._tasks.add(stream.task)
-            stream.task.add_done_callback(self._tasks.discard)
+        side.last_press = call_id
+        if stream is not None:
+            stream.queue.put_nowait(None)   # a new press ends the one before
+        stream = side.jog = _Stream(call_id)
+        stream.task = asyncio.create_task(self._run_jog(link, rpc, side, stream))
+        self._tasks.add(stream.task)
+        stream.task.add_done_callback(self._tasks.discard)
         stream.queue.put_nowait(request)
 
     async def _run_jog(self, link: DeviceLink, rpc: Rpc, side: _DeviceSide, stream: _Stream) -> None:
