@@ -41,11 +41,13 @@ def identity_metadata(on_behalf_of: str, token: str | None) -> tuple[tuple[str, 
 
 class CallerChannel:
     """The multi-callable factories of a grpc.aio channel (what generated stubs and
-    rpc_table use), each call made with `metadata` first."""
+    rpc_table use), each call made with `metadata` first. The newest call of each method is
+    kept, so its owner can ask a stream how it ended (`last_call`)."""
 
     def __init__(self, channel: grpc.aio.Channel, metadata: tuple[tuple[str, str], ...]):
         self._channel = channel
         self.metadata = metadata
+        self._last: dict[str, object] = {}
 
     def unary_unary(self, method: str, **options):
         return _Calls(self, method, self._channel.unary_unary(method, **options))
@@ -59,11 +61,18 @@ class CallerChannel:
     def stream_stream(self, method: str, **options):
         return _Calls(self, method, self._channel.stream_stream(method, **options))
 
+    def last_call(self, method: str):
+        """The newest call of `method` ("/landscape.v1.SessionService/Connect") made through
+        this view, or None."""
+        return self._last.get(method)
+
 
 class _Calls:
     def __init__(self, owner: CallerChannel, method: str, multi_callable):
         self._owner, self._method, self._multi_callable = owner, method, multi_callable
 
     def __call__(self, request, *, metadata=None, **options):
-        return self._multi_callable(request, metadata=(*self._owner.metadata, *(metadata or ())),
+        call = self._multi_callable(request, metadata=(*self._owner.metadata, *(metadata or ())),
                                     **options)
+        self._owner._last[self._method] = call
+        return call

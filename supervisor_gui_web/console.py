@@ -10,6 +10,12 @@ google.rpc.Status with its ErrorInfo) goes back as it came. The session's secret
 stay here; the page never sees them. A session the device ends is reported to the page with
 the device's reason ("no keep-alive for 2 s").
 
+Jogging is one device Jog stream per button press: the page gives each press a fresh id,
+larger than every earlier one on its connection (its call numbering does). The first message
+of a new press opens the stream; a message of a press whose stream has ended (released, cut
+by the device's deadman, aborted, failed) or of a press older than the newest is refused and
+never reaches the device: a late or repeated message cannot start the arm again.
+
 Every call runs in its own task, so a StopMotion never waits behind an Activate in progress.
 Closing the console (the page closed or lost its connection) ends its sessions: the device's
 disconnect handler then stops, deactivates and releases, as for any client.
@@ -173,8 +179,10 @@ class Console:
                 raise Refused(grpc.StatusCode.ALREADY_EXISTS,
                               f"this page already has session {side.session.session_id}")
             # The session bears the person's name (the device shows it as the lock holder),
-            # whatever name the page asked for.
-            session = AsyncSession(side.caller, self.person.name,
+            # whatever name the page asked for. Its own view of the channel keeps the Connect
+            # call, whose status says why the device ended it.
+            watched = link.caller(self._metadata)
+            session = AsyncSession(watched, self.person.name,
                                    on_rsvp=lambda request: self._ask_page(link, side, request))
             await session.open()
             side.session, side.session_call_id = session, call_id
@@ -182,17 +190,24 @@ class Console:
             self._send(link.name, CONNECT, call_id, reply=session_service_pb2.ConnectResponse(
                 opened=session_service_pb2.SessionOpened(
                     session_id=session.session_id, keepalive_interval_ms=0)))
-            self._watch_session_end(link, session, call_id)
+            self._watch_session_end(link, session, watched.last_call(RPCS[CONNECT].path),
+                                    call_id)
         else:
             raise Refused(grpc.StatusCode.INVALID_ARGUMENT,
                           "the page sends hello or rsvp_answer; the backend keeps the session alive")
 
-    def _watch_session_end(self, link: DeviceLink, session: AsyncSession, call_id) -> None:
+    def _watch_session_end(self, link: DeviceLink, session: AsyncSession, connect_call,
+                           call_id) -> None:
         async def wait_end():
             await session.ended.wait()
-            code = session.end_status or grpc.StatusCode.OK
+            code = session.end_status
+            if code is None:   # closed from here: the page asked, or went away
+                self._send(link.name, CONNECT, call_id,
+                           status=wire.status(grpc.StatusCode.OK, "session closed"))
+                return
+            reason = await connect_call.details() or code.name
             self._send(link.name, CONNECT, call_id, status=wire.status(
-                code, "session ended" + ("" if code is grpc.StatusCode.OK else f" by the device: {code.name}")))
+                code, f"your session ended: {reason}"))
         task = asyncio.create_task(wait_end())
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)

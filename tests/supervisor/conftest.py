@@ -16,7 +16,7 @@ from support import start_server
 # so), and the tests that start the backend skip, naming what is missing.
 PAGE = Path(__file__).resolve().parents[2] / "supervisor_gui_web" / "frontend" / "dist"
 NEED_THE_PAGE = {"test_backend.py", "test_page.py", "test_page_panels.py", "test_http_guard.py",
-                 "test_page_trust.py", "test_jog_press.py"}
+                 "test_page_trust.py", "test_jog_press.py", "test_page_lost.py"}
 
 
 def pytest_collection_modifyitems(items):

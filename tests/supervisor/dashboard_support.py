@@ -7,6 +7,9 @@ import contextlib
 import json
 import os
 import secrets
+import signal
+import subprocess
+import sys
 import threading
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -146,6 +149,32 @@ class DashboardThread:
         self.run(self._running.stop())
         self._loop.call_soon_threadsafe(self._loop.stop)
         self._thread.join(timeout=10)
+
+
+class SpawnedDashboard:
+    """`python -m landscape.supervisor` in a process of its own (so a test can stop, starve
+    or kill it), on a free loopback port; people sign in with `people`'s tokens."""
+
+    def __init__(self, devices: dict[str, str], people: People, *args: str):
+        self.people = people
+        argv = [sys.executable, "-m", "landscape.supervisor", "--port", "0",
+                "--sign-in-tokens", str(people.folder), *args]
+        for name, target in devices.items():
+            argv += ["--device", f"{name}={target}"]
+        self.process = subprocess.Popen(argv, stdout=subprocess.PIPE,
+                                        stderr=subprocess.DEVNULL, text=True)
+        line = self.process.stdout.readline()
+        if not line.startswith("web supervisor on "):
+            self.stop()
+            raise AssertionError(f"the supervisor did not start: {line!r}")
+        self.url = line.split()[-1]
+        self.pid = self.process.pid
+
+    def stop(self) -> int:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGCONT)   # a stopped process cannot take SIGTERM
+            self.process.terminate()
+        return self.process.wait(timeout=30)
 
 
 def chromium_or_skip():

@@ -8,6 +8,7 @@ import json
 import logging
 import subprocess
 import sys
+import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -139,6 +140,21 @@ def test_closing_the_page_ends_its_session_and_the_device_releases(people, serve
         await page.call(DEVICE + "Activate")
         assert server.device.state is State.RESTING
         await page.ws.close()
+    run_with_page(server, body, people)
+    wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
+
+
+def test_a_session_the_device_ends_is_reported_with_the_devices_reason(people, server):
+    """Issue 25 item 4: the backend's loop held past the device's keep-alive timeout (2 s):
+    the device ends the session, and the page is told why, in the device's words."""
+    async def body(page, dashboard):
+        session = await page.send(CONNECT, {"hello": {}})
+        await page.answer(session)
+        await page.call(DEVICE + "Lock")
+        time.sleep(3)   # nothing on the loop runs: neither the backend nor its keep-alives
+        ended = await page.until(lambda f: f.get("id") == session and "status" in f)
+        assert ended["status"]["code"] == 4, ended   # DEADLINE_EXCEEDED
+        assert ended["status"]["message"] == "your session ended: no keep-alive for 2 s"
     run_with_page(server, body, people)
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 

@@ -121,7 +121,8 @@ def test_a_viewer_watches_with_the_controls_disabled_and_may_stop_the_cell(chrom
                                                                           cell_server):
     vera = Page(chromium, dashboard, name="vera")
     vera.shows("person", "vera (viewer)")
-    vera.shows("role", "commanding needs the operator role")
+    vera.shows("role", "watching only (viewer)")
+    assert "commanding needs the operator role" in vera.page.locator("#role").get_attribute("title")
     for button in ("btn-session", "btn-lock", "btn-activate", "btn-speed", "btn-estop-release",
                    "btn-reset", "btn-path-run"):
         locator = vera.page.locator(f"#{button}")

@@ -12,6 +12,8 @@ export class DeviceContext {
     this.device = device;
     this.log = log;
     this.person = person;   // {name, role} of who is signed in
+    this.lastStateReason = '';   // the newest state change's reason (the event stream's)
+    this.lastSequence = 0;       // the newest event's sequence number
     this.model = {
       started: null,        // StreamStarted: the stream's rate, frame, units, note
       sample: null,         // the newest StateSample

@@ -3,6 +3,12 @@
 // disabled with the reason (the backend refuses it anyway), and so is one that needs the lock
 // while this page does not hold it. What is allowed in which state is the server's call: a
 // button enabled here may still be refused, and the refusal is shown as the server gave it.
+//
+// A lost session or lock is never silent and never taken back silently: the page's socket
+// closing, the device ending the session (with its reason), or the lock going away show the
+// banner with the reason, the controls disabled, and one button to take the lock back.
+import { LostNotice } from './lost.js';
+
 const $ = (id) => document.getElementById(id);
 const CONNECT = 'landscape.v1.SessionService/Connect';
 const RANK = { viewer: 1, operator: 2, admin: 3 };
@@ -16,11 +22,16 @@ export class Controls {
   constructor(ctx, { onRsvp }) {
     this.ctx = ctx;
     this.onRsvp = onRsvp;
+    this.notice = new LostNotice(ctx.log);
     const on = (id, handler) => $(id).addEventListener('click', handler);
     on('btn-session', () => this.openSession());
     on('btn-session-close', () => this.ctx.session && this.ctx.session.stream.cancel());
     on('btn-lock', () => this.lock());
-    on('btn-release', async () => { if (await ctx.command('Release')) this.setLock(false); });
+    on('btn-release', async () => {
+      if (!await ctx.command('Release')) return;
+      this.notice.released();
+      this.setLock(false);
+    });
     on('btn-activate', () => ctx.command('Activate'));
     on('btn-deactivate', () => ctx.command('Deactivate'));
     on('btn-reset', () => ctx.command('Reset'));
@@ -29,6 +40,10 @@ export class Controls {
     on('btn-speed', () => ctx.command('SetSpeed', { speed: Number($('speed').value), attribute: 'SPEED_TYPE_PERCENT_SPEED' }));
     on('btn-accel', () => ctx.command('SetAcceleration', { accel: Number($('accel').value), attribute: 'ACCEL_TYPE_PERCENT_ACCEL' }));
     on('btn-units', () => ctx.command('SetUnits', { linearUnits: $('units-linear').value, angularUnits: $('units-angular').value }));
+    on('btn-take-back', () => this.takeBack());
+    ctx.link.onConnection((up, event) => {
+      if (!up && (ctx.session || ctx.holdsLock)) this.notice.connectionLost(event?.code);
+    });
     ctx.onChange(() => this.updateRole());
     this.updateRole();
   }
@@ -47,9 +62,12 @@ export class Controls {
           this.onRsvp(frame.reply.rsvpRequest, (choice, data) => stream.send({ rsvpAnswer: { rsvpId: frame.reply.rsvpRequest.rsvpId, choice, data } }));
         }
         if (frame.status) {
-          if (frame.status.code) ctx.refused('session', frame.status);
+          const wasOpen = Boolean(ctx.session?.sessionId);
+          const heldLock = ctx.holdsLock;
           ctx.session = null;
           this.setLock(false);
+          if (frame.status.code && !wasOpen) ctx.refused('session', frame.status);
+          else if (frame.status.code && frame.status.code !== 14) this.notice.sessionEnded(frame.status, heldLock);
           resolve(false);
         }
       });
@@ -60,11 +78,20 @@ export class Controls {
   }
 
   async lock() {
-    if (await this.ctx.command('Lock')) {
-      this.setLock(true);
-      return true;
-    }
-    return false;
+    if (!await this.ctx.command('Lock')) return false;
+    this.notice.lockTaken(this.ctx.lastSequence);
+    this.setLock(true);
+    return true;
+  }
+
+  // One click: a session if the page has none, then the lock.
+  async takeBack() {
+    if (await this.openSession()) await this.lock();
+  }
+
+  // A landscape.v1 Event of this device (the event stream).
+  event(event) {
+    this.notice.event(event);
   }
 
   setLock(holds) {
@@ -80,7 +107,10 @@ export class Controls {
     // it unlocked (released, or the device's disconnect handler); a read older than the lock
     // may still arrive after its reply, and is not taken as losing it.
     if (ctx.holdsLock && status?.locked) this.lockSeen = true;
-    if (ctx.holdsLock && this.lockSeen && status && !status.locked) ctx.holdsLock = false;
+    if (ctx.holdsLock && this.lockSeen && status && (!status.locked || status.lockHolder !== ctx.person.name)) {
+      ctx.holdsLock = false;
+      this.notice.lockTakenAway(ctx.lastStateReason);
+    }
     const rank = RANK[ctx.person.role] || 0;
     const asWho = `you are signed in as ${ctx.person.role} (${MAY[ctx.person.role]})`;
     const holder = status?.locked ? status.lockHolder : '';
@@ -104,7 +134,9 @@ export class Controls {
     }
     if (rank >= RANK.operator) $('btn-session').disabled = Boolean(ctx.session);
     const role = $('role');
-    role.textContent = ctx.holdsLock ? `commanding (${ctx.session?.sessionId})` : reason;
+    role.textContent = ctx.holdsLock ? `commanding (${ctx.session?.sessionId})`
+      : rank < RANK.operator ? 'watching only (viewer)' : reason;
+    role.title = reason;
     role.className = `pill ${ctx.holdsLock ? 'owner' : 'watcher'}`;
   }
 }

@@ -62,7 +62,7 @@ async function main() {
   const plots = new Plots();
   const rsvp = new RsvpDialog();
   const paths = new PathPanel(ctx, view);
-  new Controls(ctx, { onRsvp: (request, answer) => rsvp.ask(request, answer) });
+  const controls = new Controls(ctx, { onRsvp: (request, answer) => rsvp.ask(request, answer) });
   new JogPendant(ctx);
   new IoPanel(ctx);
   new SensorPanel(ctx);
@@ -114,6 +114,9 @@ async function main() {
     } else if (frame.rpc === FEED_EVENTS) {
       if (frame.status) { log.add('alarm', 3, `event stream: ${describeStatus(frame.status)}`); return; }
       const event = frame.reply.event;
+      if (event.stateChange) ctx.lastStateReason = event.stateChange.reason;
+      ctx.lastSequence = Math.max(ctx.lastSequence, Number(event.sequence));
+      controls.event(event);
       log.addEvent(device, event);
       paths.event(event);
       rsvp.event(event);
