@@ -24,10 +24,13 @@ import asyncio
 import json
 import multiprocessing as mp
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import threading
 import time
+from pathlib import Path
 
 import grpc
 from common import pct, record, skipped
@@ -76,26 +79,31 @@ async def _grpc_reader(target: str, until: float) -> list[tuple[float, float]]:
     return ages
 
 
-async def _websocket_reader(url: str, until: float) -> list[tuple[float, float]]:
+async def _websocket_reader(url: str, token: str, until: float) -> list[tuple[float, float]]:
     import aiohttp
     from google.protobuf import timestamp_pb2
     ages = []
-    async with aiohttp.ClientSession() as http, http.ws_connect(url + "ws") as ws:
-        async for message in ws:
-            now = time.time()
-            sample = json.loads(message.data).get("reply", {}).get("sample")
-            if sample:
-                stamp = timestamp_pb2.Timestamp()
-                stamp.FromJsonString(sample["time"])
-                ages.append((now, (now - stamp.ToNanoseconds() / 1e9) * 1000.0))
-            if now > until:
-                return ages
+    origin = url.rstrip("/")   # signed in, from the page's origin, as the page does
+    async with aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True)) as http:
+        await http.post(url + "api/sign-in", json={"token": token},
+                        headers={"Origin": origin, "X-Landscape-Request": "page"})
+        async with http.ws_connect(url + "ws", origin=origin) as ws:
+            async for message in ws:
+                now = time.time()
+                sample = json.loads(message.data).get("reply", {}).get("sample")
+                if sample:
+                    stamp = timestamp_pb2.Timestamp()
+                    stamp.FromJsonString(sample["time"])
+                    ages.append((now, (now - stamp.ToNanoseconds() / 1e9) * 1000.0))
+                if now > until:
+                    return ages
     return ages
 
 
-def _readers(target: str, url: str, until: float, results) -> None:
+def _readers(target: str, url: str, token: str, until: float, results) -> None:
     async def both():
-        return await asyncio.gather(_grpc_reader(target, until), _websocket_reader(url, until))
+        return await asyncio.gather(_grpc_reader(target, until),
+                                    _websocket_reader(url, token, until))
     results.put(asyncio.run(both()))
 
 
@@ -123,13 +131,15 @@ def drive_tour(target: str, done: threading.Event) -> None:
                     break
 
 
-def browser_ages(url: str, seconds: float) -> tuple[list[float], float, float]:
+def browser_ages(url: str, token: str, seconds: float) -> tuple[list[float], float, float]:
     """The page's sample ages (ms) over `seconds` after its warm-up, and that window."""
     from playwright.sync_api import sync_playwright
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={"width": 1400, "height": 1000})
         page.goto(url)
+        page.fill("#sign-in-token", token)   # a viewer signs in, as people do
+        page.click("#btn-sign-in")
         page.wait_for_function("() => window.dashboardStats && window.dashboardStats.samples.length > 0",
                                timeout=30_000)
         time.sleep(WARM_UP_S)
@@ -156,18 +166,24 @@ def main() -> None:
         print(f"skipped: {CHROMIUM} is absent (apt-get install -y chromium; no browser is downloaded)")
         skipped(f"{CHROMIUM} is absent")
         return
+    from landscape.cell.tokens import make_tokens
+    from landscape.client import read_token
+    people = Path(tempfile.mkdtemp(prefix="bench-dashboard-"))
+    token = read_token(make_tokens(people)["viewer"])
     server, target = spawn("landscape.server", "--port", "0", ready="listening on")
     dashboard, url = spawn("landscape.supervisor", "--device", f"arm1={target}", "--port", "0",
-                           "--display-rate", str(DISPLAY_RATE_HZ), ready="web supervisor on")
+                           "--display-rate", str(DISPLAY_RATE_HZ), "--sign-in-tokens",
+                           str(people), ready="web supervisor on")
     done = threading.Event()
     driver = threading.Thread(target=drive_tour, args=(target, done), daemon=True)
     try:
         driver.start()
         results = mp.get_context("spawn").Queue()
         until = time.time() + seconds + 40.0   # past the browser's start-up, warm-up and window
-        readers = mp.get_context("spawn").Process(target=_readers, args=(target, url, until, results))
+        readers = mp.get_context("spawn").Process(target=_readers,
+                                                  args=(target, url, token, until, results))
         readers.start()
-        in_browser, begin, end = browser_ages(url, seconds)
+        in_browser, begin, end = browser_ages(url, token, seconds)
         grpc_ages, ws_ages = results.get(timeout=seconds + 90)
         readers.join(timeout=10)
     finally:
@@ -175,6 +191,7 @@ def main() -> None:
         driver.join(timeout=10)
         stop(dashboard)
         stop(server)
+        shutil.rmtree(people, ignore_errors=True)
     def window(pairs):   # the same seconds as the browser's
         return [age for received, age in pairs if begin <= received <= end]
     print(f"state sample latency, controller cycle -> receiver, {DISPLAY_RATE_HZ:g} samples/s, "
