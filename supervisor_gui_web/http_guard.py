@@ -34,7 +34,10 @@ SIGNED_IN = web.RequestKey("signed_in", SignIn)   # the SignIn of a request that
 
 
 def refused(status: type[web.HTTPException], reason: str) -> web.HTTPException:
-    return status(text=reason, content_type="text/plain")
+    """The refusal, on a connection closed after it: a refused client holds nothing."""
+    refusal = status(text=reason, content_type="text/plain")
+    refusal.force_close()
+    return refusal
 
 
 @web.middleware

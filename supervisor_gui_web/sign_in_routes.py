@@ -14,7 +14,8 @@ import json
 from aiohttp import web
 
 from landscape.supervisor.connections import HEADER_TIMEOUT_S
-from landscape.supervisor.http_guard import SIGN_IN_COOKIE, SIGN_IN_PATH, SIGN_INS, signed_in
+from landscape.supervisor.http_guard import (GUARD, SIGN_IN_COOKIE, SIGN_IN_PATH, SIGN_INS,
+                                             signed_in)
 from landscape.supervisor.sign_in import SignIn, SignInRefused
 
 MAX_BODY = 4096   # bytes of a sign-in request's body
@@ -59,6 +60,7 @@ async def _sign_in(request: web.Request) -> web.Response:
         record = sign_ins.sign_in(token, request.remote or "?")
     except SignInRefused as refusal:
         return web.json_response({"error": str(refusal)}, status=401)
+    request.app[GUARD].vouch(request.protocol)   # this connection has shown who it is
     response = web.json_response(_describe(record, sign_ins))
     response.set_cookie(SIGN_IN_COOKIE, record.id, httponly=True, samesite="Strict",
                         secure=request.secure, path="/", max_age=round(sign_ins.max_age_s))
