@@ -12,7 +12,9 @@ Every WebSocket frame is a JSON object about one message of one RPC of one devic
     browser -> backend  {"device": "arm1", "rpc": "landscape.v1.DeviceService/SetSpeed", "id": 8,
                          "request": {"speed": 50, "attribute": "SPEED_TYPE_PERCENT_SPEED"}}
                         ("requests": [...] for a client-streaming RPC; "cancel": true ends a stream
-                         the browser opened: the session, a jog)
+                         the browser opened: the session, a jog. Every frame of a stream carries
+                         the id of its first: a jog press's frames share one, and each press has
+                         a fresh id, larger than any before it: console.py)
 
 The feeds the backend keeps for every browser arrive under their own RPC names
 (StateService/StreamState, EventService/Subscribe, the read-only gets of `status_poll`, and

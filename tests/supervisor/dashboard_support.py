@@ -90,8 +90,9 @@ async def open_page(url: str, token: str):
 class PageClient:
     """The page's side of the WebSocket: numbered calls, and every frame kept for inspection."""
 
-    def __init__(self, ws):
+    def __init__(self, ws, http: aiohttp.ClientSession | None = None):
         self.ws = ws
+        self.http = http     # the signed-in HTTP client the socket was opened with
         self.frames: list[dict] = []
         self._next = 1
 
@@ -124,6 +125,22 @@ class PageClient:
     async def call(self, rpc: str, request=None) -> dict:
         return await self.answer(await self.send(rpc, request))
 
+
+
+def run_with_page(server, body, people, devices=None, person="olga", **config):
+    """Run body(page, dashboard) against a backend on a free port, within a time limit, the
+    page signed in as `person`; its devices (DeviceTargets) default to `server` as arm1."""
+    async def main():
+        dashboard = await start(DashboardConfig(
+            devices=devices or (DeviceTarget("arm1", server.target),), port=0,
+            sign_in_tokens=str(people.folder), **config))
+        try:
+            http, ws = await open_page(dashboard.url, people.token(person))
+            async with http, ws:
+                await body(PageClient(ws, http), dashboard)
+        finally:
+            await dashboard.stop()
+    asyncio.run(asyncio.wait_for(main(), 120))
 
 
 class DashboardThread:
@@ -204,9 +221,8 @@ class Page:
 
     TIMEOUT_MS = 30_000
 
-    def __init__(self, chromium, dashboard: DashboardThread, name: str = "olga", query: str = "",
-                 context=None):
-        self.context = context or chromium.new_context(viewport={"width": 1400, "height": 1000})
+    def __init__(self, chromium, dashboard: DashboardThread, name: str = "olga", query: str = ""):
+        self.context = chromium.new_context(viewport={"width": 1400, "height": 1000})
         self.page = self.context.new_page()
         self.errors: list[str] = []
         self.page.on("pageerror", lambda error: self.errors.append(str(error)))

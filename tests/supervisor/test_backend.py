@@ -13,16 +13,16 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
-import aiohttp
 import pytest
 from google.protobuf import any_pb2, json_format
 from google.rpc import error_details_pb2
 
-from dashboard_support import CONNECT, DEVICE, PageClient, open_page, signed_in_http
+from dashboard_support import (CONNECT, DEVICE, PageClient, open_page, run_with_page,
+                               signed_in_http)
 from landscape.server.app import serve
 from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.server.states import State
-from landscape.supervisor import DashboardConfig, DeviceTarget, start
+from landscape.supervisor import DeviceTarget
 from landscape.v1 import event_service_pb2, settings_pb2, state_service_pb2, types_pb2
 from support import start_server, wait_until
 
@@ -36,22 +36,6 @@ def unpack(reply: dict, message_class):
     message = message_class()
     assert packed.Unpack(message), reply["@type"]
     return message
-
-
-def run_with_page(server, body, people, devices=None, person="olga", **config):
-    """Run body(page, dashboard) against a backend on a free port, within a time limit, the
-    page signed in as `person`; its devices (DeviceTargets) default to `server` as arm1."""
-    async def main():
-        dashboard = await start(DashboardConfig(
-            devices=devices or (DeviceTarget("arm1", server.target),), port=0,
-            sign_in_tokens=str(people.folder), **config))
-        try:
-            http, ws = await open_page(dashboard.url, people.token(person))
-            async with http, ws:
-                await body(PageClient(ws), dashboard)
-        finally:
-            await dashboard.stop()
-    asyncio.run(asyncio.wait_for(main(), 120))
 
 
 @pytest.fixture

@@ -13,7 +13,7 @@ import grpc
 import pytest
 
 from dashboard_support import (CONNECT, DEVICE, PageClient, open_page, origin_of, page_headers,
-                               signed_in_http)
+                               run_with_page, signed_in_http)
 from landscape.server.states import State
 from landscape.supervisor import DashboardConfig, DeviceTarget, start
 from landscape.supervisor.connections import HEADER_TIMEOUT_S
@@ -140,64 +140,55 @@ def test_a_viewer_watches_and_may_stop_but_every_command_is_refused(server, peop
     """Vera's forged frames: a session, the lock, Activate, an output, the e-stop's release:
     PERMISSION_DENIED with the reason, and nothing reaches the device; the e-stop press is
     allowed to every role."""
-    async def body(dashboard):
-        http, ws = await open_page(dashboard.url, people.token("vera"))
-        async with http, ws:
-            page = PageClient(ws)
-            forged = [(CONNECT, {"hello": {"clientName": "vera"}}), (DEVICE + "Lock", None),
-                      (DEVICE + "Activate", None), (DEVICE + "Release", None),
-                      ("landscape.v1.DigitalIOService/SetDigitalIO",
-                       {"type": "output", "unitId": 2, "bitsOn": 8}),
-                      (DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"}),
-                      (DEVICE + "Reset", None)]
-            for rpc, request in forged:
-                status = (await page.call(rpc, request))["status"]
-                assert status["code"] == grpc.StatusCode.PERMISSION_DENIED.value[0], rpc
-                assert "you are signed in as viewer" in status["message"], status
-            assert server.device.state is State.UNLOCKED and not server.device.status().locked
-            description = await page.call(DEVICE + "GetRobotDescription")
-            assert "reply" in description   # reading is a viewer's
-            pressed = await page.call(DEVICE + "OperatePanel",
-                                      {"action": "PANEL_ACTION_PRESS_ESTOP"})
-            assert pressed["reply"]["estopPressed"] is True
-    run_with_dashboard(server, body, people)
+    async def body(page, dashboard):
+        forged = [(CONNECT, {"hello": {"clientName": "vera"}}), (DEVICE + "Lock", None),
+                  (DEVICE + "Activate", None), (DEVICE + "Release", None),
+                  ("landscape.v1.DigitalIOService/SetDigitalIO",
+                   {"type": "output", "unitId": 2, "bitsOn": 8}),
+                  (DEVICE + "OperatePanel", {"action": "PANEL_ACTION_RELEASE_ESTOP"}),
+                  (DEVICE + "Reset", None)]
+        for rpc, request in forged:
+            status = (await page.call(rpc, request))["status"]
+            assert status["code"] == grpc.StatusCode.PERMISSION_DENIED.value[0], rpc
+            assert "you are signed in as viewer" in status["message"], status
+        assert server.device.state is State.UNLOCKED and not server.device.status().locked
+        description = await page.call(DEVICE + "GetRobotDescription")
+        assert "reply" in description   # reading is a viewer's
+        pressed = await page.call(DEVICE + "OperatePanel",
+                                  {"action": "PANEL_ACTION_PRESS_ESTOP"})
+        assert pressed["reply"]["estopPressed"] is True
+    run_with_page(server, body, people, person="vera")
     assert server.device.state is State.ERROR   # stopped, as anyone watching may
 
 
 def test_an_operator_commands_but_neither_resets_nor_works_the_door(server, people):
-    async def body(dashboard):
-        http, ws = await open_page(dashboard.url, people.token("olga"))
-        async with http, ws:
-            page = PageClient(ws)
-            await page.call(CONNECT, {"hello": {}})
-            assert "reply" in await page.call(DEVICE + "Lock")
-            for rpc, request in ((DEVICE + "Reset", None), (DEVICE + "OperatePanel",
-                                                            {"action": "PANEL_ACTION_OPEN_DOOR"})):
-                status = (await page.call(rpc, request))["status"]
-                assert status["code"] == grpc.StatusCode.PERMISSION_DENIED.value[0], rpc
-                assert "needs the admin role" in status["message"]
-            assert server.device.status().lock_holder == "olga"
-    run_with_dashboard(server, body, people)
+    async def body(page, dashboard):
+        await page.call(CONNECT, {"hello": {}})
+        assert "reply" in await page.call(DEVICE + "Lock")
+        for rpc, request in ((DEVICE + "Reset", None), (DEVICE + "OperatePanel",
+                                                        {"action": "PANEL_ACTION_OPEN_DOOR"})):
+            status = (await page.call(rpc, request))["status"]
+            assert status["code"] == grpc.StatusCode.PERMISSION_DENIED.value[0], rpc
+            assert "needs the admin role" in status["message"]
+        assert server.device.status().lock_holder == "olga"
+    run_with_page(server, body, people)
 
 
 def test_signing_out_closes_the_persons_pages_and_their_lock_is_released(server, people):
-    async def body(dashboard):
-        http, ws = await open_page(dashboard.url, people.token("olga"))
-        async with http, ws:
-            page = PageClient(ws)
-            await page.call(CONNECT, {"hello": {}})
-            await page.call(DEVICE + "Lock")
-            await page.call(DEVICE + "Activate")
-            async with http.post(dashboard.url + "api/sign-out",
-                                 headers=page_headers(dashboard.url)) as reply:
-                assert reply.status == 204
-            closed = await asyncio.wait_for(ws.receive(), 30)
-            while closed.type is aiohttp.WSMsgType.TEXT:
-                closed = await asyncio.wait_for(ws.receive(), 30)
-            assert ws.close_code == 4001 and "signed out" in (closed.extra or "")
-            async with http.get(dashboard.url + "api/me") as reply:
-                assert reply.status == 401
-    run_with_dashboard(server, body, people)
+    async def body(page, dashboard):
+        await page.call(CONNECT, {"hello": {}})
+        await page.call(DEVICE + "Lock")
+        await page.call(DEVICE + "Activate")
+        async with page.http.post(dashboard.url + "api/sign-out",
+                                  headers=page_headers(dashboard.url)) as reply:
+            assert reply.status == 204
+        closed = await asyncio.wait_for(page.ws.receive(), 30)
+        while closed.type is aiohttp.WSMsgType.TEXT:
+            closed = await asyncio.wait_for(page.ws.receive(), 30)
+        assert page.ws.close_code == 4001 and "signed out" in (closed.extra or "")
+        async with page.http.get(dashboard.url + "api/me") as reply:
+            assert reply.status == 401
+    run_with_page(server, body, people)
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
 
