@@ -13,6 +13,7 @@ from landscape.server.auth import TokenStore
 from landscape.supervisor import app
 from landscape.supervisor.config import (DEFAULT_DISPLAY_RATE_HZ, DEFAULT_HOST, DEFAULT_PORT,
                                          DashboardConfig, parse_device)
+from landscape.supervisor.origins import own_origins
 from landscape.supervisor.sign_in import DEFAULT_IDLE_S, DEFAULT_MAX_AGE_S
 
 
@@ -76,6 +77,11 @@ async def serve(config: DashboardConfig) -> None:
     if not _loopback(config.host):
         logging.warning("serving beyond loopback over plain HTTP: sign-in tokens and cookies "
                         "cross the network readable; put TLS in front of %s", running.url)
+        if not config.allowed_origins:
+            logging.warning("pages are accepted from %s only: list the URL people use in "
+                            "--allowed-origin ([supervisor] allowed_origins)",
+                            ", ".join(own_origins(config.host, int(running.url.rstrip("/")
+                                                                   .rsplit(":", 1)[1]))))
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
