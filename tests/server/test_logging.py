@@ -15,6 +15,8 @@ import pytest
 
 from landscape.v1 import control_pb2, device_service_pb2_grpc, motion_pb2
 
+from support import child_pids
+
 SERVER = ["-m", "landscape.server", "--port", "0", "--audit-log", ""]
 # The server without real-time privileges, whoever runs the test: no CAP_SYS_NICE in what it
 # execs (root keeps it otherwise) and a real-time priority limit of 0.
@@ -41,8 +43,7 @@ class Started:
     def cycle_has_real_time_priority(self) -> bool:
         """Whether a child of the server (the cycle process) runs SCHED_FIFO."""
         pid = self.proc.pid
-        children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
-        return any(os.sched_getscheduler(int(c)) == os.SCHED_FIFO for c in children)
+        return any(os.sched_getscheduler(c) == os.SCHED_FIFO for c in child_pids(pid))
 
     def stop(self) -> tuple[str, str]:
         self.proc.terminate()
