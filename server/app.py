@@ -16,7 +16,7 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from landscape.server import services, tls
+from landscape.server import alarms, services, tls
 from landscape.server.audit import AuditLog
 from landscape.server.auth import TokenFileError, TokenStore
 from landscape.server.collision import CollisionScene
@@ -149,7 +149,9 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                           on_lost=lambda why: device and device.controller_lost(why),
                           pace=config.lockstep_pace)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
-    device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs,
+    paths = PathStore(config.paths_file,
+                      report=lambda severity, message: bus.alarm(severity, alarms.STORAGE, message))
+    device = Device(link, bus, cell.arm, paths=paths, outputs=outputs,
                     reset_settings=config.reset_settings,
                     collisions=CollisionScene(cell, config.collision_margin))
     workcell = build_workcell(device, cell)
