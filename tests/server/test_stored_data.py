@@ -1,7 +1,7 @@
 """Stored data faults (issue 25.6): a paths file that cannot be read, a row that cannot be
 read, a full disk and an empty PathLoad never stop the server nor answer INTERNAL. Real
 servers (lock-step clock) on real SQLite files; the full disk is a small tmpfs the test mounts
-(root only)."""
+(conftest.small_disk)."""
 from __future__ import annotations
 
 import contextlib
@@ -206,41 +206,12 @@ def test_an_unreadable_row_is_skipped_with_an_alarm_naming_it(good_file, tmp_pat
         server.stop(grace=None)
 
 
-@pytest.fixture
-def small_disk(tmp_path):
-    """A 1 MiB tmpfs mounted for the test (root only: CI runs as root)."""
-    if os.geteuid() != 0:
-        pytest.skip("mounting a small filesystem needs root")
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)],
-                             capture_output=True, text=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.strip()}")
-    try:
-        yield disk
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], check=False)
-
-
-def fill(disk: Path) -> Path:
-    """A file that takes every free byte of `disk`."""
-    filler = disk / "filler"
-    with open(filler, "wb", buffering=0) as out:
-        try:
-            while True:
-                out.write(b"\0" * 4096)
-        except OSError:
-            pass
-    return filler
-
-
 def test_a_full_disk_is_resource_exhausted_with_an_alarm_and_changes_nothing(small_disk):
-    server = start_server(paths_file=str(small_disk / "paths.sqlite3"))
+    server = start_server(paths_file=str(small_disk.path / "paths.sqlite3"))
     try:
         with _holder(server) as device:
             _load(device, "before")
-            filler = fill(small_disk)
+            small_disk.fill()
             refused = _refusal(lambda: _load(device, "during", points=200))
             assert refused.code() is grpc.StatusCode.RESOURCE_EXHAUSTED, refused
             assert error_info(refused).reason == "STORAGE_FULL"
@@ -251,7 +222,7 @@ def test_a_full_disk_is_resource_exhausted_with_an_alarm_and_changes_nothing(sma
             (alarm,) = _storage_alarms(server)                        # once, not per call
             assert "full" in alarm.message, alarm.message
             assert not _exists(device, "during")
-            filler.unlink()                                           # space again
+            small_disk.free()                                         # space again
             _load(device, "after")
             device.SetSpeed(SPEED, timeout=10)
             assert _exists(device, "after") and _exists(device, "before")
