@@ -76,10 +76,11 @@ class Record:
     wall: float = field(default_factory=time.time)
 
     def line(self, result: str) -> bytes:
+        if not isinstance(self.request, str):     # described once, when first written
+            self.request = "" if self.request is None else describe(self.request)
         entry = {"time": _utc(self.wall), "who": self.who, "role": self.role, "via": self.via,
                  "for": self.on_behalf_of, "peer": self.peer, "rpc": self.rpc,
-                 "request": "" if self.request is None else describe(self.request),
-                 "result": result,
+                 "request": self.request, "result": result,
                  "ms": round((time.monotonic() - self.started) * 1000.0, 1)}
         text = {key: printable(value) if isinstance(value, str) else value
                 for key, value in entry.items()}
