@@ -13,12 +13,12 @@ servicers/guard.py) sees it:
    token's identity, sized by its name (rate_limit.py); with tokens off, its address and its
    `landscape-client` name (the best there is without authentication: a name is only what
    the caller says), sized by that name. A call without a known token counts against its
-   address. The calls that stop the arm are never limited. The client is also what the
-   guard's stream caps count (limits.CLIENT);
+   address. The calls that stop the arm (STOPS, the e-stop's press) are never limited. The
+   client is also what the guard's stream caps count (limits.CLIENT);
 4. written down (audit.py): every call that needs more than a viewer, and the operator panel.
    A call that would move the arm or change a setting runs only once its record is written
    (write-ahead): while the audit cannot write, it is refused (UNAVAILABLE). The calls that
-   make the arm safe (SAFE) never wait for the audit: written when it can. Refused
+   stop the arm, and Release, never wait for the audit: written when it can. Refused
    authentication is written once per address per interval with its count (refusal_tally.py).
 
 The health service passes untouched: probes need no secret.
@@ -46,11 +46,12 @@ from landscape.v1 import control_pb2
 
 log = logging.getLogger(__name__)
 
-# Calls that make the arm safe: never rate limited (a stop must always get through).
-UNLIMITED = {name for name, rule in states.RULES.items() if rule.immediate} | {"OperatePanel"}
-# Calls that make the arm safe or give up control: never refused for want of an audit record
-# (safety first), written when the audit can. The e-stop's press is one too (`_safe`).
-SAFE = {name for name, rule in states.RULES.items() if rule.immediate} | {"Release"}
+# The calls that stop the arm (StopMotion, AbortMotion, Deactivate) and the e-stop's press:
+# never rate limited (a stop must always get through), never refused for want of an audit
+# record (safety first; written when the audit can). Release, which gives control up, is
+# never refused for the audit either.
+STOPS = {name for name, rule in states.RULES.items() if rule.immediate}
+GIVING_UP = {"Release"}
 FIRST_MESSAGE_WAIT = 1.0    # s a refused request stream is given to deliver its first message
 
 
@@ -58,9 +59,10 @@ class RateLimited(ResourceExhausted):
     reason = "RATE_LIMITED"
 
 
-def _safe(name: str, request) -> bool:
-    return name in SAFE or (name == "OperatePanel" and hasattr(request, "action")
-                            and request.action == control_pb2.PANEL_ACTION_PRESS_ESTOP)
+def stops_the_arm(name: str, request) -> bool:
+    """Whether the call `name` with `request` (a message, or None for a stream) stops the arm."""
+    return name in STOPS or (name == "OperatePanel" and request is not None
+                             and request.action == control_pb2.PANEL_ACTION_PRESS_ESTOP)
 
 
 class _Call:
@@ -100,9 +102,11 @@ class _Call:
             raise RoleTooLow(f"{self.name} needs the {needs.label} role; "
                              f"{self.identity.name} has the {self.identity.role.label} role",
                              role=self.identity.role.label, needs=needs.label)
-        if self.name not in UNLIMITED:
+        stop = stops_the_arm(self.name, message)
+        if not stop:
             self._limit(client, size)
-        self.gated = self.audited and layer.audit is not None and not _safe(self.name, message)
+        self.gated = (self.audited and layer.audit is not None
+                      and not (stop or self.name in GIVING_UP))
 
     def _limit(self, client: str, size: str | None) -> None:
         rate = self.layer.rate
