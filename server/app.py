@@ -148,8 +148,8 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                           on_lost=lambda why: device and device.controller_lost(why),
                           pace=config.lockstep_pace)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
-    paths = PathStore(config.paths_file,
-                      report=lambda severity, message: bus.alarm(severity, alarms.STORAGE, message))
+    paths = PathStore(config.paths_file, report=lambda severity, message: bus.alarm(
+        severity, alarms.STORAGE, message))
     device = Device(link, bus, cell.arm, paths=paths, outputs=outputs,
                     reset_settings=config.reset_settings,
                     collisions=CollisionScene(cell, config.collision_margin))
@@ -182,16 +182,16 @@ def _security_layer(security: SecurityConfig, report) -> SecurityInterceptor:
     except TokenFileError as error:
         raise StartupError(f"tokens: {error}") from None
     try:
+        rate = (RateLimiter(security.rate_limit, security.rate_burst, security.rate_limits)
+                if security.rate_limit else None)
+    except ValueError as error:
+        raise StartupError(f"rate limits: {error}") from None
+    try:
         audit = (AuditLog(security.audit_log, security.audit_max_bytes, security.audit_backups,
                           report) if security.audit_log else None)
     except OSError as error:
         raise StartupError(f"cannot write the audit log {security.audit_log}: "
                            f"{error.strerror}; choose another with --audit-log") from None
-    try:
-        rate = (RateLimiter(security.rate_limit, security.rate_burst, security.rate_limits)
-                if security.rate_limit else None)
-    except ValueError as error:
-        raise StartupError(f"rate limits: {error}") from None
     return SecurityInterceptor(tokens, audit, rate)
 
 

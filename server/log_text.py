@@ -22,8 +22,8 @@ def printable(text: str, limit: int | None = None) -> str:
 
 class EscapingFilter(logging.Filter):
     """Escapes the string arguments of each record (and the text of an exception given as an
-    argument, if it needs it) before a handler formats it. The message itself is the program's own format
-    string: it may hold newlines on purpose."""
+    argument, if it needs it) before a handler formats it. The message itself is the
+    program's own format string: it may hold newlines on purpose."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.args and not getattr(record, "escaped", False):
