@@ -253,8 +253,8 @@ def test_a_restarted_device_server_is_followed_from_its_first_event():
 
 
 def test_the_backend_commands_over_tls_with_its_token_and_the_role_decides(secured, keys):
-    """An operator's token: sessions, the lock and commands; the e-stop (admin only) refused
-    with the device's reason, and nothing pressed."""
+    """An operator's token: sessions, the lock and commands; the door (admin only) refused
+    with the device's reason, and nothing opened."""
     async def body(page, dashboard):
         state = await page.until(lambda f: f["rpc"] == DEVICE + "GetDeviceState")
         assert state["reply"]["state"] == "DEVICE_STATE_UNLOCKED"
@@ -263,9 +263,9 @@ def test_the_backend_commands_over_tls_with_its_token_and_the_role_decides(secur
         assert "reply" in await page.call(DEVICE + "Activate")
         assert secured.device.state is State.RESTING
         refused = (await page.call(DEVICE + "OperatePanel",
-                                   {"action": "PANEL_ACTION_PRESS_ESTOP"}))["status"]
+                                   {"action": "PANEL_ACTION_OPEN_DOOR"}))["status"]
         assert refused["code"] == 7 and "admin" in refused["message"]   # PERMISSION_DENIED
-        assert secured.device.state is State.RESTING   # not pressed
+        assert secured.device.state is State.RESTING
     run_with_page(secured, body, tls=keys.tls(), token=keys.token("operator"))
 
 

@@ -169,17 +169,20 @@ def test_the_io_panel_shows_bits_by_name_and_toggles_an_output(chromium, dashboa
     page.close()
 
 
-def test_the_estop_is_refused_with_the_reason_when_the_backends_role_lacks_it(chromium, keys):
+def test_the_estop_release_is_refused_with_the_reason_when_the_backends_role_lacks_it(
+        chromium, keys):
+    """Anyone watching may press the e-stop; releasing it needs an operator (issue 25)."""
     secured = start_secured_server(keys, lockstep_pace=1.0)
     running = DashboardThread({"arm1": secured.target}, tls=keys.tls(),
-                              token=keys.token("operator"))
+                              token=keys.token("viewer"))
     try:
         page = Page(chromium, running.url)
         page.click("btn-estop-press")
+        wait_until(lambda: secured.device.state is State.ERROR, timeout=10)
+        page.click("btn-estop-release")
         page.shows("refusal", "OperatePanel — PERMISSION_DENIED ROLE_TOO_LOW")
         page.log_has("refused: OperatePanel")
-        assert secured.device.state is State.UNLOCKED   # nothing pressed
-        page.take_control()                             # an operator may command
+        assert secured.device.status().estop            # still pressed
         page.close()
     finally:
         running.stop()
