@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import math
+import os
 import multiprocessing as mp
 import subprocess
 import sys
@@ -54,8 +55,10 @@ def rss_mb(pid: int) -> float:
 def children(pid: int) -> tuple[int | None, int | None]:
     """The device server's planning process (named so) and its cycle process (the largest of
     the other children: the rest are multiprocessing's helpers), as (cycle, planning)."""
-    with open(f"/proc/{pid}/task/{pid}/children") as listed:
-        pids = [int(c) for c in listed.read().split()]
+    pids = []   # children are started from a thread of their own (sim/lifeline.py)
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as listed:
+            pids += [int(c) for c in listed.read().split()]
     planning = [p for p in pids if _comm(p) == PROCESS_NAME]
     cycle = max((p for p in pids if p not in planning), key=rss_mb, default=None)
     return cycle, planning[0] if planning else None

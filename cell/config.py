@@ -22,6 +22,8 @@ from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
 from landscape.sim.cell import CellError, _Table, load_cell
 
 DEFAULT_FILE = "cells/local.toml"
+# The cell's own front ends, sized for their traffic (calls per second; the names they send).
+FRONT_END_RATES = {"crcl-gateway": 5000.0, "supervisor": 5000.0}
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
 RESTART = ("no", "on-failure")
 
@@ -89,7 +91,8 @@ class SecuritySpec:
     """TLS (cert/key of the device servers; ca: the CA clients trust, and with mtls the one
     that signs clients), the cell's own clients' pair under mtls, the token folder, the audit
     log's rotation (and folder: None puts each device's in its data folder), the rate limit
-    per client, and --insecure."""
+    per client and the budgets of the clients so named (rate_limits: a token's name, or with
+    tokens off the name a front end sends; calls per second), and --insecure."""
 
     tls: bool = False
     cert: Path | None = None
@@ -104,6 +107,7 @@ class SecuritySpec:
     audit_backups: int = 5
     rate_limit: float = 1000.0
     rate_burst: int = 2000
+    rate_limits: dict[str, float] = field(default_factory=lambda: dict(FRONT_END_RATES))
     insecure: bool = False
 
     def audit_log(self, device: DeviceSpec) -> Path:
@@ -242,6 +246,7 @@ def _security(r: _Reader) -> SecuritySpec:
         audit_backups=r.t.integer("audit_backups", d.audit_backups, low=0, high=1000),
         rate_limit=r.t.number("rate_limit", d.rate_limit, low=0.0),
         rate_burst=r.t.integer("rate_burst", d.rate_burst, low=1),
+        rate_limits=_rate_limits(r.t.table("rate_limits"), d.rate_limits),
         insecure=r.t.boolean("insecure", d.insecure))
     for key, needed in (("cert", tls), ("key", tls), ("ca", tls), ("client_cert", mtls),
                         ("client_key", mtls)):
@@ -257,6 +262,18 @@ def _security(r: _Reader) -> SecuritySpec:
             r.t.fail("tokens", str(error))
     r.t.done()
     return spec
+
+
+def _rate_limits(table, defaults: dict[str, float]) -> dict[str, float]:
+    """[security.rate_limits]: name = calls per second, over the defaults."""
+    sized = dict(defaults)
+    for name in list(table.data):
+        if not name or "=" in name or name != name.strip():
+            table.fail(name, "a name is a token's name or a client's (no '=', no spaces at "
+                             "its ends)")
+        sized[name] = table.number(name, positive=True)
+    table.done()
+    return sized
 
 
 def _client_token(r: _Reader, security: SecuritySpec, role: str = "operator") -> Path | None:

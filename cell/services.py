@@ -52,6 +52,8 @@ def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None 
             "--audit-max-bytes", str(security.audit_max_bytes),
             "--audit-backups", str(security.audit_backups),
             "--rate-limit", f"{security.rate_limit:g}", "--rate-burst", str(security.rate_burst)]
+    for name, rate in security.rate_limits.items():
+        argv += ["--rate-limit-for", f"{name}={rate:g}"]
     if device.world is not None:
         argv += ["--cell", str(device.world)]
     if device.reset_settings:

@@ -31,6 +31,7 @@ signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 from landscape.server.config import (CLOCKS, DEFAULT_ADDRESS, DEFAULT_PORT,  # noqa: E402
                                      MAX_COLLISION_MARGIN, SecurityConfig, ServerConfig)
 from landscape.server.listen import listen_address, listen_problem  # noqa: E402
+from landscape.server.log_text import escape_handlers  # noqa: E402
 
 log = logging.getLogger("landscape.server")
 
@@ -72,11 +73,21 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
         parser.error(f"--collision-margin must be above 0 and at most {MAX_COLLISION_MARGIN} m")
     if args.mtls and not args.tls_ca:
         parser.error("--mtls needs --tls-ca (the CA that signs the clients' certificates)")
+    sized = {}
+    for item in args.rate_limit_for:
+        name, _, rate = item.partition("=")
+        try:
+            sized[name] = float(rate)
+        except ValueError:
+            sized[name] = 0.0
+        if not name or not sized[name] > 0:
+            parser.error(f"--rate-limit-for takes NAME=CALLS_PER_SECOND (above 0), not {item!r}")
     security = SecurityConfig(
         tls_cert=args.tls_cert, tls_key=args.tls_key, tls_ca=args.tls_ca, mtls=args.mtls,
         tokens=args.tokens, audit_log=args.audit_log or None,
         audit_max_bytes=args.audit_max_bytes, audit_backups=args.audit_backups,
-        rate_limit=args.rate_limit or None, rate_burst=args.rate_burst, insecure=args.insecure)
+        rate_limit=args.rate_limit or None, rate_burst=args.rate_burst, rate_limits=sized,
+        insecure=args.insecure)
     config = ServerConfig(address=args.address, port=args.port, cell=args.cell,
                           clock=args.clock, paths_file=args.paths,
                           reset_settings=args.reset_settings, security=security,
@@ -102,10 +113,15 @@ def _security_arguments(group) -> None:
     group.add_argument("--audit-backups", type=int, default=5,
                        help="rotated audit logs kept (default %(default)s)")
     group.add_argument("--rate-limit", type=float, default=1000.0,
-                       help="calls per second one client may make on average; stops are never "
+                       help="calls per second one client (its token; with tokens off, its "
+                            "address and client name) may make on average; stops are never "
                             "limited (default %(default)s; 0 for none)")
     group.add_argument("--rate-burst", type=int, default=2000,
                        help="calls one client may make at once (default %(default)s)")
+    group.add_argument("--rate-limit-for", action="append", default=[], metavar="NAME=RATE",
+                       help="calls per second the client so named may make (bursts of twice "
+                            "that): a token's name, or with tokens off the name a front end "
+                            "sends in landscape-client; repeat for each")
     group.add_argument("--max-message-bytes", type=int, default=4 * 1024 * 1024,
                        help="largest request accepted, bytes (default %(default)s); paths "
                             "stream in chunks, so no message needs to be big")
@@ -117,6 +133,7 @@ def _security_arguments(group) -> None:
 def main(argv=None) -> None:
     config, level = parse_args(argv)
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    escape_handlers()   # a caller's name or header never forges a line (log_text.py)
     problem = listen_problem(config.address, config.port)
     if problem:
         _refuse(problem)

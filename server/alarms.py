@@ -9,3 +9,5 @@ OVERFLOW = 106            # a bounded queue overflowed (what was dropped is said
 PANIC = 107               # a compliant motion panicked (force or travel beyond its envelope)
 DIGITAL_IO = 108          # a signalDigitalIO watch fired (its callback type CLIENT_ALARM)
 PLANNING_LOST = 109        # the planning process died: its job failed, another one started
+STORAGE = 110             # stored paths or settings could not be read or written (which, where)
+AUDIT = 111               # the audit log could not be written: commands that move are refused

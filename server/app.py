@@ -16,7 +16,7 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from landscape.server import services, tls
+from landscape.server import alarms, services, tls
 from landscape.server.audit import AuditLog
 from landscape.server.auth import TokenFileError, TokenStore
 from landscape.server.collision import CollisionScene
@@ -111,8 +111,7 @@ class RunningServer:
         self.dispatch.shutdown()
         self.link.stop()
         self.runner.close()
-        if self.security.audit is not None:
-            self.security.audit.close()
+        self.security.close()
 
     def wait(self) -> None:
         self.runner.run(self.server.wait_for_termination(), timeout=None)
@@ -132,16 +131,16 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     # (bench_stop: p99 under long planning 8.4 ms, 13.9 at 1 ms). The lock-step clock's
     # thread computes too, and pays for every hand-over (bench_lockstep: 12 % slower at 0.2).
     sys.setswitchinterval(0.001 if config.clock == "lockstep" else 0.0002)
-    security = _security_layer(config.security)
+    bus = EventBus()
+    security = _security_layer(config.security, report=lambda severity, message: bus.alarm(
+        severity, alarms.AUDIT, message))
     runner = _LoopThread()
     try:
         server, port = runner.run(_bind(config, security))
     except BaseException:
         runner.close()
-        if security.audit is not None:
-            security.audit.close()
+        security.close()
         raise
-    bus = EventBus()
     cell = load_cell(config.cell)
     device: Device | None = None
     link = ControllerLink(config.clock, config.cell,
@@ -149,7 +148,9 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                           on_lost=lambda why: device and device.controller_lost(why),
                           pace=config.lockstep_pace)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
-    device = Device(link, bus, cell.arm, paths=PathStore(config.paths_file), outputs=outputs,
+    paths = PathStore(config.paths_file, report=lambda severity, message: bus.alarm(
+        severity, alarms.STORAGE, message))
+    device = Device(link, bus, cell.arm, paths=paths, outputs=outputs,
                     reset_settings=config.reset_settings,
                     collisions=CollisionScene(cell, config.collision_margin))
     workcell = build_workcell(device, cell)
@@ -165,8 +166,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         link.stop()
         runner.run(server.stop(None))
         runner.close()
-        if security.audit is not None:
-            security.audit.close()
+        security.close()
         raise
     running = RunningServer(server, health_servicer, port, config.address, bus, device, workcell,
                             link, hub, dispatch, limits, runner, security)
@@ -174,20 +174,24 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     return running
 
 
-def _security_layer(security: SecurityConfig) -> SecurityInterceptor:
-    """Tokens, audit log and rate limit as configured; StartupError naming what is wrong."""
+def _security_layer(security: SecurityConfig, report) -> SecurityInterceptor:
+    """Tokens, audit log and rate limit as configured; StartupError naming what is wrong.
+    `report` (severity, message): the audit log's troubles (audit.py)."""
     try:
         tokens = TokenStore.load(security.tokens) if security.tokens else None
     except TokenFileError as error:
         raise StartupError(f"tokens: {error}") from None
     try:
-        audit = (AuditLog(security.audit_log, security.audit_max_bytes, security.audit_backups)
-                 if security.audit_log else None)
+        rate = (RateLimiter(security.rate_limit, security.rate_burst, security.rate_limits)
+                if security.rate_limit else None)
+    except ValueError as error:
+        raise StartupError(f"rate limits: {error}") from None
+    try:
+        audit = (AuditLog(security.audit_log, security.audit_max_bytes, security.audit_backups,
+                          report) if security.audit_log else None)
     except OSError as error:
         raise StartupError(f"cannot write the audit log {security.audit_log}: "
                            f"{error.strerror}; choose another with --audit-log") from None
-    rate = (RateLimiter(security.rate_limit, security.rate_burst)
-            if security.rate_limit else None)
     return SecurityInterceptor(tokens, audit, rate)
 
 

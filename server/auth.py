@@ -2,9 +2,11 @@
 
 Three roles, each holding the rights of the ones below it:
 
-- viewer: read and watch (every read-only RPC, Subscribe, StreamState, reflection);
-- operator: open a session, lock and command (every RPC that needs the lease, and the session);
-- admin: the operator panel (e-stop, door) and Reset.
+- viewer: read and watch (every read-only RPC, Subscribe, StreamState, reflection), and press
+  the e-stop (anyone watching the cell may stop it);
+- operator: open a session, lock and command (every RPC that needs the lease, and the session),
+  and release the e-stop;
+- admin: the rest of the operator panel (the door) and Reset.
 
 The gRPC health service needs no token, so that probes and load balancers need no secret.
 
@@ -22,13 +24,21 @@ import hmac
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import unquote
 
 import grpc
 
 from landscape.server import states
 from landscape.server.errors import CommandError
+from landscape.server.log_text import printable
+from landscape.v1 import control_pb2
 
 AUTHORIZATION = "authorization"
+# What a front end says of a call (recorded, never trusted): the program calling and the
+# person or remote peer it acts for (the lead's identity convention).
+CLIENT_HEADER = "landscape-client"
+ON_BEHALF_OF_HEADER = "landscape-on-behalf-of"
+HEADER_LIMIT = 128          # characters of either kept
 ROLE_FILE = "{role}.tokens"
 MIN_TOKEN_LENGTH = 16
 # What may stand in an HTTP/2 header value and in our files without quoting (RFC 6750 b64token).
@@ -66,13 +76,20 @@ class TokenFileError(ValueError):
 _ADMIN = {"OperatePanel", "Reset"}
 _OPERATOR = {"Connect", "SendCommand", "Lock"}
 _PUBLIC_SERVICES = {"grpc.health.v1.Health"}
+# Anyone watching the cell may stop it; releasing the e-stop is an operator's; the rest of the
+# panel (the door) an admin's.
+_PANEL_ROLES = {control_pb2.PANEL_ACTION_PRESS_ESTOP: Role.VIEWER,
+                control_pb2.PANEL_ACTION_RELEASE_ESTOP: Role.OPERATOR}
 
 
-def required_role(method: str) -> Role:
-    """The role a full method name (`/package.Service/Rpc`) needs. Methods of the contract
-    follow the state table: read-only ones are viewer's, the lease's are operator's; the panel
-    and Reset are admin's. Anything unknown needs admin (fail closed)."""
+def required_role(method: str, request=None) -> Role:
+    """The role a full method name (`/package.Service/Rpc`) needs, for `request` if given.
+    Methods of the contract follow the state table: read-only ones are viewer's, the lease's
+    are operator's; the panel and Reset are admin's, but pressing the e-stop is a viewer's and
+    releasing it an operator's. Anything unknown needs admin (fail closed)."""
     service, _, rpc = method.lstrip("/").rpartition("/")
+    if rpc == "OperatePanel" and request is not None and service == "landscape.v1.DeviceService":
+        return panel_role(request.action)
     if service in _PUBLIC_SERVICES:
         return Role.PUBLIC
     if service.startswith("grpc.reflection."):
@@ -84,6 +101,23 @@ def required_role(method: str) -> Role:
     if rpc in _OPERATOR or states.RULES[rpc].lease is not states.Lease.NONE:
         return Role.OPERATOR
     return Role.VIEWER
+
+
+def panel_role(action: int) -> Role:
+    """The role an OperatePanel action (PanelAction) needs."""
+    return _PANEL_ROLES.get(action, Role.ADMIN)
+
+
+def front_end(metadata) -> tuple[str, str]:
+    """(landscape-client, landscape-on-behalf-of) of a call's metadata, printable, each cut to
+    HEADER_LIMIT characters; "" where absent. gRPC carries only printable ASCII in a text
+    header: UTF-8 comes percent-encoded (as gRPC's own grpc-message), and is decoded here."""
+    found = {CLIENT_HEADER: "", ON_BEHALF_OF_HEADER: ""}
+    for key, value in metadata or ():
+        if key in found and not found[key]:
+            text = value.decode("ascii", "replace") if isinstance(value, bytes) else value
+            found[key] = printable(unquote(text, errors="replace"), HEADER_LIMIT)
+    return found[CLIENT_HEADER], found[ON_BEHALF_OF_HEADER]
 
 
 @dataclass(frozen=True)

@@ -28,10 +28,13 @@ class SecurityConfig:
     audit_log: str | None = None
     audit_max_bytes: int = 10 * 1024 * 1024
     audit_backups: int = 5
-    # Calls per second one client (its token's identity, else its IP address) may make on
-    # average, and at once; stops are never limited. None: no limit.
+    # Calls per second one client (its token's identity; else its IP address and client name)
+    # may make on average, and at once; stops are never limited. None: no limit.
     rate_limit: float | None = None
     rate_burst: int = 200
+    # Calls per second of the clients so named (a token's name; with tokens off, the name a
+    # front end gives in `landscape-client`), bursts of twice that: the front ends' budgets.
+    rate_limits: dict[str, float] | None = None
     # Listen on a non-loopback address without TLS and tokens all the same.
     insecure: bool = False
 

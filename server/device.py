@@ -31,8 +31,8 @@ from typing import Callable
 
 from landscape.server import alarms, states, stored_settings
 from landscape.server.collision import CollisionScene
-from landscape.server.errors import (ControllerFailure, EstopActive, NotLockHolder, ParamError,
-                                     WrongState)
+from landscape.server.errors import (CommandError, ControllerFailure, EstopActive, NotLockHolder,
+                                     ParamError, WrongState)
 from landscape.server.events import EventBus, Severity
 from landscape.server.feedback import Sample
 from landscape.server.motion_control import MotionControl
@@ -94,7 +94,8 @@ class Device(SafetyActions):
         self._settings = (defaults if reset_settings
                           else stored_settings.from_record(defaults, self._store.load_settings()))
         if reset_settings:
-            self._store.save_settings(stored_settings.to_record(defaults))
+            with contextlib.suppress(CommandError):   # reported by the store; in force anyway
+                self._store.save_settings(stored_settings.to_record(defaults))
         self._error = ""
         self._power = EnableState.DISABLED   # the controller's last reported power state
         self._estop = False

@@ -109,6 +109,26 @@ class ResourceExhausted(CommandError):
     status, reason = grpc.StatusCode.RESOURCE_EXHAUSTED, "RESOURCE_EXHAUSTED"
 
 
+class StorageFull(ResourceExhausted):
+    """The disk that keeps what the call would store (paths, settings, the audit) is full:
+    nothing was stored, nothing changed."""
+
+    reason = "STORAGE_FULL"
+
+
+class Unavailable(CommandError):
+    """The server cannot do this now for a reason of its own that may pass (a file it cannot
+    write); the message says which. Nothing changed."""
+
+    status, reason = grpc.StatusCode.UNAVAILABLE, "UNAVAILABLE"
+
+
+class StorageFailed(Unavailable):
+    """What the call would store could not be written (other than a full disk)."""
+
+    reason = "STORAGE_FAILED"
+
+
 class Internal(CommandError):
     """Something failed inside the server that should not have; it is logged with its
     traceback. Nothing the call was to do should be assumed done."""

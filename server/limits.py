@@ -5,8 +5,10 @@ loop. A client may hold at most `per_client` streams of a kind, and the server a
 `total`. Sessions are a kind of their own: they carry the lock's safety, so subscriptions can
 never use up the room sessions need.
 
-A client is its token's identity where tokens are on, else its IP address (`client_of`): not a
-connection, which anyone can multiply. The rate limit (security.py) counts clients the same way.
+A client is who the security layer says (security.py, which counts its rate limit the same
+way): its token's identity where tokens are on, else its IP address and the name its
+`landscape-client` header gives; without the security layer, its IP address (`client_of`).
+Never a connection, which anyone can multiply.
 """
 from __future__ import annotations
 
@@ -31,8 +33,8 @@ class Cap:
 DEFAULT_CAPS = {"session": Cap(per_client=32, total=512),
                 "watch": Cap(per_client=256, total=20_000)}
 
-# The token identity of the call being handled, set by the security layer when tokens are on.
-TOKEN_IDENTITY: ContextVar[str | None] = ContextVar("token_identity", default=None)
+# Who the call being handled counts against, set by the security layer.
+CLIENT: ContextVar[str | None] = ContextVar("client", default=None)
 
 
 def peer_address(peer: str) -> str:
@@ -45,9 +47,10 @@ def peer_address(peer: str) -> str:
 
 
 def client_of(peer: str) -> str:
-    """Who the call being handled counts against: its token's identity, else its address."""
-    identity = TOKEN_IDENTITY.get()
-    return f"token {identity}" if identity is not None else peer_address(peer)
+    """Who the call being handled counts against: as the security layer said, else its
+    address."""
+    client = CLIENT.get()
+    return client if client is not None else peer_address(peer)
 
 
 class StreamLimits:

@@ -87,6 +87,9 @@ def load(planner: Planner, existing: StoredPath | None, name: str, frame: Frame,
     from (rad). total: the point count the client announced, if any."""
     if not name:
         raise ParamError("a path needs a name")
+    if not specs:
+        raise ParamError(f"the PathLoad stream for {name!r} carried a header and no points: "
+                         f"send at least one tag")
     if total is not None and total != len(specs):
         raise ParamError(f"number_of_points says {total}, the stream carried {len(specs)}")
     path = existing or StoredPath(name, straight, tuple(settings.tool_offset.ravel()))

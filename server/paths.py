@@ -5,20 +5,39 @@ A path is checked whole when it is loaded (every point reachable in the arm's co
 every straight segment followable) and stored resolved, so pathMove runs what was checked.
 Paths live in one SQLite file; every change is one transaction, so a crash leaves either the
 old or the new path, never half of one, and paths survive a restart of the device server.
+
+Stored data never stops the server (issue 25.6), and each fault is reported (an alarm, through
+`report`): a file whose content cannot be read is moved aside and a fresh one started
+(sqlite_file.py); a file that cannot be opened at all leaves the paths and settings in memory
+until a restart; a path or the settings that cannot be read are skipped (an unreadable path
+can still be cleared, or loaded again); a write that fails (a full disk: StorageFull,
+RESOURCE_EXHAUSTED; anything else: StorageFailed, UNAVAILABLE) changes nothing, is reported
+once, and its recovery too.
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import sqlite3
 import threading
 from itertools import chain
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path as FilePath
+from typing import Callable
 
 import numpy as np
 
+from landscape.server import sqlite_file
 from landscape.server.errors import NotFound
+from landscape.server.event_records import Severity
+
+log = logging.getLogger(__name__)
+TABLES = {"paths": "name TEXT PRIMARY KEY, body TEXT NOT NULL",
+          "settings": "id INTEGER PRIMARY KEY CHECK (id = 1), body TEXT NOT NULL"}
+_LOG_LEVELS = {Severity.INFO: logging.INFO, Severity.WARNING: logging.WARNING,
+               Severity.ERROR: logging.ERROR, Severity.CRITICAL: logging.CRITICAL}
 
 
 @dataclass(frozen=True)
@@ -77,40 +96,107 @@ def _stored_path(name, straight, tcp, joints, numbers, tag_indices, tag_names, a
 
 
 class PathStore:
-    """Paths by name in an SQLite file (None: in memory, gone with the process)."""
+    """Paths by name in an SQLite file (None: in memory, gone with the process). `report`
+    (severity, message) is told of every fault and recovery; each is logged as well."""
 
-    def __init__(self, file: str | FilePath | None = None):
-        if file is not None:
-            FilePath(file).parent.mkdir(parents=True, exist_ok=True)
-        self._db = sqlite3.connect(":memory:" if file is None else str(file),
-                                   check_same_thread=False)
+    def __init__(self, file: str | FilePath | None = None,
+                 report: Callable[[Severity, str], None] = lambda severity, message: None):
+        self._file = file
+        self._report_to = report
         self._lock = threading.Lock()
-        # Write-ahead log, synced at checkpoints: a save is one atomic commit without an fsync
-        # (0.03 ms here, was 0.8); a killed server loses nothing, a power cut at most the
-        # last saves, never the file's consistency.
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=NORMAL")
-        with self._lock, self._db:
-            self._db.execute("CREATE TABLE IF NOT EXISTS paths (name TEXT PRIMARY KEY, body TEXT NOT NULL)")
-            self._db.execute("CREATE TABLE IF NOT EXISTS settings (id INTEGER PRIMARY KEY CHECK (id = 1), "
-                             "body TEXT NOT NULL)")
+        self._failing = False        # the last write failed: said once, until one works
+        self._db = self._open(file)
+
+    def _report(self, severity: Severity, message: str) -> None:
+        log.log(_LOG_LEVELS[severity], "%s", message)
+        self._report_to(severity, message)
+
+    def _open(self, file) -> sqlite3.Connection:
+        if file is None:
+            return sqlite_file.connect(":memory:", TABLES)
+        try:
+            FilePath(file).parent.mkdir(parents=True, exist_ok=True)
+            return sqlite_file.connect(file, TABLES)
+        except (OSError, sqlite3.Error) as error:
+            if not (isinstance(error, sqlite3.Error) and sqlite_file.unreadable(error)):
+                return self._in_memory(f"{file} cannot be opened ({error})")
+            problem = error
+        try:
+            kept = sqlite_file.move_aside(file)
+        except OSError as error:
+            return self._in_memory(f"{file} cannot be read ({problem}) nor moved aside "
+                                   f"({error})")
+        self._report(Severity.ERROR, f"{file} cannot be read ({problem}): it is kept as {kept} "
+                                     f"(sqlite3's .recover may save what is readable); "
+                                     f"starting anew: no stored paths, the default settings")
+        try:
+            return sqlite_file.connect(file, TABLES)
+        except (OSError, sqlite3.Error) as error:
+            return self._in_memory(f"a new {file} cannot be started ({error})")
+
+    def _in_memory(self, why: str) -> sqlite3.Connection:
+        self._report(Severity.ERROR, f"{why}: paths and settings are kept in memory only, "
+                                     f"until the server restarts")
+        return sqlite_file.connect(":memory:", TABLES)
+
+    @contextlib.contextmanager
+    def _writing(self, what: str):
+        """One transaction; a failure changes nothing and becomes StorageFull/StorageFailed."""
+        try:
+            with self._lock, self._db:
+                yield self._db
+        except sqlite3.Error as error:
+            refusal = sqlite_file.write_failure(error, self._file or "memory", what)
+            if not self._failing:
+                self._failing = True
+                self._report(Severity.ERROR, refusal.message)
+            raise refusal from None
+        if self._failing:
+            self._failing = False
+            self._report(Severity.INFO, f"{self._file} is written again")
 
     def load_settings(self) -> dict | None:
-        """The stored settings record (stored_settings.py), or None if none was stored."""
+        """The stored settings record (stored_settings.py), or None if none was stored or it
+        cannot be read (said)."""
         with self._lock:
             row = self._db.execute("SELECT body FROM settings WHERE id = 1").fetchone()
-        return json.loads(row[0]) if row else None
+        if row is None:
+            return None
+        try:
+            record = json.loads(row[0])
+            if not isinstance(record, dict):
+                raise ValueError(f"a {type(record).__name__}, not a record")
+        except ValueError as error:
+            self._report(Severity.WARNING, f"the stored settings cannot be read ({error}): "
+                                           f"the defaults are in force")
+            return None
+        return record
 
     def save_settings(self, record: dict) -> None:
         """Replace the stored settings, in one transaction."""
         body = json.dumps(record)
-        with self._lock, self._db:
-            self._db.execute("INSERT OR REPLACE INTO settings (id, body) VALUES (1, ?)", (body,))
+        with self._writing("the settings") as db:
+            db.execute("INSERT OR REPLACE INTO settings (id, body) VALUES (1, ?)", (body,))
 
-    def load_all(self) -> dict[str, StoredPath]:
+    def load_all(self) -> tuple[dict[str, "StoredPath"], set[str]]:
+        """Every stored path by name, and the names of those that cannot be read (said)."""
         with self._lock:
-            rows = self._db.execute("SELECT name, body FROM paths").fetchall()
-        return {name: _decode(name, body) for name, body in rows}
+            try:
+                rows = self._db.execute("SELECT name, body FROM paths").fetchall()
+            except sqlite3.Error as error:
+                rows = []
+                self._report(Severity.ERROR, f"the stored paths in {self._file} cannot be "
+                                             f"read ({error}): serving without them")
+        paths, unreadable = {}, set()
+        for name, body in rows:
+            try:
+                paths[name] = _decode(name, body)
+            except (ValueError, TypeError, KeyError, AttributeError) as error:
+                unreadable.add(name)
+                self._report(Severity.WARNING, f"stored path {name!r} cannot be read "
+                                               f"({type(error).__name__}: {error}): skipped; "
+                                               f"load it again, or clear it")
+        return paths, unreadable
 
     def put(self, path: StoredPath) -> None:
         # Point by point: json's C encoder keeps the interpreter for a whole call (8 ms for
@@ -118,13 +204,13 @@ class PathStore:
         points = ", ".join(json.dumps(asdict(p)) for p in path.points)
         body = (f'{{"straight": {json.dumps(path.straight)}, "tcp": {json.dumps(list(path.tcp))}'
                 f', "points": [{points}]}}')
-        with self._lock, self._db:
-            self._db.execute("INSERT OR REPLACE INTO paths (name, body) VALUES (?, ?)",
-                             (path.name, body))
+        with self._writing(f"path {path.name!r}") as db:
+            db.execute("INSERT OR REPLACE INTO paths (name, body) VALUES (?, ?)",
+                       (path.name, body))
 
     def delete(self, name: str) -> None:
-        with self._lock, self._db:
-            self._db.execute("DELETE FROM paths WHERE name = ?", (name,))
+        with self._writing(f"the clearing of path {name!r}") as db:
+            db.execute("DELETE FROM paths WHERE name = ?", (name,))
 
     def close(self) -> None:
         with self._lock:
@@ -136,7 +222,7 @@ class PathLibrary(Mapping):
 
     def __init__(self, store: PathStore):
         self._store = store
-        self._paths = store.load_all()
+        self._paths, self._unreadable = store.load_all()   # the latter: only to clear them
 
     def __getitem__(self, name: str) -> StoredPath:
         return self._paths[name]
@@ -150,15 +236,17 @@ class PathLibrary(Mapping):
     def put(self, path: StoredPath) -> None:
         self._store.put(path)   # first: if the write fails, memory keeps the old path too
         self._paths[path.name] = path
+        self._unreadable.discard(path.name)
 
     def close(self) -> None:
         self._store.close()
 
     def delete(self, name: str) -> None:
-        if name not in self._paths:
+        if name not in self._paths and name not in self._unreadable:
             raise NotFound(f"no path named {name!r}")
         self._store.delete(name)
-        del self._paths[name]
+        self._paths.pop(name, None)
+        self._unreadable.discard(name)
 
 
 def _decode(name: str, body: str) -> StoredPath:

@@ -14,7 +14,8 @@ without holding the interpreter.
 The jobs are plain functions of a PlanningContext, run here in the server when the cycle runs
 in the server as well (the lock-step clock: a stop waits for the cycle's thread anyway).
 One job at a time. A planning process that dies fails its job with Internal, is reported (the
-log, and `on_lost`: the device's alarm), and another one starts at once.
+log, and `on_lost`: the device's alarm), and another one starts at once. One whose server dies
+is killed by the kernel at once, even in the middle of a job (lifeline.py).
 """
 from __future__ import annotations
 
@@ -39,6 +40,7 @@ from landscape.server.moves import Planner
 from landscape.server.paths import StoredPath
 from landscape.server.settings import MotionSettings
 from landscape.server.units import Units
+from landscape.sim import lifeline
 from landscape.sim.kinematics import Kinematics
 from landscape.v1 import motion_pb2
 
@@ -211,9 +213,10 @@ class PlanningProcess(_Planning):
         ctx = multiprocessing.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self._process = ctx.Process(
-            target=_main, args=(child, self.scene.cell, self.scene.margin, self.cycle_time),
+            target=_main, args=(child, self.scene.cell, self.scene.margin, self.cycle_time,
+                                os.getpid()),
             name="landscape-planning", daemon=True)
-        self._process.start()
+        lifeline.start(self._process)
         child.close()
         self._sent_version: int | None = None   # a new process starts from the cell
 
@@ -255,7 +258,9 @@ class PlanningProcess(_Planning):
             self._process.join(1.0)
 
 
-def _main(conn, cell, margin: float, cycle_time: float) -> None:
+def _main(conn, cell, margin: float, cycle_time: float, parent_pid: int) -> None:
+    # Killed with the server, even in the middle of a job (it has nothing to leave safe).
+    lifeline.bind_to_parent(parent_pid, signal.SIGKILL)
     # The server decides when this process ends (its pipe closes): not Ctrl-C in a terminal,
     # and a mask of blocked signals inherited from the server's threads is dropped.
     signal.pthread_sigmask(signal.SIG_SETMASK, ())

@@ -95,7 +95,7 @@ class SessionRegistry:
                           client_name or "anonymous", loop)
         with self._lock:
             self._sessions[session.id] = session
-        log.info("session %s opened by %r", session.id, session.client_name)
+        log.info("session %s opened by '%s'", session.id, session.client_name)
         return session
 
     def get(self, session_id: str) -> Session | None:

@@ -21,10 +21,18 @@ from collections import deque
 from multiprocessing.reduction import ForkingPickler
 from typing import Any, Callable
 
+from landscape.sim import lifeline
 from landscape.sim.cycle_process import (CALL, FATAL, LATE_IMPORTS, MSG, READY, REPLY,
                                          RESET_STATS, RUN_URGENT, SIM_TIME, SLOW_CALLS, STOP,
                                          CycleLoop, Mailbox, Steppable, serve_call)
 from landscape.sim.cycle_stats import StatsRing
+
+# s a file being stored (a recording) may still take when the loop ended unasked (a signal, the
+# server gone): the drives are off already, and the cycle process must be gone within a second
+# of its server. The kernel's parent-death signal is a SIGTERM that comes while the dying
+# server's threads end, before the child is seen reparented: it cannot tell the two apart.
+ORPHAN_GRACE = 0.3
+GONE = "the device server is gone"
 
 
 class _AsyncTask:
@@ -128,6 +136,7 @@ class _Server:
         self.urgent: deque = deque()  # the same, RUN_URGENT: served first, never held back
         self.async_task = _AsyncTask()
         self.running = True
+        self.ended_by = ""            # why the loop ended, unless the parent asked (STOP)
         self.cycles = 0
         self.modules: frozenset[str] = frozenset()   # what the loop starts with
 
@@ -140,7 +149,7 @@ class _Server:
         self._read(deadline)
         self._serve(deadline)
         if self.cycles % 64 == 0 and os.getppid() != self.parent_pid:
-            self.running = False  # reparented: the parent died without closing the pipe
+            self.end(GONE)  # reparented: the parent died without closing the pipe
         return self.running
 
     def wait(self, deadline: float, spin: float) -> None:
@@ -165,7 +174,7 @@ class _Server:
             item = self.frames.next()
             if item is None:
                 if self.frames.ended:   # never set back to True: SIGTERM may have cleared it
-                    self.running = False
+                    self.end(GONE)
                 return
             count += 1
             tag = item[0]
@@ -175,6 +184,11 @@ class _Server:
                 (self.urgent if item[2] == RUN_URGENT else self.calls).append(item[1:])
             elif tag == STOP:
                 self.running = False
+
+    def end(self, why: str) -> None:
+        """End the loop after this cycle, not asked by the parent: `why` is said on stderr."""
+        self.running = False
+        self.ended_by = self.ended_by or why
 
     def _serve(self, deadline: float) -> None:
         # The urgent lane first (its calls are short), whatever the asynchronous task does.
@@ -212,7 +226,7 @@ class _Server:
         try:
             self.conn.send(item)
         except (BrokenPipeError, ConnectionError, EOFError):
-            self.running = False
+            self.end(GONE)
 
     def _call(self, method: str, args: tuple) -> Any:
         if method == RESET_STATS:
@@ -227,7 +241,7 @@ class _Server:
         try:
             self.conn.send((REPLY, call_id, ok, value))
         except (BrokenPipeError, ConnectionError, EOFError):
-            self.running = False
+            self.end(GONE)
         except Exception as exc:  # the value did not pickle; nothing was written yet
             error = RuntimeError(f"a {type(value).__name__} did not pickle: {exc!r}")
             self._send((REPLY, call_id, False, error))
@@ -252,15 +266,26 @@ def tune_for_latency(rt_priority: int | None = None) -> list[str]:
     return problems
 
 
-def _shutdown(controller) -> None:
-    """Leave the robot safe: disable, then destroy, whatever state we are in."""
-    for name in ("disable", "destroy"):
-        method = getattr(controller, name, None)
-        if method is not None:
-            try:
-                method()
-            except Exception:
-                traceback.print_exc()
+def _shutdown(controller, async_task: _AsyncTask | None = None, grace: float = 0.0) -> bool:
+    """Leave the robot safe: disable at once, whatever state we are in; then let a file being
+    stored finish (at most `grace` s) and destroy. Returns whether the disable went through."""
+    disabled = _call_quietly(controller, "disable")
+    if async_task is not None:
+        async_task.wait(grace)
+    _call_quietly(controller, "destroy")
+    return disabled
+
+
+def _call_quietly(controller, name: str) -> bool:
+    method = getattr(controller, name, None)
+    if method is None:
+        return True
+    try:
+        method()
+    except Exception:
+        traceback.print_exc()
+        return False
+    return True
 
 
 def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
@@ -272,7 +297,7 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
     def on_sigterm(*_):
         if server is None:
             raise SystemExit(1)  # still building: clean up on the way out
-        server.running = False  # the loop ends after this cycle
+        server.end("SIGTERM")  # the loop ends after this cycle
 
     faulthandler.enable()   # a crash in native code (pybullet) leaves its stack on stderr
     # The parent may block signals in its threads (it waits for them with sigwait); a spawned
@@ -281,6 +306,9 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
     # Ctrl-C in a terminal reaches the whole process group; the parent decides when we stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, on_sigterm)
+    # The server's death, however it dies (SIGKILL too), reaches us as a SIGTERM: the loop
+    # ends within a cycle and the drives go off.
+    lifeline.bind_to_parent(parent_pid, signal.SIGTERM)
     controller = None
     try:
         mailbox = Mailbox()
@@ -314,8 +342,12 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
         _fatal(conn, traceback.format_exc())
         code = 1
     finally:
-        server.async_task.wait(30.0)  # let a file being stored be finished
-        _shutdown(controller)
+        unasked = server.ended_by
+        disabled = _shutdown(controller, server.async_task, ORPHAN_GRACE if unasked else 30.0)
+        if unasked:   # the server may not be there to read the pipe: say it on its stderr
+            print(f"landscape cycle process: {unasked}: "
+                  f"{'drives disabled' if disabled else 'disabling the drives FAILED'}",
+                  file=sys.stderr, flush=True)
         server._flush()
         conn.close()
     raise SystemExit(code)

@@ -26,9 +26,10 @@ is its tag:
                     (EVENT, text)                   from the controller's event function
                     (FATAL, traceback_text)         the factory or a cycle raised; child exits
 
-The child exits when told to, on SIGTERM, and when its parent is gone: the pipe reports EOF
-once the parent's end is closed (the kernel closes it when the parent dies), and the parent pid
-is checked as well, so no orphan keeps stepping a robot.
+The child exits when told to, on SIGTERM, and when its parent is gone, with the drives
+disabled: the kernel sends it a SIGTERM the moment its parent dies, however it dies
+(lifeline.py), the pipe reports EOF once the parent's end is closed, and the parent pid is
+checked as well, so no orphan keeps stepping a robot.
 """
 from __future__ import annotations
 

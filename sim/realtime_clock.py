@@ -13,7 +13,7 @@ import threading
 import traceback
 from typing import Any, Callable
 
-from landscape.sim import cycle_child
+from landscape.sim import cycle_child, lifeline
 from landscape.sim import cycle_process as cp
 from landscape.sim.cycle_stats import CycleStats, StatsRing
 
@@ -99,7 +99,7 @@ class RealTimeClock:
             target=cycle_child.child_main, name="landscape-cycle", daemon=True,
             args=(self._factory, child_end, self._stats, self._cycle_time, os.getpid(),
                   self._spin, self._guard, None if self.free else self._rt_priority, self.free))
-        self._process.start()
+        lifeline.start(self._process)
         child_end.close()  # only the child holds it now: its death reads as EOF here
         self._conn = parent_end
         ready = self._wait_ready()

@@ -99,6 +99,17 @@ def memory_cap(headroom: int = 3 << 30):
         resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
 
 
+def child_pids(pid: int) -> list[int]:
+    """The children of process `pid`, whichever of its threads started them (Linux /proc)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            found += [int(child) for child in (task / "children").read_text().split()]
+        except FileNotFoundError:   # a thread that ended meanwhile
+            pass
+    return found
+
+
 def assert_serving(channel) -> None:
     """The server behind `channel` answers its health check SERVING."""
     from grpc_health.v1 import health_pb2, health_pb2_grpc

@@ -81,11 +81,11 @@ class Dispatch:
 PASSING = (asyncio.CancelledError, grpc.aio.AbortError, GeneratorExit)
 
 
-async def end_call(context, rpc: str, exc: Exception) -> None:
+async def end_call(context, rpc: str, exc: Exception, logged: bool = True) -> None:
     """End the call with the status of `exc`: a CommandError's own, else INTERNAL (logged with
-    its traceback); either way one line in the log says who was refused and why. A call the
-    client has already left (or the server already ended) has no one to tell: noted, not
-    reported as a failure."""
+    its traceback); either way one line in the log says who was refused and why (unless not
+    `logged`: the caller sums such refusals up). A call the client has already left (or the
+    server already ended) has no one to tell: noted, not reported as a failure."""
     if context.done():
         log.debug("%s ended while the call was over already: %r", rpc, exc)
         return
@@ -93,8 +93,9 @@ async def end_call(context, rpc: str, exc: Exception) -> None:
         log.error("%s failed unexpectedly", rpc, exc_info=exc)
         exc = Internal(f"{rpc} failed inside the server: {type(exc).__name__}: {exc}")
     status = to_status(exc)
-    log.info("refused %s from %s: %s %s: %s", rpc, context.peer(), exc.status.name,
-             exc.reason, exc.message)
+    if logged:
+        log.info("refused %s from %s: %s %s: %s", rpc, context.peer(), exc.status.name,
+                 exc.reason, exc.message)
     await context.abort(status.code, status.details, status.trailing_metadata)
 
 

@@ -85,11 +85,24 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     ("[security]\nmtls = true", r"security\.mtls: mutual TLS needs tls = true"),
     ("[security]\ntokens = '.'", r"security\.tokens: .*none of viewer\.tokens"),
     ("[launcher]\nrestart = 'always'", r"launcher\.restart: must be one of no, on-failure"),
+    ("[security.rate_limits]\ncli = 0", r"security\.rate_limits\.cli: must be positive"),
     ("name = [", r"<t>: not valid TOML"),
 ])
 def test_errors_name_the_file_and_the_key(text, message, tmp_path):
     with pytest.raises(CellConfigError, match=message):
         parse_config(text, "<t>", tmp_path)
+
+
+def test_the_front_ends_have_budgets_of_their_own_and_the_cell_file_sizes_them(tmp_path):
+    """Issue 31.3: rate limits belong to each client; the cell sizes the ones it names."""
+    default = device_service(load_config().devices[0], load_config().security).argv
+    sized = [default[i + 1] for i, arg in enumerate(default) if arg == "--rate-limit-for"]
+    assert sized == ["crcl-gateway=5000", "supervisor=5000"]
+    config = parse_config("[security.rate_limits]\nsupervisor = 800\nrobot-cli = 50.5", "<t>",
+                          tmp_path)
+    argv = device_service(config.devices[0], config.security).argv
+    sized = [argv[i + 1] for i, arg in enumerate(argv) if arg == "--rate-limit-for"]
+    assert sized == ["crcl-gateway=5000", "supervisor=800", "robot-cli=50.5"]
 
 
 def test_a_world_file_that_is_wrong_is_named_with_its_own_key(tmp_path):

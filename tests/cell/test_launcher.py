@@ -137,7 +137,8 @@ def test_the_cell_starts_says_where_and_stops_safely(launch, tmp_path):
         assert time.monotonic() < deadline, "the holder's session outlived the cell"
         time.sleep(0.05)
     channel.close()
-    assert (tmp_path / "var" / "arm1" / "audit.log").read_text().count('"DeviceService/Lock"') == 1
+    lock = '"rpc": "DeviceService/Lock", "request": '    # written when admitted, and done
+    assert (tmp_path / "var" / "arm1" / "audit.log").read_text().count(lock) == 2
 
 
 def test_a_first_run_makes_the_sign_in_tokens_and_says_where_they_are(launch, tmp_path):

@@ -17,7 +17,7 @@ import pytest
 from landscape.client import Session
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
-from support import error_info, stubs, wait_until
+from support import child_pids, error_info, stubs, wait_until
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 
@@ -35,9 +35,9 @@ def _start(paths: Path) -> tuple[subprocess.Popen, str]:
 
 def _cycle_process(pid: int) -> int:
     """The server's cycle process (its child started by multiprocessing's spawn)."""
-    for child in Path(f"/proc/{pid}/task/{pid}/children").read_text().split():
+    for child in child_pids(pid):
         if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
-            return int(child)
+            return child
     raise AssertionError("no cycle process")
 
 

@@ -13,7 +13,10 @@ from pathlib import Path
 import grpc
 import pytest
 
+from landscape.client import Session
 from landscape.v1 import control_pb2, device_service_pb2_grpc, motion_pb2
+
+from support import child_pids
 
 SERVER = ["-m", "landscape.server", "--port", "0", "--audit-log", ""]
 # The server without real-time privileges, whoever runs the test: no CAP_SYS_NICE in what it
@@ -41,8 +44,7 @@ class Started:
     def cycle_has_real_time_priority(self) -> bool:
         """Whether a child of the server (the cycle process) runs SCHED_FIFO."""
         pid = self.proc.pid
-        children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
-        return any(os.sched_getscheduler(int(c)) == os.SCHED_FIFO for c in children)
+        return any(os.sched_getscheduler(c) == os.SCHED_FIFO for c in child_pids(pid))
 
     def stop(self) -> tuple[str, str]:
         self.proc.terminate()
@@ -98,3 +100,18 @@ def test_log_level_debug_still_says_listening_once(tmp_path):
     server = Started(tmp_path, "--clock", "lockstep", "--log-level", "DEBUG")
     out, err = server.stop()
     assert " DEBUG " in err and (out + err).count("listening") == 1, out + err
+
+
+def test_a_client_name_cannot_forge_log_lines(tmp_path):
+    """Issue 25.5: a name with newlines or terminal escapes is written escaped, on its line."""
+    forged = "2026-01-01 00:00:00,000 landscape.server INFO stopped"
+    name = f"evil\n{forged}\x1b[2K\u2028"
+    server = Started(tmp_path, "--clock", "lockstep")
+    with grpc.insecure_channel(server.target) as channel, Session(channel, name) as session:
+        session.lock()
+    out, err = server.stop()
+    lines = err.splitlines()
+    assert not [line for line in lines if line.startswith(forged)], err
+    assert "\x1b" not in err and "\u2028" not in err, err
+    opened = [line for line in lines if "opened by" in line]
+    assert len(opened) == 1 and "evil\\n2026-01-01" in opened[0] and "\\x1b[2K" in opened[0], err

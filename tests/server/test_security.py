@@ -125,24 +125,33 @@ def test_a_viewer_reads_and_watches_but_opens_no_session(secured, keys):
         assert refused.value.code() is grpc.StatusCode.PERMISSION_DENIED
 
 
-def test_the_panel_and_reset_are_an_admins(secured, keys):
+def test_anyone_watching_may_press_the_estop_an_operator_releases_it(secured, keys):
+    """The e-stop is every role's to press (anyone watching may stop the cell), an operator's
+    to release; the door, the rest of the panel and Reset stay an admin's."""
     def panel(channel, action):
         return _device(channel).OperatePanel(control_pb2.OperatePanelRequest(action=action),
                                              timeout=10)
 
-    with open_channel(secured.target, _tls(keys), keys.token["operator"]) as operator, \
+    with open_channel(secured.target, _tls(keys), keys.token["viewer"]) as viewer, \
+            open_channel(secured.target, _tls(keys), keys.token["operator"]) as operator, \
             open_channel(secured.target, _tls(keys), keys.token["admin"]) as admin:
-        refused = _refusal(lambda: panel(operator, control_pb2.PANEL_ACTION_PRESS_ESTOP))
-        assert refused.code() is grpc.StatusCode.PERMISSION_DENIED
+        refused = _refusal(lambda: panel(operator, control_pb2.PANEL_ACTION_OPEN_DOOR))
+        assert error_info(refused).reason == "ROLE_TOO_LOW"
         assert secured.device.state is State.UNLOCKED
-        assert panel(admin, control_pb2.PANEL_ACTION_PRESS_ESTOP).estop_pressed
+        assert panel(viewer, control_pb2.PANEL_ACTION_PRESS_ESTOP).estop_pressed
         wait_until(lambda: secured.device.state is State.ERROR)
-        assert not panel(admin, control_pb2.PANEL_ACTION_RELEASE_ESTOP).estop_pressed
+        refused = _refusal(lambda: panel(viewer, control_pb2.PANEL_ACTION_RELEASE_ESTOP))
+        info = error_info(refused)
+        assert (info.reason, info.metadata["role"], info.metadata["needs"]) == (
+            "ROLE_TOO_LOW", "viewer", "operator")
+        assert secured.device.status().estop
+        assert not panel(operator, control_pb2.PANEL_ACTION_RELEASE_ESTOP).estop_pressed
         refused = _refusal(lambda: _device(operator).Reset(control_pb2.ResetRequest(), timeout=10))
         assert error_info(refused).reason == "ROLE_TOO_LOW"
         assert secured.device.state is State.ERROR
         _device(admin).Reset(control_pb2.ResetRequest(), timeout=60)
         wait_until(lambda: secured.device.state is State.UNLOCKED, timeout=30)
+        assert panel(admin, control_pb2.PANEL_ACTION_OPEN_DOOR).door_open
 
 
 def test_health_needs_no_token(secured, keys):
@@ -266,7 +275,7 @@ def test_the_audit_log_names_every_mutating_call_refused_ones_included(keys, tmp
                  lambda: operator.MoveArc(motion_pb2.MoveArcRequest(), timeout=10))
             call("operator", "DeviceService/OperatePanel", "PERMISSION_DENIED",
                  lambda: operator.OperatePanel(control_pb2.OperatePanelRequest(
-                     action=control_pb2.PANEL_ACTION_PRESS_ESTOP), timeout=10))
+                     action=control_pb2.PANEL_ACTION_OPEN_DOOR), timeout=10))
             call("operator", "DeviceService/MoveAbsolute", "OK",
                  lambda: _move(channel, session.lease))
             wait_until(lambda: server.device.state is State.RESTING, timeout=60)
@@ -282,8 +291,12 @@ def test_the_audit_log_names_every_mutating_call_refused_ones_included(keys, tmp
     for record in records:
         print(record)
     logged = [(r["rpc"], r["who"], r["result"].split(":")[0]) for r in records
-              if r["rpc"] != "SessionService/Connect"]
+              if r["rpc"] != "SessionService/Connect" and r["result"] != "ADMITTED"]
     assert logged == made
+    # What changes something was written before it ran; what makes the arm safe, and what
+    # was refused before it could run, only when it ended.
+    admitted = [r["rpc"].split("/")[1] for r in records if r["result"] == "ADMITTED"]
+    assert admitted == ["Lock", "Activate", "MoveArc", "MoveAbsolute"], admitted
     sessions = [r["result"].split(":")[0] for r in records if r["rpc"] == "SessionService/Connect"]
     assert sessions == ["OPEN", "CANCELLED"]
     assert all(r["time"].endswith("Z") and r["peer"].startswith("ipv4:127.0.0.1:")
