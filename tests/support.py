@@ -16,6 +16,7 @@ from google.rpc import error_details_pb2
 from grpc_status import rpc_status
 
 import numpy as np
+import pytest
 
 from landscape.cell.certs import CertFiles, make_certificates
 from landscape.cell.tokens import make_tokens
@@ -27,6 +28,18 @@ from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
                           end_effector_pb2, event_service_pb2, event_service_pb2_grpc, motion_pb2,
                           sensing_pb2, types_pb2)
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def installed(path: Path, target: str, what: str) -> Path:
+    """`path`, which `make <target>` builds (the downloads are the Makefile's, never a
+    test's); skips the test, naming the command, when it is not built."""
+    if not path.exists():
+        pytest.skip(f"{what} is not built here: `make {target}` builds it "
+                    f"({path.relative_to(ROOT)})")
+    return path
 
 
 def start_server(**config) -> RunningServer:

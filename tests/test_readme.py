@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -15,6 +14,8 @@ from importlib import resources
 from pathlib import Path
 
 import pytest
+
+from support import installed
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -63,12 +64,7 @@ def make_run_cell(folder: Path):
 
 @pytest.fixture(scope="module")
 def grpcurl() -> Path:
-    if not GRPCURL.exists():
-        if shutil.which("go") is None:
-            pytest.skip("Go is not installed, so `make tools` cannot build grpcurl, which the "
-                        "README's walkthrough calls as .tools/bin/grpcurl")
-        subprocess.run(["make", "-s", "tools"], cwd=ROOT, check=True, timeout=600)
-    return GRPCURL
+    return installed(GRPCURL, "tools", "grpcurl, which the README's walkthrough calls,")
 
 
 def test_the_walkthrough_runs_as_written(grpcurl, tmp_path):
