@@ -49,6 +49,7 @@ BENCHES = {
     "bench_security": ([], ["--quick"]),
     "bench_cell_loops": ([], ["--cycles", "500"]),
     "bench_soak": (["--seconds", "40"], ["--seconds", "20"]),
+    "bench_faults": ([], ["--repeat", "2"]),
 }
 # Every bench_*.py is in the report: one added without an entry fails the run at once.
 _UNLISTED = sorted({p.stem for p in HERE.glob("bench_*.py")} - set(BENCHES))

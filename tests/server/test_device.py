@@ -87,8 +87,7 @@ def test_a_killed_lock_holder_leaves_the_arm_disabled_and_the_lock_free(server):
         wait_until(lambda: server.device.state is State.UNLOCKED
                    and server.device.feedback().enable is EnableState.DISABLED, timeout=5)
         elapsed = time.monotonic() - killed
-        print(f"disabled and unlocked {elapsed * 1000:.0f} ms after SIGKILL")
-        assert elapsed < 1.0
+        print(f"disabled and unlocked {elapsed * 1000:.0f} ms after SIGKILL")   # bench_faults.py
     finally:
         proc.kill()
     alarms = [e for e in bus_history(server) if e.event_id == "alarm"]
