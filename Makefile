@@ -9,7 +9,8 @@ GRPCURL := .tools/bin/grpcurl
 CONFIG ?=
 HOSTS ?=
 
-.PHONY: help install run certs test lint proto bench clean tools clients clients-go clients-ts
+.PHONY: help install run certs test test-fast lint proto bench clean tools clients clients-go \
+	clients-ts
 
 help:
 	@echo "make run      install, then start the cell: a device server on 127.0.0.1:50051 with"
@@ -18,6 +19,8 @@ help:
 	@echo "make certs    a development CA, certificates (var/certs) and role tokens (var/tokens);"
 	@echo "              HOSTS=\"names or addresses\" of the device servers' machines"
 	@echo "make test     install (tools and clients too), then run every test"
+	@echo "make test-fast  the edit-and-test loop: every test but the slow ones (browsers,"
+	@echo "              other languages, cells of processes, real time, physics, fuzzing)"
 	@echo "make lint     buf lint of proto/"
 	@echo "make proto    regenerate the Python stubs from proto/"
 	@echo "make bench    run every benchmark: one table, bench/results/latest.json (QUICK=1: short)"
@@ -67,6 +70,9 @@ certs: install
 # what these build and skip, naming the make command, where it is not built.
 test: install tools clients
 	@$(PY) -m pytest
+
+test-fast: install
+	@$(PY) -m pytest -m "not slow"
 
 lint: install
 	$(VENV)/bin/buf lint
