@@ -26,7 +26,6 @@ import signal
 import statistics
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -35,7 +34,8 @@ import numpy as np
 from common import record
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from support import activate, locked_session, stubs, wait_until  # noqa: E402  (the tests' harness)
+from support import (HOLDER_SCRIPT, activate, locked_session, stubs,  # noqa: E402
+                     wait_until)   # the tests' harness
 
 from landscape.server.app import serve  # noqa: E402
 from landscape.server.config import ServerConfig  # noqa: E402
@@ -46,17 +46,6 @@ from landscape.sim.controller import EnableState  # noqa: E402
 from landscape.v1 import control_pb2, motion_pb2, sensing_pb2, types_pb2  # noqa: E402
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
-HOLDER = textwrap.dedent("""
-    import sys, time, grpc
-    from landscape.client import Session
-    from landscape.v1 import control_pb2, device_service_pb2_grpc
-    session = Session(grpc.insecure_channel(sys.argv[1]), "doomed").open()
-    session.lock()
-    device_service_pb2_grpc.DeviceServiceStub(session.channel).Activate(
-        control_pb2.ActivateRequest(), timeout=10)
-    print("active", flush=True)
-    time.sleep(600)
-""")
 
 
 def _alarm(server, code: int, after: float, timeout: float = 10.0):
@@ -91,7 +80,7 @@ def cycle_process(server, stop: signal.Signals) -> float:
 
 def holder_process(server, stop: signal.Signals) -> float:
     """s from the signal to the holder's process to drives off and the lock free."""
-    child = subprocess.Popen([sys.executable, "-c", HOLDER, server.target],
+    child = subprocess.Popen([sys.executable, "-c", HOLDER_SCRIPT, server.target],
                              stdout=subprocess.PIPE, text=True)
     try:
         assert child.stdout.readline().strip() == "active"

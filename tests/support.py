@@ -6,6 +6,7 @@ import math
 import queue
 import subprocess
 import sys
+import textwrap
 import threading
 import time
 from dataclasses import dataclass
@@ -40,6 +41,21 @@ def installed(path: Path, target: str, what: str) -> Path:
         pytest.skip(f"{what} is not built here: `make {target}` builds it "
                     f"({path.relative_to(ROOT)})")
     return path
+
+
+# A lock holder in a process of its own (`python -c HOLDER_SCRIPT TARGET`), to be killed or
+# frozen: "doomed" locks, activates, says "active" and waits.
+HOLDER_SCRIPT = textwrap.dedent("""
+    import sys, time, grpc
+    from landscape.client import Session
+    from landscape.v1 import control_pb2, device_service_pb2_grpc
+    session = Session(grpc.insecure_channel(sys.argv[1]), "doomed").open()
+    session.lock()
+    device_service_pb2_grpc.DeviceServiceStub(session.channel).Activate(
+        control_pb2.ActivateRequest(), timeout=10)
+    print("active", flush=True)
+    time.sleep(600)
+""")
 
 
 def start_server(**config) -> RunningServer:

@@ -7,7 +7,6 @@ import os
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 
 import grpc
@@ -19,7 +18,8 @@ from landscape.server.states import State
 from landscape.sim.controller import EnableState
 from landscape.v1 import control_pb2, event_service_pb2, settings_pb2, types_pb2
 
-from support import activate, bus_history, error_info, locked_session, stubs, wait_until
+from support import (HOLDER_SCRIPT, activate, bus_history, error_info, locked_session, stubs,
+                     wait_until)
 
 
 @pytest.fixture
@@ -59,19 +59,6 @@ def test_only_the_lock_holder_commands_and_the_other_still_reads(server, holder)
         assert len(position.joint_position) == 6
     finally:
         other.close()
-
-
-HOLDER_SCRIPT = textwrap.dedent("""
-    import sys, time, grpc
-    from landscape.client import Session
-    from landscape.v1 import control_pb2, device_service_pb2_grpc
-    session = Session(grpc.insecure_channel(sys.argv[1]), "doomed").open()
-    session.lock()
-    device_service_pb2_grpc.DeviceServiceStub(session.channel).Activate(
-        control_pb2.ActivateRequest(), timeout=10)
-    print("active", flush=True)
-    time.sleep(600)
-""")
 
 
 def test_a_killed_lock_holder_leaves_the_arm_disabled_and_the_lock_free(server):
