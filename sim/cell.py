@@ -46,7 +46,6 @@ def _radians(degrees) -> tuple[float, ...]:
 
 
 Name = string()
-Number = number()
 Positive = number(above=0.0)
 Vector3 = vector(3)
 Size = vector(3, positive=True)
