@@ -28,7 +28,10 @@ from support import bus_history, distance_to_line, start_server, wait_until
 def server():
     running = start_server(lockstep_pace=1.0)
     sessions = running.device.sessions
-    sessions.keepalive_interval, sessions.keepalive_timeout = 0.15, 0.6
+    # Short enough that a frozen holder is found mid-line (0.5 m at 0.15 m/s), long enough that
+    # a busy machine's late keep-alive is no loss (at 0.6 s the holder lost its lock before
+    # its SetSpeed, the machine's load at 7).
+    sessions.keepalive_interval, sessions.keepalive_timeout = 0.25, 1.5
     yield running
     running.stop(grace=None)
 
