@@ -9,7 +9,8 @@ GRPCURL := .tools/bin/grpcurl
 CONFIG ?=
 HOSTS ?=
 
-.PHONY: help install run certs test lint proto bench clean tools clients clients-go clients-ts
+.PHONY: help install run certs test test-fast lint proto bench clean tools clients clients-go \
+	clients-ts
 
 help:
 	@echo "make run      install, then start the cell: a device server on 127.0.0.1:50051 with"
@@ -17,11 +18,13 @@ help:
 	@echo "              8080 (when installed); CONFIG=file for another cell (landscape-cell)"
 	@echo "make certs    a development CA, certificates (var/certs) and role tokens (var/tokens);"
 	@echo "              HOSTS=\"names or addresses\" of the device servers' machines"
-	@echo "make test     install, then run every test"
+	@echo "make test     install (tools and clients too), then run every test"
+	@echo "make test-fast  the edit-and-test loop: every test but the slow ones (browsers,"
+	@echo "              other languages, cells of processes, real time, physics, fuzzing)"
 	@echo "make lint     buf lint of proto/"
 	@echo "make proto    regenerate the Python stubs from proto/"
 	@echo "make bench    run every benchmark: one table, bench/results/latest.json (QUICK=1: short)"
-	@echo "make tools    build grpcurl $(GRPCURL_VERSION) into .tools/bin"
+	@echo "make tools    build grpcurl $(GRPCURL_VERSION) into .tools/bin, fetch NIST's CRCL client"
 	@echo "make clients  build the Go and TypeScript example clients (clients/)"
 	@echo "make clean    remove the virtualenv, generated stubs and caches"
 
@@ -63,8 +66,13 @@ certs: install
 	@$(PY) -m landscape.cell certs $(foreach host,$(HOSTS),--host $(host))
 	@$(PY) -m landscape.cell tokens
 
-test: install tools
+# Every download is an install step (install, tools, clients), never a test's: the tests use
+# what these build and skip, naming the make command, where it is not built.
+test: install tools clients
 	@$(PY) -m pytest
+
+test-fast: install
+	@$(PY) -m pytest -m "not slow"
 
 lint: install
 	$(VENV)/bin/buf lint
@@ -78,16 +86,35 @@ $(GRPCURL):
 	  GOBIN=$(CURDIR)/.tools/bin go install github.com/fullstorydev/grpcurl/cmd/grpcurl@$(GRPCURL_VERSION); \
 	else echo "make tools: no Go on this machine, so no grpcurl (its tests will skip)"; fi
 
-tools: $(GRPCURL)
+# NIST's reference CRCL client (crcl4java-ui) and its dependencies, from Maven Central as the
+# POM says; the gateway's test runs it from this classpath. Needs Java and Maven.
+CRCL4JAVA := .tools/crcl4java/classpath.txt
+$(CRCL4JAVA): tests/gateway/nist_client.pom.xml
+	@if command -v mvn >/dev/null && command -v java >/dev/null; then \
+	  mkdir -p $(@D) && cp $< $(@D)/pom.xml && \
+	  cd $(@D) && mvn -q -B dependency:build-classpath -Dmdep.outputFile=classpath.txt; \
+	else echo "make tools: no Java and Maven here, so no NIST CRCL client (its test will skip)"; fi
 
-# The Go and TypeScript clients (clients/README.md); stubs and builds stay out of git.
+tools: $(GRPCURL) $(CRCL4JAVA)
+
+# The Go and TypeScript clients (clients/README.md); stubs and builds stay out of git. Each
+# is skipped, saying so, on a machine without its language.
+GO_CLIENT := clients/go/bin/landscape-go-client
+TS_CLIENT := clients/ts/dist/main.js
 clients: clients-go clients-ts
+clients-go: $(GO_CLIENT)
+clients-ts: $(TS_CLIENT)
 
-clients-go: install
-	PYTHON=$(CURDIR)/$(PY) clients/go/build.sh
+$(GO_CLIENT): clients/go/build.sh clients/go/main.go clients/go/go.mod clients/go/go.sum \
+		$(wildcard proto/landscape/v1/*.proto) | $(STAMP)
+	@if command -v go >/dev/null; then PYTHON=$(CURDIR)/$(PY) clients/go/build.sh; \
+	else echo "make clients: no Go here, so no Go client (its test will skip)"; fi
 
-clients-ts:
-	cd clients/ts && npm ci --no-audit --no-fund --loglevel=error && npx tsc -p .
+$(TS_CLIENT): clients/ts/package.json clients/ts/package-lock.json clients/ts/tsconfig.json \
+		$(wildcard clients/ts/src/*)
+	@if command -v npm >/dev/null; then \
+	  cd clients/ts && npm ci --no-audit --no-fund --loglevel=error && npx tsc -p .; \
+	else echo "make clients: no npm here, so no TypeScript client (its test will skip)"; fi
 
 clean:
 	rm -rf $(VENV) .tools gen build *.egg-info .pytest_cache

@@ -1,4 +1,4 @@
-"""The report's figures that vary with load, as one PNG for the README (report.py --plot).
+"""The report's figures that vary with load, one PNG for docs/performance.md (report.py --plot).
 
 Four panels from bench/results/latest.json, each beside its same-run baseline: unary call
 latency against the number of concurrent clients (bench_rpc), event latency against the

@@ -8,8 +8,8 @@ exits non-zero at the end; a bench that cannot run here (no Chromium, say) says 
 
     .venv/bin/python bench/report.py            # everything, under 10 minutes
     .venv/bin/python bench/report.py --quick    # the same code paths, shorter (CI)
-    .venv/bin/python bench/report.py --markdown # the table of latest.json, for the README
-    .venv/bin/python bench/report.py --plot     # docs/bench_load.png from latest.json
+    .venv/bin/python bench/report.py --markdown # latest.json's table, for docs/performance.md
+    .venv/bin/python bench/report.py --plot     # docs/bench_load.png (in performance.md)
     .venv/bin/python bench/report.py --only bench_stop bench_state
     .venv/bin/python bench/report.py --soak     # with bench_soak's 10-minute run
 """
@@ -49,6 +49,7 @@ BENCHES = {
     "bench_security": ([], ["--quick"]),
     "bench_cell_loops": ([], ["--cycles", "500"]),
     "bench_soak": (["--seconds", "40"], ["--seconds", "20"]),
+    "bench_faults": ([], ["--repeat", "2"]),
 }
 # Every bench_*.py is in the report: one added without an entry fails the run at once.
 _UNLISTED = sorted({p.stem for p in HERE.glob("bench_*.py")} - set(BENCHES))

@@ -25,7 +25,7 @@ import asyncio
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+import pinocchio as pin
 
 from landscape.gateway import model as m
 from landscape.gateway import poses
@@ -219,7 +219,7 @@ async def move_screw(session, cmd: m.MoveScrew) -> str:
                                  math.hypot(abs(turn) * radius, abs(advance)) / SCREW_STEP_LENGTH)))
     points = []
     for s in range(1, steps + 1):
-        spin = Rotation.from_rotvec(axis * turn * s / steps).as_matrix()
+        spin = pin.exp3(axis * turn * s / steps)
         pose = np.eye(4)
         pose[:3, :3] = spin @ here[:3, :3]
         pose[:3, 3] = center + spin @ (here[:3, 3] - center) + axis * advance * s / steps

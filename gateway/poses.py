@@ -1,15 +1,15 @@
 """CRCL poses (a point and the X and Z axes) <-> the device's x, y, z, roll, pitch, yaw.
 
 The device's orientation is fixed-axis X-Y-Z, R = Rz(yaw) Ry(pitch) Rx(roll) (DESIGN.md
-section 6), which is scipy's extrinsic "xyz" Euler sequence; CRCL's XAxis and ZAxis are the
-first and third columns of R. Values here are SI (m, rad); units.py converts at the edge.
+section 6), pinocchio's rpy; CRCL's XAxis and ZAxis are the first and third columns of R.
+Values here are SI (m, rad); units.py converts at the edge.
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+import pinocchio as pin
 
 from landscape.gateway import model as m
 from landscape.gateway.units import CrclUnits
@@ -28,25 +28,25 @@ def rotation(x_axis: m.Vector, z_axis: m.Vector) -> np.ndarray:
 def to_device(pose: m.Pose, units: CrclUnits) -> np.ndarray:
     """(6,) x, y, z (m), roll, pitch, yaw (rad) of a CRCL pose given in `units`."""
     p = pose.point
-    rpy = Rotation.from_matrix(rotation(pose.x_axis, pose.z_axis)).as_euler("xyz")
+    rpy = pin.rpy.matrixToRpy(rotation(pose.x_axis, pose.z_axis))
     return np.array([units.length_si(p.x), units.length_si(p.y), units.length_si(p.z), *rpy])
 
 
 def matrix(values: np.ndarray) -> np.ndarray:
     """4x4 (m) of SI x, y, z, roll, pitch, yaw."""
     out = np.eye(4)
-    out[:3, :3] = Rotation.from_euler("xyz", values[3:6]).as_matrix()
+    out[:3, :3] = pin.rpy.rpyToMatrix(*values[3:6])
     out[:3, 3] = values[:3]
     return out
 
 
 def from_matrix(t: np.ndarray) -> np.ndarray:
-    return np.concatenate([t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_euler("xyz")])
+    return np.concatenate([t[:3, 3], pin.rpy.matrixToRpy(t[:3, :3])])
 
 
 def axes(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(point m, X axis, Z axis) of SI x, y, z, roll, pitch, yaw."""
-    r = Rotation.from_euler("xyz", values[3:6]).as_matrix()
+    r = pin.rpy.rpyToMatrix(*values[3:6])
     return np.asarray(values[:3], dtype=float), r[:, 0], r[:, 2]
 
 

@@ -18,6 +18,7 @@ moves along the axis and the lock. Anywhere else, both commands are errors.
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 
 from landscape.gateway import model as m
 from landscape.gateway import poses
@@ -96,7 +97,7 @@ def _docking(flange: np.ndarray, plate: np.ndarray) -> float | None:
     not on the axis, turned as the plate, within DOCK_REACH."""
     relative = np.linalg.inv(plate) @ flange
     lateral, along = float(np.hypot(*relative[:2, 3])), float(-relative[2, 3])
-    turned = np.arccos(np.clip((np.trace(relative[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
+    turned = np.linalg.norm(pin.log3(relative[:3, :3]))
     if lateral > AXIS_REACH or turned > ANGLE_REACH or not -SLOT_REACH <= along <= DOCK_REACH:
         return None
     return max(along, 0.0)

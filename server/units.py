@@ -58,6 +58,9 @@ class Units:
         return np.concatenate([self.length_from_si(xyz), self.angle_from_si(rpy)])
 
 
+# rpy_matrix and matrix_rpy are ours, not pinocchio's rpy: as a pair they give back the angles
+# to 1e-16 near pitch +-pi/2, where pin.rpy.rpyToMatrix then matrix_rpy lose up to 1e-4 rad, and
+# pin.rpy.matrixToRpy picks other angles than our replies carry at gimbal lock and at +-pi.
 def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
                               math.cos(yaw), math.sin(yaw))

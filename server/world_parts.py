@@ -19,7 +19,7 @@ import time
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+import pinocchio as pin
 
 from landscape.sim.clock import CycleProcessError
 from landscape.sim.world_reads import read_part_states
@@ -70,7 +70,7 @@ class WorldParts:
         for name, (xyz, quaternion, _, held) in states.items():
             if not held:
                 poses[name] = np.eye(4)
-                poses[name][:3, :3] = Rotation.from_quat(quaternion).as_matrix()
+                poses[name][:3, :3] = pin.Quaternion(np.array(quaternion)).normalized().matrix()
                 poses[name][:3, 3] = xyz
         return states if scene.follow_parts(poses, version) else None
 

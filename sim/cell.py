@@ -1,5 +1,6 @@
-"""The cell file: one TOML file configuring a simulated cell, parsed into frozen dataclasses
-(cell_model.py, all of them named here too).
+"""The cell file: one TOML file configuring a simulated cell, read into typed tables (pydantic,
+toml_tables.py) and made into the frozen dataclasses the simulator uses (cell_model.py, all of
+them named here too).
 
 Like the CS8's configuration files together (controller.cfx for the cycle time, cell.cf for the
 named I/O, records.cfx for the recorder), plus what a simulator needs: the arm variant, the world
@@ -14,337 +15,317 @@ typo never silently falls back to a default; every error names the file and the 
 """
 from __future__ import annotations
 
-import dataclasses
 import math
-import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
-from landscape.sim.arm import ArmModel, arm_model
+from pydantic import model_validator
+
+from landscape.sim.arm import VARIANTS, ArmModel, arm_model
 from landscape.sim.cell_model import (  # noqa: F401  (the parsed cell, named here too)
     BoxSpec, Cell, ControllerSpec, INPUT_WIRES, IoSignalSpec, IoSpec, IoUnitSpec, MAX_BITS,
     MAX_TOOL_ID_BITS, OUTPUT_WIRES, PANEL_WIRES, Pose, RecorderSpec, SENSOR_KINDS, SensorSpec,
     TOOL_KINDS, ToolSpec, WORLD_INPUT_WIRES, WorldSpec, ZoneSpec)
 from landscape.sim.cycle_process import check_cycle_time
+from landscape.sim.toml_tables import (Table, flag, integer, names, number, problem, read_toml,
+                                       string, vector)
 
 _DEG = math.pi / 180.0
-_MISSING = object()
 
 
 class CellError(ValueError):
     """A cell file that cannot be used; the message names the file and the key."""
 
 
-# ---- reading ----------------------------------------------------------------------------------
-
-class _Table:
-    """A TOML table being read: typed getters that name the key in errors, and a check that
-    every key was used."""
-
-    def __init__(self, data: Any, where: str, source: str):
-        self.source, self.where = source, where
-        if not isinstance(data, dict):
-            self.fail("", "must be a table")
-        self.data = data
-        self.used: set[str] = set()
-
-    def fail(self, key: str, message: str):
-        name = f"{self.where}.{key}" if self.where and key else (self.where or key)
-        raise CellError(f"{self.source}: {name or '(top level)'}: {message}")
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def raw(self, key: str, default=_MISSING):
-        self.used.add(key)
-        if key in self.data:
-            return self.data[key]
-        if default is _MISSING:
-            self.fail(key, "is required")
-        return default
-
-    def number(self, key, default=_MISSING, *, low=None, high=None, positive=False) -> float:
-        v = self.raw(key, default)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            self.fail(key, f"must be a finite number, got {v!r}")
-        if positive and v <= 0:
-            self.fail(key, f"must be positive, got {v!r}")
-        if (low is not None and v < low) or (high is not None and v > high):
-            self.fail(key, f"must be within [{low}, {high}], got {v!r}")
-        return float(v)
-
-    def integer(self, key, default=_MISSING, *, low=None, high=None) -> int:
-        v = self.raw(key, default)
-        if isinstance(v, bool) or not isinstance(v, int):
-            self.fail(key, f"must be an integer, got {v!r}")
-        if (low is not None and v < low) or (high is not None and v > high):
-            self.fail(key, f"must be within [{low}, {high}], got {v!r}")
-        return v
-
-    def string(self, key, default=_MISSING, choices=None) -> str:
-        v = self.raw(key, default)
-        if not isinstance(v, str) or not v:
-            self.fail(key, f"must be a non-empty string, got {v!r}")
-        if choices is not None and v not in choices:
-            self.fail(key, f"must be one of {', '.join(choices)}; got {v!r}")
-        return v
-
-    def boolean(self, key, default=_MISSING) -> bool:
-        v = self.raw(key, default)
-        if not isinstance(v, bool):
-            self.fail(key, f"must be true or false, got {v!r}")
-        return v
-
-    def vector(self, key, n, default=_MISSING, *, scale=1.0, positive=False) -> tuple:
-        v = self.raw(key, default)
-        if (not isinstance(v, (list, tuple)) or len(v) != n
-                or any(isinstance(x, bool) or not isinstance(x, (int, float))
-                       or not math.isfinite(x) for x in v)):
-            self.fail(key, f"must be a list of {n} finite numbers, got {v!r}")
-        if positive and min(v) <= 0:
-            self.fail(key, f"must hold positive numbers, got {v!r}")
-        return tuple(float(x) * scale for x in v)
-
-    def table(self, key) -> "_Table":
-        return _Table(self.raw(key, {}), f"{self.where}.{key}" if self.where else key, self.source)
-
-    def tables(self, key) -> list["_Table"]:
-        items = self.raw(key, [])
-        if not isinstance(items, list):
-            self.fail(key, "must be an array of tables ([[...]])")
-        where = f"{self.where}.{key}" if self.where else key
-        return [_Table(item, f"{where}[{i}]", self.source) for i, item in enumerate(items)]
-
-    def pose(self, xyz_key="xyz", rpy_key="rpy_deg", xyz_default=_MISSING) -> Pose:
-        return Pose(self.vector(xyz_key, 3, xyz_default),
-                    self.vector(rpy_key, 3, (0.0, 0.0, 0.0), scale=_DEG))
-
-    def done(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
-        if unknown:
-            self.fail(unknown[0], f"unknown key (known here: {', '.join(sorted(self.used))})")
+def _degrees(radians) -> tuple[float, ...]:
+    return tuple(v / _DEG for v in radians)
 
 
-def _unique(items, what: str, table: _Table, key: str) -> None:
-    names = [i.name for i in items]
-    for name in names:
-        if names.count(name) > 1:
-            table.fail(key, f"two {what} are named {name!r}")
+def _radians(degrees) -> tuple[float, ...]:
+    return tuple(v * _DEG for v in degrees)
 
 
-# ---- sections ---------------------------------------------------------------------------------
-
-_ARM_JOINT_LIMITS = ("max_velocity", "max_acceleration", "max_effort")   # (6,) each
-# The arm's scalar limits (Cartesian speeds and accelerations of the tool tip, SI units).
-_ARM_SCALAR_LIMITS = tuple(f.name for f in dataclasses.fields(ArmModel)
-                           if f.name.startswith("max_") and f.type in ("float", float))
-
-
-def _arm(t: _Table) -> tuple[ArmModel, Pose]:
-    variant = t.string("variant", "TX90")
-    overrides: dict[str, Any] = {key: t.vector(key, 6, positive=True)
-                                 for key in _ARM_JOINT_LIMITS if t.has(key)}
-    overrides.update((key, t.number(key, positive=True))
-                     for key in _ARM_SCALAR_LIMITS if t.has(key))
-    for key in ("joint_min", "joint_max"):
-        if t.has(f"{key}_deg"):
-            overrides[key] = t.vector(f"{key}_deg", 6, scale=_DEG)
-    base = t.pose("base_xyz", "base_rpy_deg", (0.0, 0.0, 0.0))
-    t.done()
-    try:
-        return arm_model(variant, **overrides), base
-    except ValueError as exc:
-        t.fail("variant" if "variant" in str(exc) else "", str(exc))
+Name = string()
+Positive = number(above=0.0)
+Vector3 = vector(3)
+Size = vector(3, positive=True)
+Joints = vector(6)
+JointLimits = vector(6, positive=True)
 
 
-def _in_range(t: _Table, key: str, q: tuple, arm: ArmModel) -> None:
-    for i, (v, lo, hi) in enumerate(zip(q, arm.joint_min, arm.joint_max)):
-        if not lo <= v <= hi:
-            t.fail(key, f"joint {i + 1} at {v / _DEG:.3f} deg is outside its range "
-                        f"[{lo / _DEG:.3f}, {hi / _DEG:.3f}] deg")
+# ---- the file's tables ------------------------------------------------------------------------
+
+class ArmTable(Table):
+    variant: string(tuple(VARIANTS)) = "TX90"
+    base_xyz: Vector3 = (0.0, 0.0, 0.0)
+    base_rpy_deg: Vector3 = (0.0, 0.0, 0.0)
+    # Overrides of sim/arm.py, SI units; the joint ranges in degrees are the cell limits.
+    max_velocity: JointLimits | None = None
+    max_acceleration: JointLimits | None = None
+    max_effort: JointLimits | None = None
+    max_linear_velocity: Positive | None = None
+    max_angular_velocity: Positive | None = None
+    max_linear_acceleration: Positive | None = None
+    max_angular_acceleration: Positive | None = None
+    joint_min_deg: Joints | None = None
+    joint_max_deg: Joints | None = None
+
+    def arm_model(self) -> ArmModel:
+        overrides = {key: getattr(self, key) for key in self.model_fields_set
+                     if key.startswith("max_")}
+        overrides.update((key[:-4], _radians(getattr(self, key)))
+                         for key in ("joint_min_deg", "joint_max_deg") if self.given(key))
+        try:
+            return arm_model(self.variant, **overrides)
+        except ValueError as error:
+            raise problem(str(error)) from None
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        self.arm_model()
+        return self
 
 
-def _controller(t: _Table, arm: ArmModel) -> ControllerSpec:
-    d = ControllerSpec()
-    cycle = t.number("cycle_time", d.cycle_time, positive=True)
-    try:
-        check_cycle_time(cycle)
-    except ValueError as exc:
-        t.fail("cycle_time", str(exc))
-    spec = ControllerSpec(
-        cycle_time=cycle,
-        physics_step=t.number("physics_step", d.physics_step, positive=True),
-        enable_time=t.number("enable_time", d.enable_time, low=0.0, high=10.0),
-        disable_time=t.number("disable_time", d.disable_time, low=0.0, high=10.0),
-        acceleration_factor=t.number("acceleration_factor", d.acceleration_factor, low=1.0),
-        effort_factor=t.number("effort_factor", d.effort_factor, positive=True),
-        brake_factor=t.number("brake_factor", d.brake_factor, positive=True),
-        initial_position=t.vector("initial_position_deg", 6,
-                                  tuple(v / _DEG for v in d.initial_position), scale=_DEG),
-        user_marks=t.vector("user_marks_deg", 6, (0.0,) * 6, scale=_DEG),
-    )
-    _in_range(t, "initial_position_deg", spec.initial_position, arm)
-    t.done()
-    return spec
+class ControllerTable(Table):
+    cycle_time: number(above=0.0, then=check_cycle_time) = ControllerSpec.cycle_time
+    physics_step: Positive = ControllerSpec.physics_step
+    enable_time: number(0.0, 10.0) = ControllerSpec.enable_time
+    disable_time: number(0.0, 10.0) = ControllerSpec.disable_time
+    acceleration_factor: number(low=1.0) = ControllerSpec.acceleration_factor
+    effort_factor: Positive = ControllerSpec.effort_factor
+    brake_factor: Positive = ControllerSpec.brake_factor
+    initial_position_deg: Joints = _degrees(ControllerSpec.initial_position)
+    user_marks_deg: Joints = (0.0,) * 6
+
+    def spec(self) -> ControllerSpec:
+        return ControllerSpec(self.cycle_time, self.physics_step, self.enable_time,
+                              self.disable_time, self.acceleration_factor, self.effort_factor,
+                              self.brake_factor, _radians(self.initial_position_deg),
+                              _radians(self.user_marks_deg))
 
 
-def _box(t: _Table, *, part: bool) -> BoxSpec:
-    spec = BoxSpec(
-        name=t.string("name"),
-        pose=t.pose(),
-        size=t.vector("size", 3, positive=True),
-        mass=t.number("mass", _MISSING if part else 0.0, positive=part, low=0.0),
-        color=t.vector("color", 4, (0.8, 0.3, 0.2, 1.0) if part else (0.6, 0.6, 0.6, 1.0)),
-    )
-    t.done()
-    return spec
+class FixtureTable(Table):
+    """A box fixed in the world: mass 0, or at least given as 0."""
+
+    name: Name
+    xyz: Vector3
+    rpy_deg: Vector3 = (0.0, 0.0, 0.0)
+    size: Size
+    mass: number(low=0.0) = 0.0
+    color: vector(4) = BoxSpec.color
+
+    def spec(self) -> BoxSpec:
+        return BoxSpec(self.name, Pose(self.xyz, _radians(self.rpy_deg)), self.size, self.mass,
+                       self.color)
 
 
-def _tool(t: _Table, index: int) -> ToolSpec:
-    d = ToolSpec("", "", Pose(), 0.0, 0.0)
-    kind = t.string("kind", choices=TOOL_KINDS)
-    spec = ToolSpec(
-        name=t.string("name"), kind=kind, slot=t.pose(),
-        mass=t.number("mass", positive=True), length=t.number("length", positive=True),
-        id=t.integer("id", index + 1, low=1, high=2 ** MAX_TOOL_ID_BITS - 1),
-        stroke=t.number("stroke", d.stroke, positive=True) if kind == "parallel_gripper"
-        else d.stroke,
-        finger_speed=t.number("finger_speed", d.finger_speed, positive=True)
-        if kind == "parallel_gripper" else d.finger_speed,
-        cup_radius=t.number("cup_radius", d.cup_radius, positive=True) if kind == "vacuum_cup"
-        else d.cup_radius,
-        contact_stiffness=t.number("contact_stiffness", d.contact_stiffness, positive=True),
-        contact_damping=t.number("contact_damping", d.contact_damping, positive=True),
-    )
-    t.done()
-    return spec
+class PartTable(FixtureTable):
+    mass: Positive
+    color: vector(4) = (0.8, 0.3, 0.2, 1.0)
 
 
-def _zone(t: _Table) -> ZoneSpec:
-    spec = ZoneSpec(t.string("name"), t.vector("xyz", 3), t.vector("size", 3, positive=True))
-    t.done()
-    return spec
+class ToolTable(Table):
+    name: Name
+    kind: string(TOOL_KINDS)
+    xyz: Vector3
+    rpy_deg: Vector3 = (0.0, 0.0, 0.0)
+    mass: Positive
+    length: Positive
+    id: integer(1, 2 ** MAX_TOOL_ID_BITS - 1) | None = None   # default: its place in the rack
+    stroke: Positive = ToolSpec.stroke                  # a parallel_gripper's
+    finger_speed: Positive = ToolSpec.finger_speed      # a parallel_gripper's
+    cup_radius: Positive = ToolSpec.cup_radius          # a vacuum_cup's
+    contact_stiffness: Positive = ToolSpec.contact_stiffness
+    contact_damping: Positive = ToolSpec.contact_damping
+
+    @model_validator(mode="after")
+    def _keys_of_its_kind(self):
+        own = {"parallel_gripper": ("stroke", "finger_speed"), "vacuum_cup": ("cup_radius",)}
+        for kind, keys in own.items():
+            for key in keys:
+                if self.given(key) and self.kind != kind:
+                    raise problem(f"only a {kind} has a {key} (this tool is a {self.kind})", key)
+        return self
+
+    def spec(self, index: int) -> ToolSpec:
+        return ToolSpec(self.name, self.kind, Pose(self.xyz, _radians(self.rpy_deg)), self.mass,
+                        self.length, index + 1 if self.id is None else self.id, self.stroke,
+                        self.finger_speed, self.cup_radius, self.contact_stiffness,
+                        self.contact_damping)
 
 
-def _world(t: _Table) -> WorldSpec:
-    d = WorldSpec()
-    fixtures = tuple(_box(x, part=False) for x in t.tables("fixtures"))
-    tools = tuple(_tool(x, i) for i, x in enumerate(t.tables("tools")))
-    parts = tuple(_box(x, part=True) for x in t.tables("parts"))
-    zones = tuple(_zone(x) for x in t.tables("zones"))
-    spec = WorldSpec(
-        gravity=t.vector("gravity", 3, d.gravity), floor=t.boolean("floor", d.floor),
-        fixtures=fixtures, tools=tools, parts=parts, zones=zones,
-        lock_distance=t.number("lock_distance", d.lock_distance, positive=True),
-        lock_angle=t.number("lock_angle_deg", d.lock_angle / _DEG, positive=True) * _DEG,
-    )
-    _unique(fixtures + parts, "fixtures or parts", t, "parts")
-    _unique(tools, "tools", t, "tools")
-    ids = [tool.id for tool in tools]
-    if len(set(ids)) != len(ids):
-        t.fail("tools", "two tools share an id")
-    _unique(zones, "zones", t, "zones")
-    t.done()
-    return spec
+class ZoneTable(Table):
+    name: Name
+    xyz: Vector3      # its centre
+    size: Size
+
+    def spec(self) -> ZoneSpec:
+        return ZoneSpec(self.name, self.xyz, self.size)
 
 
-def _io(t: _Table, world: WorldSpec) -> IoSpec:
-    units = []
-    for u in t.tables("units"):
-        units.append(IoUnitSpec(u.integer("id", low=0, high=32767), u.string("name"),
-                                u.string("direction", choices=("input", "output"))))
-        u.done()
-    ids = [u.id for u in units]
-    if len(set(ids)) != len(ids):
-        t.fail("units", "two units share an id")
-    _unique(units, "units", t, "units")
-    direction = {u.id: u.direction for u in units}
-    zones = {z.name for z in world.zones}
-    signals = []
-    for s in t.tables("signals"):
-        name = s.string("name")
-        unit = s.integer("unit")
-        if unit not in direction:
-            s.fail("unit", f"no unit has id {unit} (units: {sorted(direction)})")
-        bit = s.integer("bit", low=0, high=MAX_BITS - 1)
-        wire = s.string("wire", name if name in INPUT_WIRES + OUTPUT_WIRES else "none")
-        if direction[unit] == "input":
-            ok = (wire in INPUT_WIRES or (wire.startswith("zone:") and wire[5:] in zones)
-                  or wire in {f"tool_id:{b}" for b in range(MAX_TOOL_ID_BITS)})
-            if not ok:
-                s.fail("wire", f"an input wire is one of {', '.join(INPUT_WIRES)}, zone:<name> "
-                               f"(zones: {', '.join(sorted(zones)) or 'none'}) or tool_id:<bit> "
-                               f"(0..{MAX_TOOL_ID_BITS - 1}); got {wire!r}")
-        elif wire not in OUTPUT_WIRES:
-            s.fail("wire", f"an output wire is one of {', '.join(OUTPUT_WIRES)}; got {wire!r}")
-        signals.append(IoSignalSpec(name, unit, bit, wire, direction[unit]))
-        s.done()
-    _unique(signals, "signals", t, "signals")
-    slots = [(s.unit, s.bit) for s in signals]
-    for s in signals:
-        if slots.count((s.unit, s.bit)) > 1:
-            t.fail("signals", f"unit {s.unit} bit {s.bit} is used twice")
-    wires = [s.wire for s in signals if s.direction == "output" and s.wire != "none"]
-    for w in wires:
-        if wires.count(w) > 1:
-            t.fail("signals", f"two outputs drive {w!r}")
-    t.done()
-    return IoSpec(tuple(units), tuple(signals))
+class WorldTable(Table):
+    gravity: Vector3 = WorldSpec.gravity
+    floor: flag = WorldSpec.floor
+    lock_distance: Positive = WorldSpec.lock_distance
+    lock_angle_deg: Positive = WorldSpec.lock_angle / _DEG
+    fixtures: list[FixtureTable] = []
+    tools: list[ToolTable] = []
+    parts: list[PartTable] = []
+    zones: list[ZoneTable] = []
+
+    @model_validator(mode="after")
+    def _unique(self):
+        names(self.fixtures + self.parts, "fixtures or parts", "parts")
+        names(self.tools, "tools", "tools")
+        ids = [tool.spec(i).id for i, tool in enumerate(self.tools)]
+        if len(set(ids)) != len(ids):
+            raise problem("two tools share an id", "tools")
+        names(self.zones, "zones", "zones")
+        return self
+
+    def spec(self) -> WorldSpec:
+        return WorldSpec(self.gravity, self.floor, tuple(f.spec() for f in self.fixtures),
+                         tuple(t.spec(i) for i, t in enumerate(self.tools)),
+                         tuple(p.spec() for p in self.parts), tuple(z.spec() for z in self.zones),
+                         self.lock_distance, self.lock_angle_deg * _DEG)
 
 
-def _sensors(t: _Table) -> tuple[SensorSpec, ...]:
-    out = []
-    for name in list(t.data):
-        s = t.table(name)
-        kind = s.string("kind", choices=SENSOR_KINDS)
-        if kind == "laser_range":
-            d = SensorSpec(name, kind)
-            spec = SensorSpec(name, kind,
-                              max_range=s.number("max_range", d.max_range, positive=True),
-                              min_range=s.number("min_range", d.min_range, low=0.0),
-                              offset=s.vector("offset", 3, d.offset))
-            if spec.min_range >= spec.max_range:
-                s.fail("min_range", "must be below max_range")
-        else:
-            spec = SensorSpec(name, kind)
-        s.done()
-        out.append(spec)
-    return tuple(out)
+class IoUnitTable(Table):
+    id: integer(0, 32767)
+    name: Name
+    direction: string(("input", "output"))
 
 
-def _recorder(t: _Table) -> RecorderSpec:
-    d = RecorderSpec()
-    spec = RecorderSpec(t.string("path", d.path),
-                        t.number("frequency_percent", d.frequency_percent, low=0.01, high=100.0),
-                        t.number("max_seconds", d.max_seconds, positive=True))
-    t.done()
-    return spec
+class IoSignalTable(Table):
+    name: Name
+    unit: integer()
+    bit: integer(0, MAX_BITS - 1)
+    wire: Name | None = None   # default: its name if that is a wire, else "none"
+
+    def wired(self) -> str:
+        if self.wire is not None:
+            return self.wire
+        return self.name if self.name in INPUT_WIRES + OUTPUT_WIRES else "none"
+
+
+class IoTable(Table):
+    units: list[IoUnitTable] = []
+    signals: list[IoSignalTable] = []
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        ids = [u.id for u in self.units]
+        if len(set(ids)) != len(ids):
+            raise problem("two units share an id", "units")
+        names(self.units, "units", "units")
+        for i, s in enumerate(self.signals):
+            if s.unit not in ids:
+                raise problem(f"expected the id of a unit ({', '.join(map(str, sorted(ids)))}), "
+                              f"got {s.unit}", f"signals[{i}].unit")
+        names(self.signals, "signals", "signals")
+        slots = [(s.unit, s.bit) for s in self.signals]
+        for unit, bit in slots:
+            if slots.count((unit, bit)) > 1:
+                raise problem(f"unit {unit} bit {bit} is used twice", "signals")
+        driven = [s.wired() for s in self.signals
+                  if self._direction(s) == "output" and s.wired() != "none"]
+        for wire in driven:
+            if driven.count(wire) > 1:
+                raise problem(f"two outputs drive {wire!r}", "signals")
+        return self
+
+    def _direction(self, signal: IoSignalTable) -> str:
+        return next(u.direction for u in self.units if u.id == signal.unit)
+
+    def check_wires(self, zones: set[str]) -> None:
+        """Each signal's wire among those of its direction (inputs: zones of the world too)."""
+        tool_ids = {f"tool_id:{b}" for b in range(MAX_TOOL_ID_BITS)}
+        for i, s in enumerate(self.signals):
+            wire = s.wired()
+            if self._direction(s) == "input":
+                if not (wire in INPUT_WIRES or wire in tool_ids
+                        or (wire.startswith("zone:") and wire[5:] in zones)):
+                    raise problem(
+                        f"expected an input wire: one of {', '.join(INPUT_WIRES)}, zone:<name> "
+                        f"(zones: {', '.join(sorted(zones)) or 'none'}) or tool_id:<bit> "
+                        f"(0..{MAX_TOOL_ID_BITS - 1}); got {wire!r}", f"io.signals[{i}].wire")
+            elif wire not in OUTPUT_WIRES:
+                raise problem(f"expected an output wire: one of {', '.join(OUTPUT_WIRES)}; "
+                              f"got {wire!r}", f"io.signals[{i}].wire")
+
+    def spec(self) -> IoSpec:
+        return IoSpec(tuple(IoUnitSpec(u.id, u.name, u.direction) for u in self.units),
+                      tuple(IoSignalSpec(s.name, s.unit, s.bit, s.wired(), self._direction(s))
+                            for s in self.signals))
+
+
+class SensorTable(Table):
+    kind: string(SENSOR_KINDS)
+    # A laser_range's:
+    max_range: Positive = SensorSpec.max_range
+    min_range: number(low=0.0) = SensorSpec.min_range
+    offset: Vector3 = SensorSpec.offset
+
+    @model_validator(mode="after")
+    def _keys_of_its_kind(self):
+        for key in ("max_range", "min_range", "offset"):
+            if self.given(key) and self.kind != "laser_range":
+                raise problem(f"only a laser_range has a {key} (this sensor is a {self.kind})",
+                              key)
+        if self.min_range >= self.max_range:
+            raise problem(f"expected a number below max_range ({self.max_range:g}), "
+                          f"got {self.min_range:g}", "min_range")
+        return self
+
+    def spec(self, name: str) -> SensorSpec:
+        return SensorSpec(name, self.kind, self.max_range, self.min_range, self.offset)
+
+
+class RecorderTable(Table):
+    path: Name = RecorderSpec.path
+    frequency_percent: number(0.01, 100.0) = RecorderSpec.frequency_percent
+    max_seconds: Positive = RecorderSpec.max_seconds
+
+
+class CellFile(Table):
+    """The whole file."""
+
+    name: Name = "cell"
+    arm: ArmTable = ArmTable()
+    controller: ControllerTable = ControllerTable()
+    world: WorldTable = WorldTable()
+    io: IoTable = IoTable()
+    sensors: dict[str, SensorTable] = {}
+    recorder: RecorderTable = RecorderTable()
+
+    @model_validator(mode="after")
+    def _tables_agree(self):
+        arm = self.arm.arm_model()
+        q = _radians(self.controller.initial_position_deg)
+        for i, (v, lo, hi) in enumerate(zip(q, arm.joint_min, arm.joint_max)):
+            if not lo <= v <= hi:
+                raise problem(f"joint {i + 1} at {v / _DEG:.3f} deg is outside its range "
+                              f"[{lo / _DEG:.3f}, {hi / _DEG:.3f}] deg",
+                              "controller.initial_position_deg")
+        self.io.check_wires({z.name for z in self.world.zones})
+        return self
+
+    def cell(self, source: str) -> Cell:
+        return Cell(name=self.name, arm=self.arm.arm_model(),
+                    base=Pose(self.arm.base_xyz, _radians(self.arm.base_rpy_deg)),
+                    controller=self.controller.spec(), world=self.world.spec(),
+                    io=self.io.spec(),
+                    sensors=tuple(s.spec(name) for name, s in self.sensors.items()),
+                    recorder=RecorderSpec(self.recorder.path, self.recorder.frequency_percent,
+                                          self.recorder.max_seconds),
+                    source=source)
 
 
 # ---- entry points -----------------------------------------------------------------------------
 
 def parse_cell(text: str, source: str = "<string>") -> Cell:
     """A cell from TOML text; raises CellError naming `source` and the bad key."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CellError(f"{source}: not valid TOML: {exc}") from None
-    top = _Table(data, "", source)
-    arm, base = _arm(top.table("arm"))
-    world = _world(top.table("world"))
-    cell = Cell(
-        name=top.string("name", "cell"),
-        arm=arm, base=base,
-        controller=_controller(top.table("controller"), arm),
-        world=world,
-        io=_io(top.table("io"), world),
-        sensors=_sensors(top.table("sensors")),
-        recorder=_recorder(top.table("recorder")),
-        source=source,
-    )
-    top.done()
-    return cell
+    return read_toml(text, CellFile, source, CellError).cell(source)
 
 
 def load_cell(path: str | Path | None = None) -> Cell:

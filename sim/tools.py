@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 import pybullet as pb
 
 from landscape.sim.cell import ToolSpec
@@ -51,8 +52,7 @@ def set_sleeping(bc, body: int, allowed: bool) -> None:
 
 def angle_between(orn_a, orn_b) -> float:
     """Angle (rad) of the rotation taking frame a to frame b."""
-    r = rotation(orn_a).T @ rotation(orn_b)
-    return float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
+    return pin.Quaternion(np.array(orn_a)).angularDistance(pin.Quaternion(np.array(orn_b)))
 
 
 # ---- mechanics --------------------------------------------------------------------------------

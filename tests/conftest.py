@@ -34,3 +34,45 @@ def secured(keys):
     running = start_secured_server(keys)
     yield running
     running.stop(grace=None)
+
+
+# ---- the fast lane: `make test-fast` runs every test not marked slow -------------------------
+# Slow, by module: browsers; other languages and the tools `make tools` / `make clients` build;
+# cells of processes (device servers, gateways, clients of their own); the real-time cycle
+# process; physics-heavy runs (force loops, pick and place, jogs paced at real time, long
+# trajectories); fuzzing. The device contract tests run on the pybullet backend today: the
+# kinematic backend (issue 26 item 4, no physics) plugs in here, as a backend the fast lane
+# starts its servers on, and takes the physics-heavy modules off this list.
+SLOW_MODULES = {
+    "tests/supervisor/test_page.py", "tests/supervisor/test_page_panels.py",          # browser
+    "tests/clients/test_other_languages.py", "tests/server/test_grpcurl.py",         # languages
+    "tests/gateway/test_nist_client.py", "tests/test_readme.py",
+    "tests/cell/test_launcher.py", "tests/cell/test_compose.py",                     # processes
+    "tests/cell/test_multi_host.py", "tests/reliability/test_load.py",
+    "tests/reliability/test_lock_holder_faults.py", "tests/reliability/test_stops.py",
+    "tests/reliability/test_server_restart.py", "tests/server/test_signals.py",
+    "tests/server/test_logging.py", "tests/server/test_fast_clock.py",
+    "tests/server/test_planning_process.py", "tests/examples/test_examples.py",
+    "tests/server/test_controller_loss.py", "tests/server/test_realtime.py",          # real time
+    "tests/server/test_sensors.py", "tests/server/test_tools.py",                    # physics
+    "tests/server/test_model_torques.py", "tests/server/test_jog.py",
+    "tests/server/test_handover.py",
+    "tests/fuzz/test_fuzz.py", "tests/server/test_fuzz_rpcs.py",                    # fuzzing
+}
+SLOW_TESTS = {   # physics-heavy, real time, device servers as processes
+    "tests/server/test_safety.py::test_stop_motion_does_not_wait_for_long_planning",
+    "tests/sim/test_clock.py::test_lock_step_motion_is_deterministic",
+    "tests/supervisor/test_backend.py::test_the_world_follows_tool_changes_and_parts_taken_and_put",
+    "tests/sim/test_clock.py::test_real_time_clock_drives_the_arm",
+    "tests/sim/test_clock.py::test_an_urgent_call_is_answered_while_a_slow_call_runs",
+    "tests/server/test_first_hour.py::test_an_ipv6_address_works_with_or_without_brackets",
+}
+SLOW_FIXTURES = {"realtime"}    # a real-time cycle process of the test's own
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        module, _, name = item.nodeid.partition("::")
+        if (module in SLOW_MODULES or f"{module}::{name.split('[')[0]}" in SLOW_TESTS
+                or SLOW_FIXTURES & set(item.fixturenames)):
+            item.add_marker(pytest.mark.slow)

@@ -6,6 +6,7 @@ import math
 import queue
 import subprocess
 import sys
+import textwrap
 import threading
 import time
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ from google.rpc import error_details_pb2
 from grpc_status import rpc_status
 
 import numpy as np
+import pytest
 
 from landscape.cell.certs import CertFiles, make_certificates
 from landscape.cell.tokens import make_tokens
@@ -27,6 +29,33 @@ from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
                           end_effector_pb2, event_service_pb2, event_service_pb2_grpc, motion_pb2,
                           sensing_pb2, types_pb2)
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def installed(path: Path, target: str, what: str) -> Path:
+    """`path`, which `make <target>` builds (the downloads are the Makefile's, never a
+    test's); skips the test, naming the command, when it is not built."""
+    if not path.exists():
+        pytest.skip(f"{what} is not built here: `make {target}` builds it "
+                    f"({path.relative_to(ROOT)})")
+    return path
+
+
+# A lock holder in a process of its own (`python -c HOLDER_SCRIPT TARGET`), to be killed or
+# frozen: "doomed" locks, activates, says "active" and waits.
+HOLDER_SCRIPT = textwrap.dedent("""
+    import sys, time, grpc
+    from landscape.client import Session
+    from landscape.v1 import control_pb2, device_service_pb2_grpc
+    session = Session(grpc.insecure_channel(sys.argv[1]), "doomed").open()
+    session.lock()
+    device_service_pb2_grpc.DeviceServiceStub(session.channel).Activate(
+        control_pb2.ActivateRequest(), timeout=10)
+    print("active", flush=True)
+    time.sleep(600)
+""")
 
 
 def start_server(**config) -> RunningServer:

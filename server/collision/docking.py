@@ -21,7 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from landscape.server.motion.constraints import rotation_angle
 
 DEPTH = 0.1     # m above the plate where a corridor begins (tooling.APPROACH: far clear of it)
 
@@ -42,7 +43,7 @@ class Dock:
         """(N,) bool: which flange frames (N, 4, 4, base_link) are in the corridor."""
         rel = np.linalg.inv(self.plate) @ flange
         p = rel[:, :3, 3]
-        turned = Rotation.from_matrix(rel[:, :3, :3]).magnitude()
+        turned = rotation_angle(np.eye(3), rel[:, :3, :3])
         return ((np.hypot(p[:, 0], p[:, 1]) <= self.radius) & (p[:, 2] >= -DEPTH)
                 & (p[:, 2] <= self.radius) & (turned <= self.angle))
 

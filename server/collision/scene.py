@@ -27,7 +27,7 @@ import threading
 
 import coal
 import numpy as np
-from scipy.spatial.transform import Rotation
+import pinocchio as pin
 
 from landscape.server.units import pose_matrix
 from landscape.sim.cell import Cell
@@ -341,7 +341,7 @@ def _pose(T, name: str) -> np.ndarray:
 
 def _near(a: np.ndarray, b: np.ndarray) -> bool:
     """Two poses within MOVED and TURNED of each other."""
-    turned = Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).magnitude()
+    turned = np.linalg.norm(pin.log3(a[:3, :3].T @ b[:3, :3]))
     return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < MOVED and turned < TURNED)
 
 

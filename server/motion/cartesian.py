@@ -22,9 +22,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pinocchio as pin
 
 from landscape.sim.kinematics import (BRANCHES, Config, Kinematics, PosNeg, ReversingResult,
-                                      Shoulder)
+                                      Shoulder, wrap_angle)
 
 from .trajectory import PlanningError
 
@@ -170,11 +171,13 @@ def joint_waypoints(kin: Kinematics, poses, q_start, *, tcp=None,
 def slerp(R0: np.ndarray, R1: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Rotations (K, 3, 3) on the shortest rotation from R0 to R1 (3, 3) at fractions f (K,):
     R0 @ exp(f * log(R0^T R1))."""
-    R = R0.T @ R1
-    axis, angle = _axis_angle(R)
+    w = pin.log3(R0.T @ R1)
+    angle = float(np.linalg.norm(w))
+    axis = w / angle if angle > 0.0 else np.array([0.0, 0.0, 1.0])
     t = np.asarray(f, dtype=float)[:, None, None] * angle
-    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    # Rodrigues: exp(t K) = I + sin t K + (1 - cos t) K^2.
+    K = pin.skew(axis)
+    # Rodrigues, exp(t K) = I + sin t K + (1 - cos t) K^2, for every sample in one numpy
+    # expression: pinocchio's exp3 takes one rotation a call.
     steps = np.eye(3) + np.sin(t) * K + (1.0 - np.cos(t)) * (K @ K)
     return R0 @ steps
 
@@ -194,7 +197,7 @@ def _follow(kin: Kinematics, q0: np.ndarray, tips: np.ndarray, T_tcp: np.ndarray
     ok = ~np.isnan(q[:, 0])
     first_bad = int(np.argmin(ok)) if not ok.all() else len(q)
     good = q[:first_bad]
-    steps = _wrap(np.diff(np.vstack([q0, good]), axis=0))
+    steps = wrap_angle(np.diff(np.vstack([q0, good]), axis=0))
     approx = q0 + np.cumsum(steps, axis=0)
     good = good + _TWO_PI * np.round((approx - good) / _TWO_PI)
     if len(good):
@@ -253,35 +256,9 @@ def _intervals(distance: float, angle: float, max_step: float, max_angle_step: f
     return math.ceil(n)
 
 
-def _axis_angle(R: np.ndarray) -> tuple[np.ndarray, float]:
-    """Unit axis (3,) and angle in [0, pi] of a rotation (3, 3); robust near 0 and pi."""
-    angle = _angle(np.eye(3), R)
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if angle < 1e-12:
-        return np.array([0.0, 0.0, 1.0]), 0.0
-    if angle < math.pi - 1e-6:
-        return v / np.linalg.norm(v), angle
-    # Near pi: R + I = 2 a a^T (+ small); the largest column gives the axis, v its sign.
-    S = R + np.eye(3)
-    k = int(np.argmax(np.diag(S)))
-    axis = S[:, k] / np.linalg.norm(S[:, k])
-    if axis @ v < 0:
-        axis = -axis
-    return axis, angle
-
-
 def _angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
-    """Angle (rad) between two rotations, accurate near 0 (chord) and near pi (trace)."""
-    chord = float(np.linalg.norm(Ra - Rb))
-    small = 2.0 * math.asin(min(1.0, chord / (2.0 * math.sqrt(2.0))))
-    if small < 2.5:
-        return small
-    c = (float(np.trace(Ra.T @ Rb)) - 1.0) / 2.0
-    return math.acos(max(-1.0, min(1.0, c)))
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return a - _TWO_PI * np.round(a / _TWO_PI)
+    """Angle (rad) of the rotation turning Ra into Rb."""
+    return float(np.linalg.norm(pin.log3(Ra.T @ Rb)))
 
 
 def _joints(kin: Kinematics, q) -> np.ndarray:

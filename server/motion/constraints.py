@@ -133,7 +133,7 @@ def _pass_rate(path: JointPath, s: np.ndarray, limits: Limits, tool_path) -> np.
 def rotation_vectors(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     """(K, 3) rotation vectors (axis times angle, rad, base axes) turning Ra into Rb, (K, 3, 3)
     each, for angles below pi: the axis from the skew part of Rb Ra^T, the angle from the
-    chord (accurate for the small steps of a path)."""
+    chord (accurate for the small steps of a path). Numpy, not pin.log3: one call for K."""
     R = Rb @ np.swapaxes(Ra, -1, -2)
     skew = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]],
                     axis=1)                                  # 2 sin(angle) axis
@@ -146,6 +146,6 @@ def rotation_vectors(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
 
 def rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     """Angle (rad) between rotations (..., 3, 3), from the chord |Ra - Rb|_F = 2 sqrt(2) sin(a/2):
-    accurate near zero, where acos of the trace is not."""
+    accurate near zero, where acos of the trace is not. Numpy: pin.log3 takes one at a time."""
     chord = np.linalg.norm(Ra - Rb, axis=(-2, -1))
     return 2.0 * np.arcsin(np.minimum(1.0, chord / (2.0 * math.sqrt(2.0))))

@@ -1,37 +1,32 @@
-"""The Go and TypeScript clients, built as `make clients` builds them and run against a real
-device server: session, lock, activate, MoveAbsolute, its done event, release."""
+"""The Go and TypeScript clients, as `make clients` builds them (`make test` does first), run
+against a real device server: session, lock, activate, MoveAbsolute, its done event, release."""
 from __future__ import annotations
 
 import shutil
 import subprocess
-from pathlib import Path
 
 import pytest
 
 from landscape.server.states import State
 
-ROOT = Path(__file__).resolve().parents[2]
+from support import ROOT, installed
+
 GOAL = [0.5, -0.1, 1.4, 0.2, 1.2, 0.3]
-
-
-def _build(target: str, needs: tuple[str, ...]) -> None:
-    missing = [tool for tool in needs if shutil.which(tool) is None]
-    if missing:
-        pytest.skip(f"{' and '.join(missing)} not installed: cannot build the {target} client "
-                    f"(`make {target}`)")
-    subprocess.run(["make", "-s", target], cwd=ROOT, check=True, timeout=900)
 
 
 @pytest.fixture(scope="module")
 def go_client() -> list[str]:
-    _build("clients-go", ("go",))
-    return [str(ROOT / "clients" / "go" / "bin" / "landscape-go-client")]
+    return [str(installed(ROOT / "clients" / "go" / "bin" / "landscape-go-client",
+                          "clients-go", "The Go client"))]
 
 
 @pytest.fixture(scope="module")
 def ts_client() -> list[str]:
-    _build("clients-ts", ("node", "npm"))
-    return ["node", str(ROOT / "clients" / "ts" / "dist" / "main.js")]
+    main = installed(ROOT / "clients" / "ts" / "dist" / "main.js", "clients-ts",
+                     "The TypeScript client")
+    if shutil.which("node") is None:
+        pytest.skip("Node.js is not installed: the TypeScript client cannot run here")
+    return ["node", str(main)]
 
 
 def _goal() -> str:

@@ -8,7 +8,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -58,10 +57,8 @@ def test_a_gateway_restart_ends_the_connection_cleanly_and_the_client_reconnects
         wait_until(lambda: server.device.state is State.MOVING, timeout=20)
 
         gateway.stop()
-        started = time.monotonic()
-        with pytest.raises(ConnectionError):          # closed: the end of the stream, at once
-            client.status()
-        assert time.monotonic() - started < 5
+        with pytest.raises(ConnectionError):   # closed: the end of the stream (a read that
+            client.status()                    # waited out its timeout raises TimeoutError)
         # the device saw its CRCL session end: the arm stopped on its path, the lock is free
         wait_until(lambda: server.device.state is State.UNLOCKED, timeout=10)
     finally:

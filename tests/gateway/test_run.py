@@ -95,3 +95,11 @@ def test_the_landscape_cli_runs_a_program_through_the_gateway(gateway, tmp_path)
     result = json.loads(done.stdout)
     assert len(result["commands"]) == 13
     assert all(c["state"] == "CRCL_Done" for c in result["commands"])
+
+
+def test_the_readmes_example_program_runs(gateway):
+    """examples/05_crcl_program.xml, which the README's tour runs with `landscape crcl run`."""
+    out = io.StringIO()
+    example = Path(__file__).resolve().parents[2] / "examples" / "05_crcl_program.xml"
+    assert run(example, f"127.0.0.1:{gateway.port}", out=out) == 9
+    assert all("CRCL_Done" in line for line in out.getvalue().splitlines()), out.getvalue()

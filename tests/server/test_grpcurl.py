@@ -7,19 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from support import spawned_server
-
-ROOT = Path(__file__).resolve().parents[2]
-GRPCURL = ROOT / ".tools" / "bin" / "grpcurl"
+from support import ROOT, installed, spawned_server
 
 
 @pytest.fixture(scope="module")
 def grpcurl() -> Path:
-    # The Makefile pins the version; `make test` builds it first, this covers a bare pytest run.
-    subprocess.run(["make", "-s", "tools"], cwd=ROOT, check=True, timeout=600)
-    if not GRPCURL.exists():
-        pytest.skip("grpcurl is not built: it needs Go (`go` is not on this machine's PATH)")
-    return GRPCURL
+    # The Makefile pins the version and builds it (with Go); `make test` does that first.
+    return installed(ROOT / ".tools" / "bin" / "grpcurl", "tools", "grpcurl")
 
 
 @pytest.fixture(scope="module")

@@ -188,7 +188,7 @@ def test_a_jog_stops_before_the_end_of_a_joint_range(arm):
     assert arm.server.device.state is State.RESTING    # no controller fault on the way
 
 
-def test_silence_stops_the_arm_within_the_deadman_timeout_and_its_braking(arm):
+def test_silence_stops_the_arm_at_full_deceleration_once_the_deadman_runs_out(arm):
     _manual(arm)
     pendant = Pendant(arm)
     pendant.jog(JOINT, [100, 0, 0, 0, 0, 0], 0.5)    # joint 1, then the client falls silent
@@ -199,12 +199,17 @@ def test_silence_stops_the_arm_within_the_deadman_timeout_and_its_braking(arm):
     rows = _rows(arm, last - 50)
     moving = np.abs(rows[:, QD]).max(axis=1) > 1e-6
     stopped_at = rows[np.nonzero(moving)[0][-1] + 1, SEQ]
-    speed = abs(rows[0, QD][0])
-    braking = speed / arm.server.device.arm.max_acceleration[0]
-    took = (stopped_at - last) * arm.server.link.cycle_time
+    dt = arm.server.link.cycle_time
+    took = (stopped_at - last) * dt
+    # Joint 1's setpoints: the jog's speed until the deadman ran out, then braking to rest at
+    # the arm's full deceleration (counted in cycles; the whole figure is bench_faults.py's).
+    speed = np.abs(np.diff(rows[:, CMD][:, 0])) / dt
+    cruising = int(np.flatnonzero(speed >= speed[0] - 1e-9)[-1])
+    rest = cruising + int(np.argmax(speed[cruising:] < 1e-9))
+    braking = speed[0] / arm.server.device.arm.max_acceleration[0]
     print(f"\ndeadman: stopped {took * 1000:.0f} ms after the last request (timeout 200 ms, "
           f"braking {braking * 1000:.0f} ms)")
-    assert took <= 0.2 + braking + 0.03    # + what a request takes to arrive
+    assert speed[0] > 0.1 and (rest - cruising) * dt <= braking + 2 * dt
     pendant.close()
     assert arm.server.device.state is State.RESTING
 

@@ -25,19 +25,16 @@ ABSOLUTE = types_pb2.OFFSET_TYPE_ABSOLUTE_DATA
 
 def assert_refused(arm, call, field: str, bound: str) -> None:
     """OUT_OF_RANGE naming `field` and a bound (metadata key `bound`), nothing moved, the
-    device still resting; refused before planning (a refusal that waited on planning took 30 s
-    and more: the generous bound below only catches that, it is not a timing figure)."""
+    device still resting; refused before planning: a refusal that waited on planning took 30 s
+    and more, so it would end past the calls' 10 s deadline, DEADLINE_EXCEEDED."""
     before = arm.joints().copy()
-    start = time.monotonic()
     with pytest.raises(grpc.RpcError) as refused:
         call()
-    elapsed = time.monotonic() - start
     error = refused.value
     assert error.code() is grpc.StatusCode.OUT_OF_RANGE, error.details()
     info = error_info(error)
     assert info.metadata["field"] == field, dict(info.metadata)
     assert bound in info.metadata, dict(info.metadata)
-    assert elapsed < 15.0, f"refused after {elapsed:.2f} s: it waited on planning"
     assert arm.server.device.state is State.RESTING
     assert np.max(np.abs(arm.joints() - before)) < 1e-6
 

@@ -94,3 +94,24 @@ def test_a_minimal_cell_uses_defaults():
     cell = parse_cell('name = "bare"')
     assert cell.world.tools == () and cell.io.signals == () and cell.sensors == ()
     assert cell.controller.cycle_time == 0.004
+
+
+def test_an_error_says_what_was_expected_and_what_came():
+    with pytest.raises(CellError) as err:
+        parse_cell(edited("cycle_time = 0.004", 'cycle_time = "fast"'), "cell.toml")
+    assert str(err.value) == ("cell.toml: controller.cycle_time: expected a number above 0, "
+                              "got 'fast'")
+    with pytest.raises(CellError) as err:
+        parse_cell(edited('kind = "vacuum_cup"', 'kind = "vacuum_cup"\nstroke = 0.1'), "cell.toml")
+    assert str(err.value) == ("cell.toml: world.tools[1].stroke: only a parallel_gripper has a "
+                              "stroke (this tool is a vacuum_cup)")
+
+
+def test_every_bad_key_is_named_at_once():
+    text = edited("floor = true", "floor = 1").replace("frequency_percent = 100",
+                                                       "frequency_percent = 0")
+    with pytest.raises(CellError) as err:
+        parse_cell(text, "cell.toml")
+    assert str(err.value).splitlines() == [
+        "cell.toml: world.floor: expected true or false, got 1",
+        "cell.toml: recorder.frequency_percent: expected a number from 0.01 to 100, got 0"]

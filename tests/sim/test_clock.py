@@ -73,10 +73,8 @@ def test_lock_step_run_until_uses_simulated_timeout():
     clock = LockStepClock(StandIn())
     assert clock.run_until(lambda: clock.controller.steps >= 30, timeout_s=1.0)
     assert clock.controller.steps == 30
-    started = time.perf_counter()
     assert not clock.run_until(lambda: False, timeout_s=3600.0)  # an hour, simulated
     assert clock.controller.steps == 30 + 900_000
-    assert time.perf_counter() - started < 10.0  # hang guard only
 
 
 def wait_for(predicate, timeout: float = 10.0) -> bool:
@@ -119,7 +117,6 @@ def test_lock_step_motion_is_deterministic(tmp_path):
     second, rec2, wall2 = ten_second_motion(tmp_path / "second.mcap")
     print(f"\n10 s of simulated motion on the lock-step clock: {wall1:.2f} s and "
           f"{wall2:.2f} s of wall time")
-    assert max(wall1, wall2) < 10.0  # hang guard only; figures: bench/bench_cycle.py
     for name in ("pos", "vel", "pos_err", "torque"):
         assert np.array_equal(getattr(first, name), getattr(second, name)), name
     assert len(rec1["t"]) > round(10.0 / 0.004)  # every cycle of the motion (100 %)

@@ -1,0 +1,120 @@
+"""The parsed cell configuration (config.py reads the file): frozen dataclasses of its device
+servers, the CRCL gateway, the web supervisor, security and the launcher's policy."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from landscape.server.config import ServerConfig
+
+# The cell's own front ends, sized for their traffic (calls per second; the names they send).
+FRONT_END_RATES = {"crcl-gateway": 5000.0, "supervisor": 5000.0}
+
+
+@dataclass(frozen=True)
+class DeviceSpec:
+    """One device server. address/port: where it listens (port 0: any free one); host: how
+    the others reach it (default: the address, or 127.0.0.1 for a wildcard). world: its sim
+    cell file (None: the built-in default). data: its folder, also its working directory:
+    paths and settings (paths.sqlite3), recordings (the world's [recorder] path, relative
+    to it) and the audit log. collision_margin (m): its --collision-margin."""
+
+    name: str
+    address: str
+    port: int
+    host: str
+    world: Path | None
+    data: Path
+    clock: str = "realtime"
+    reset_settings: bool = False
+    collision_margin: float = ServerConfig.collision_margin   # m (server/config.py)
+
+    @property
+    def target(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{host}:{self.port}"
+
+
+@dataclass(frozen=True)
+class GatewaySpec:
+    """The CRCL gateway in front of `device`. token: the token file it presents."""
+
+    enabled: bool = True
+    device: str = ""
+    address: str = "127.0.0.1"
+    port: int = 64444
+    grpc_port: int | None = None
+    token: Path | None = None
+
+
+@dataclass(frozen=True)
+class SupervisorSpec:
+    """The web supervisor (landscape.supervisor) showing `devices`. sign_in_tokens: the
+    folder of role tokens people sign in with (made on first run when absent); token: its
+    own, viewer-level, for the feeds (with tokens on); allowed_origins: other front ends'
+    origins it accepts; sign_in_idle / sign_in_max_age: s a sign-in lasts idle / at most."""
+
+    enabled: bool = True
+    address: str = "127.0.0.1"
+    port: int = 8080
+    devices: tuple[str, ...] = ()
+    token: Path | None = None
+    sign_in_tokens: Path = Path("var/tokens")
+    allowed_origins: tuple[str, ...] = ()
+    sign_in_idle: float = 1800.0
+    sign_in_max_age: float = 43200.0
+
+
+@dataclass(frozen=True)
+class SecuritySpec:
+    """TLS (cert/key of the device servers; ca: the CA clients trust, and with mtls the one
+    that signs clients), the cell's own clients' pair under mtls, the token folder, the audit
+    log's rotation (and folder: None puts each device's in its data folder), the rate limit
+    per client and the budgets of the clients so named (rate_limits: a token's name, or with
+    tokens off the name a front end sends; calls per second), and --insecure."""
+
+    tls: bool = False
+    cert: Path | None = None
+    key: Path | None = None
+    ca: Path | None = None
+    mtls: bool = False
+    client_cert: Path | None = None
+    client_key: Path | None = None
+    tokens: Path | None = None
+    audit_dir: Path | None = None
+    audit_max_bytes: int = 10 * 1024 * 1024
+    audit_backups: int = 5
+    rate_limit: float = 1000.0
+    rate_burst: int = 2000
+    rate_limits: dict[str, float] = field(default_factory=lambda: dict(FRONT_END_RATES))
+    insecure: bool = False
+
+    def audit_log(self, device: DeviceSpec) -> Path:
+        return (self.audit_dir / f"{device.name}.audit.log" if self.audit_dir
+                else device.data / "audit.log")
+
+
+@dataclass(frozen=True)
+class LauncherSpec:
+    """What the launcher does when a service dies ("no": stop the cell; "on-failure": start
+    it again, at most max_restarts times), and how long a service may take to start and stop
+    (s)."""
+
+    restart: str = "no"
+    max_restarts: int = 3
+    start_timeout: float = 120.0
+    stop_timeout: float = 20.0
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    name: str
+    devices: tuple[DeviceSpec, ...]
+    gateway: GatewaySpec
+    supervisor: SupervisorSpec
+    security: SecuritySpec = field(default_factory=SecuritySpec)
+    launcher: LauncherSpec = field(default_factory=LauncherSpec)
+    source: str = "<string>"
+
+    def device(self, name: str) -> DeviceSpec:
+        return next(d for d in self.devices if d.name == name)
