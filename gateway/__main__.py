@@ -25,7 +25,7 @@ from landscape.gateway.schemas import SchemaSet, default_directory
 from landscape.gateway.server import DEFAULT_PORT, Gateway
 from landscape.gateway.session import GatewayOptions
 from landscape.gateway.status import DEFAULT_GRIPPER_STROKE
-from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT
+from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
 from landscape.server.tls import is_loopback
 
 
@@ -52,6 +52,9 @@ def arguments(argv=None) -> argparse.Namespace:
                              "../shared/crcl/xsd if present); 'none' to skip schema validation")
     parser.add_argument("--max-document", type=int, default=DEFAULT_MAX_DOCUMENT,
                         help="largest accepted document, bytes")
+    parser.add_argument("--document-idle", type=float, default=DOCUMENT_IDLE,
+                        help="seconds a started document may wait for its next bytes before "
+                             "the connection is dropped")
     parser.add_argument("--gripper-stroke", type=float, default=DEFAULT_GRIPPER_STROKE,
                         help="the gripper's opening in m, for GripperStatus")
     parser.add_argument("--state-rate", type=float, default=100.0,
@@ -100,7 +103,8 @@ def grpc_credentials(args: argparse.Namespace) -> grpc.ServerCredentials | None:
 async def serve(args: argparse.Namespace, ready=None) -> None:
     link = DeviceLink(args.device, args.state_rate, *credentials.from_arguments(args))
     await link.start()
-    options = GatewayOptions(schema_set(args.schemas), args.max_document, args.gripper_stroke)
+    options = GatewayOptions(schema_set(args.schemas), args.max_document, args.document_idle,
+                             args.gripper_stroke)
     gateway = await Gateway(link, options).serve(args.host, args.port)
     grpc_server = None
     if args.grpc_port is not None:

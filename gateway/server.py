@@ -1,11 +1,13 @@
 """The CRCL TCP server (asyncio): one CrclSession per connection, documents in, status out.
 
 Each connection reads into its own DocumentSplitter; a document is handled before the next is
-read, and GetStatus answers are written in order. A connection whose stream cannot be
-resynchronised (a DOCTYPE, a single token past the size bound) is closed; everything else a
-client gets wrong is a CRCL_Error status on the connection, which stays open. One client's
-trouble never touches another's connection. A gateway that stops (SIGTERM) ends every
-connection as if its client had left, then exits.
+read, and GetStatus answers are written in order. A connection whose stream is no CRCL (bytes
+outside a document: an HTTP request a browser was made to send) or cannot be resynchronised
+(a DOCTYPE, a single token past the size bound) is closed, with one log line naming the peer
+(a DOCTYPE is answered with a CRCL_Error status first); so is one whose document stops short
+for `document_idle` seconds. Everything else a client gets wrong is a CRCL_Error status on the
+connection, which stays open. One client's trouble never touches another's connection. A
+gateway that stops (SIGTERM) ends every connection as if its client had left, then exits.
 """
 from __future__ import annotations
 
@@ -15,7 +17,8 @@ from dataclasses import dataclass, field
 
 from landscape.gateway.device import DeviceLink
 from landscape.gateway.session import CrclSession, GatewayOptions
-from landscape.gateway.wire import Document, DocumentSplitter, WireError
+from landscape.gateway.wire import (DeclarationRefused, Document, DocumentSplitter,
+                                    WireError)
 
 log = logging.getLogger(__name__)
 
@@ -54,10 +57,11 @@ class Gateway:
         peer = writer.get_extra_info("peername")
         session = CrclSession(self.link, self.options, f"{peer[0]}:{peer[1]}" if peer else "")
         splitter = DocumentSplitter(self.options.max_document)
-        log.info("%s connected", session.name)
+        log.debug("%s connected", session.name)
         self.connections.add(asyncio.current_task())
+        closing = ""                      # why the gateway ends the connection, if it does
         try:
-            while data := await reader.read(READ_SIZE):
+            while data := await self._read(reader, splitter):
                 for item in splitter.feed(data):
                     if isinstance(item, Document):
                         reply = await session.receive(item.data)
@@ -66,18 +70,36 @@ class Gateway:
                     else:
                         await session.refuse(f"byte {item.offset}: {item.reason}")
                 await writer.drain()
+        except DeclarationRefused as error:
+            closing = str(error)
+            session.fail(closing)
+            writer.write(session.status())
         except WireError as error:
-            log.warning("%s: closing: %s", session.name, error)
+            closing = str(error)
+        except TimeoutError:
+            closing = (f"a document stopped short: no byte for {self.options.document_idle:g} s "
+                       f"({splitter.pending} bytes held)")
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
         except asyncio.CancelledError:
             pass                          # the gateway is closing (close()): end in order
         finally:
             self.connections.discard(asyncio.current_task())
+            if closing:                   # the one line this connection gets
+                log.warning("%s: closing: %s", session.name, closing)
+            else:
+                log.info("%s disconnected", session.name)
             await session.close()
             writer.close()
             try:
                 await writer.wait_closed()
             except ConnectionError:
                 pass
-            log.info("%s disconnected", session.name)
+
+    async def _read(self, reader: asyncio.StreamReader, splitter: DocumentSplitter) -> bytes:
+        """The next bytes; TimeoutError if a started document gets none for document_idle s
+        (between documents a client may be silent as long as it likes)."""
+        if not splitter.pending:
+            return await reader.read(READ_SIZE)
+        async with asyncio.timeout(self.options.document_idle):
+            return await reader.read(READ_SIZE)

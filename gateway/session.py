@@ -34,7 +34,7 @@ from landscape.gateway.program import expand
 from landscape.gateway.schemas import SchemaInvalid, SchemaSet
 from landscape.gateway.settings import CrclSettings
 from landscape.gateway.status import DONE, ERROR, WORKING, CommandRecord
-from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT
+from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
 from landscape.v1 import motion_pb2, types_pb2
 
 log = logging.getLogger(__name__)
@@ -46,6 +46,7 @@ MAX_QUEUED = 10_000     # commands waiting behind the running one, per session
 class GatewayOptions:
     schemas: SchemaSet | None = None
     max_document: int = DEFAULT_MAX_DOCUMENT
+    document_idle: float = DOCUMENT_IDLE    # s a started document may wait for more bytes
     gripper_stroke: float = status.DEFAULT_GRIPPER_STROKE
 
 
@@ -115,8 +116,12 @@ class CrclSession:
         return None
 
     async def refuse(self, why: str, command_id: int | None = None) -> None:
-        """A document or stream fault that is no command: reported as an error."""
+        """A document or stream fault that is no command: logged, and reported as an error."""
         log.info("%s: %s", self.name, why)
+        self.fail(why, command_id)
+
+    def fail(self, why: str, command_id: int | None = None) -> None:
+        """The status says CRCL_Error, why, for `command_id` (default: the current one)."""
         self.record = CommandRecord(self.record.command_id if command_id is None else command_id,
                                     ERROR, why)
         self.changed()
@@ -186,6 +191,7 @@ class CrclSession:
                 record.state, record.description = DONE, description or ""
         except (CrclError, DeviceRefused) as error:
             record.state, record.description = ERROR, str(error)
+            log.info("%s: command %d: %s", self.name, record.command_id, error)
         except Exception as error:   # a bug must not take the connection down silently
             log.exception("%s: command %d failed", self.name, record.command_id)
             record.state, record.description = ERROR, f"gateway error: {error!r}"
