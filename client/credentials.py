@@ -42,6 +42,20 @@ class ClientTLS:
         return [("grpc.ssl_target_name_override", self.server_name)] if self.server_name else []
 
 
+@dataclass(frozen=True)
+class Endpoint:
+    """How to reach a device server: "host:port", TLS (None: plaintext) and the role token to
+    present (None: none). A client core opens its channels from it, one per event loop."""
+
+    target: str
+    tls: ClientTLS | None = None
+    token: str | None = None
+
+    def aio_channel(self, options=()) -> grpc.aio.Channel:
+        """A channel on the running loop (grpc.aio binds a channel to its loop)."""
+        return open_aio_channel(self.target, self.tls, self.token, options)
+
+
 def read_token(path: str | Path) -> str:
     """The first token in a token file (one a line, `<token> [name]`, `#` comments): the
     format of the server's role files, so a development file serves both sides."""
