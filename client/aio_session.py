@@ -70,6 +70,7 @@ class AsyncSession:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stream: concurrent.futures.Future | None = None
         self._outgoing: asyncio.Queue | None = None   # on the keeper's loop
+        self._lapsed = False       # the keeper stalled past the device's keep-alive timeout
         self._closing = False
 
     async def __aenter__(self) -> "AsyncSession":
@@ -167,7 +168,7 @@ class AsyncSession:
         if answer is None or self.ended.is_set():
             return   # left to the device's timeout
         choice, data = answer
-        self._keeper.call_soon(self._outgoing.put_nowait, pb.ConnectRequest(
+        self._keeper.call_soon(self._send, pb.ConnectRequest(
             rsvp_answer=event_service_pb2.RsvpAnswer(rsvp_id=request.rsvp_id, choice=choice,
                                                      data=data)))
 
@@ -195,7 +196,8 @@ class AsyncSession:
                 "the session was closed while opening"))
             return
         opened.set_result(first.opened)
-        sender = asyncio.create_task(self._keep_alive(first.opened.keepalive_interval_ms / 1e3))
+        sender = asyncio.create_task(self._keep_alive(first.opened.keepalive_interval_ms / 1e3,
+                                                      first.opened.keepalive_timeout_ms / 1e3))
         code, details = grpc.StatusCode.OK, "the device server closed it"
         try:
             while (message := await call.read()) is not grpc.aio.EOF:
@@ -220,9 +222,24 @@ class AsyncSession:
         while (item := await self._outgoing.get()) is not None:
             yield item
 
-    async def _keep_alive(self, interval: float) -> None:
-        counter = 0
+    async def _keep_alive(self, interval: float, timeout: float) -> None:
+        """A keep-alive every `interval` s. If this thread was held up past the device's
+        `timeout` (the whole process stopped, the machine suspended), the device has ended the
+        session: nothing more is sent, and the stream's end says why (a write after the
+        device's status would hide it: grpc.aio reports it as INTERNAL, grpc/grpc#36066)."""
+        loop = asyncio.get_running_loop()
+        counter, last = 0, loop.time()
         while True:
             await asyncio.sleep(interval)
+            if loop.time() - last >= timeout:
+                self._lapsed = True
+                log.info("session %s: no keep-alive could go out for %.1f s", self.session_id,
+                         loop.time() - last)
+                return
+            last = loop.time()
             counter += 1
-            self._outgoing.put_nowait(pb.ConnectRequest(keep_alive=pb.KeepAlive(counter=counter)))
+            self._send(pb.ConnectRequest(keep_alive=pb.KeepAlive(counter=counter)))
+
+    def _send(self, request: pb.ConnectRequest) -> None:
+        if not self._lapsed:
+            self._outgoing.put_nowait(request)

@@ -15,7 +15,7 @@ import asyncio
 import logging
 from dataclasses import dataclass, field
 
-from landscape.gateway.device import DeviceLink
+from landscape.gateway.device import CrclDevice
 from landscape.gateway.session import CrclSession, GatewayOptions
 from landscape.gateway.wire import (DeclarationRefused, Document, DocumentSplitter,
                                     WireError)
@@ -28,7 +28,7 @@ READ_SIZE = 64 * 1024
 
 @dataclass
 class Gateway:
-    link: DeviceLink
+    device: CrclDevice
     options: GatewayOptions
     server: asyncio.base_events.Server | None = None
     connections: set = field(default_factory=set)    # their tasks
@@ -40,7 +40,7 @@ class Gateway:
     async def serve(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT) -> "Gateway":
         self.server = await asyncio.start_server(self._connection, host, port,
                                                  limit=READ_SIZE)
-        log.info("CRCL gateway listening on %s:%d (device %s)", host, self.port, self.link.target)
+        log.info("CRCL gateway listening on %s:%d (device %s)", host, self.port, self.device.target)
         return self
 
     async def close(self) -> None:
@@ -55,7 +55,7 @@ class Gateway:
 
     async def _connection(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
         peer = writer.get_extra_info("peername")
-        session = CrclSession(self.link, self.options, f"{peer[0]}:{peer[1]}" if peer else "")
+        session = CrclSession(self.device, self.options, f"{peer[0]}:{peer[1]}" if peer else "")
         splitter = DocumentSplitter(self.options.max_document)
         log.debug("%s connected", session.name)
         self.connections.add(asyncio.current_task())
