@@ -29,7 +29,7 @@ from landscape.client.aio_streams import (AsyncEventStream, AsyncStateStream, st
                                           subscribe_request)
 from landscape.client.commands import (DEVICE, EVENTS, IO, RELINQUISH_MAX_STEPS,
                                        RELINQUISH_STEP, DeviceCommands, jog_request)
-from landscape.client.credentials import ClientTLS, Endpoint
+from landscape.client.credentials import ClientTLS, Endpoint, bearer
 from landscape.client.errors import (CommandRefused, NotAllowed, NotLockHolder, SessionEnded,
                                      WrongState, from_rpc_error)
 from landscape.client.event_feed import LOSS_GRACE, EventFeed
@@ -72,21 +72,24 @@ class AsyncCommand:
 class AsyncRobot(DeviceCommands):
     """target: "host:port" (with `tls` and `token`), an Endpoint, an open grpc.aio.Channel (the
     caller closes it; the session's keep-alives then share its loop), or a DeviceLink shared
-    with other robots (opened and closed by its owner). client_name: shown to other clients as
-    the lock holder. identity: who calls, for the device's records (identity.py; default:
-    client_name for itself). on_rsvp: answers the device's RSVP questions (a plain or async
-    function; see AsyncSession)."""
+    with other robots (opened and closed by its owner; `token` is then this robot's own, on
+    each of its calls: a person's, on a link opened without one). client_name: shown to other
+    clients as the lock holder. identity: who calls, for the device's records (identity.py;
+    default: client_name for itself). on_rsvp: answers the device's RSVP questions (a plain or
+    async function; see AsyncSession)."""
 
     def __init__(self, target: str | Endpoint | grpc.aio.Channel | DeviceLink,
                  client_name: str = "landscape-client", *,
                  on_rsvp: AsyncRsvpHandler | None = None, tls: ClientTLS | None = None,
                  token: str | None = None, identity: Identity | None = None):
-        if not isinstance(target, str) and (tls is not None or token):
+        shared = isinstance(target, DeviceLink)
+        if not isinstance(target, str) and (tls is not None or token and not shared):
             raise ValueError("TLS and the token belong to the channel: give them to "
                              "open_aio_channel, or give AsyncRobot a \"host:port\"")
         self.client_name = client_name
         self.identity = identity or Identity(client_name)
-        self._own_link = not isinstance(target, DeviceLink)
+        self._token = token if shared else None       # presented per call, on a shared link
+        self._own_link = not shared
         if isinstance(target, str):
             target = Endpoint(target, tls, token)
         self._link = target if not self._own_link else DeviceLink(target, self.identity)
@@ -108,7 +111,8 @@ class AsyncRobot(DeviceCommands):
                        IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(link.channel),
                        EVENTS: event_service_pb2_grpc.EventServiceStub(link.channel)}
         self._state = state_service_pb2_grpc.StateServiceStub(link.channel)
-        session = link.session(self.client_name, self._on_rsvp, identity=self.identity)
+        session = link.session(self.client_name, self._on_rsvp, identity=self.identity,
+                               token=self._token)
         try:
             self._session = await session.open(timeout)
         except grpc.aio.AioRpcError as error:
@@ -247,7 +251,8 @@ class AsyncRobot(DeviceCommands):
     # ---- every command goes through here ----
 
     def _metadata(self) -> tuple[tuple[str, str], ...]:
-        return self._session.metadata() if self._session else self.identity.metadata()
+        return self._session.metadata() if self._session else (
+            *self.identity.metadata(), *bearer(self._token))
 
     async def invoke(self, service: str, rpc: str, request, started: bool = False,
                      timeout: float | None = None):

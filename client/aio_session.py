@@ -28,6 +28,7 @@ from typing import Awaitable, Callable
 
 import grpc
 
+from landscape.client.credentials import bearer
 from landscape.client.errors import SessionEnded
 from landscape.client.identity import Identity
 from landscape.client.keeper import Keeper
@@ -48,14 +49,18 @@ EndListener = Callable[["SessionEnded | None"], None]
 class AsyncSession:
     """One session: opened by `open` (or `async with`), closed by `close` (the device then runs
     its disconnect handler if it held the lock). `device` is a Keeper (a program's: see
-    DeviceLink.session) or a grpc.aio channel of the caller's."""
+    DeviceLink.session) or a grpc.aio channel of the caller's. identity: who calls, for the
+    device's records; token: the role token this session's calls present, for a program that
+    calls for several people on one channel opened without one."""
 
     def __init__(self, device: Keeper | grpc.aio.Channel, client_name: str,
-                 on_rsvp: AsyncRsvpHandler | None = None, *, identity: Identity | None = None):
+                 on_rsvp: AsyncRsvpHandler | None = None, *, identity: Identity | None = None,
+                 token: str | None = None):
         self._device = device
         self.client_name = client_name
         self.on_rsvp = on_rsvp
         self.identity = identity or Identity(client_name)
+        self._caller = (*self.identity.metadata(), *bearer(token))   # on every call
         self.session_id = ""
         self.session_secret = ""
         self.lease: str | None = None
@@ -121,9 +126,9 @@ class AsyncSession:
         self.lease = None
 
     def metadata(self) -> tuple[tuple[str, str], ...]:
-        """What every call of this session carries: who calls (identity.py), and the lease
-        once locked."""
-        return (*self.identity.metadata(), *(((LEASE_KEY, self.lease),) if self.lease else ()))
+        """What every call of this session carries: who calls (identity.py), its token if it
+        has its own, and the lease once locked."""
+        return (*self._caller, *(((LEASE_KEY, self.lease),) if self.lease else ()))
 
     def add_end_listener(self, listener: EndListener) -> None:
         """`listener(lost)` is called on this loop when the session ends (lost: None when this
@@ -184,13 +189,14 @@ class AsyncSession:
         self._outgoing = asyncio.Queue()
         self._outgoing.put_nowait(pb.ConnectRequest(hello=pb.Hello(client_name=self.client_name)))
         stub = session_service_pb2_grpc.SessionServiceStub(self._keeper.channel)
-        call = stub.Connect(self._requests(), metadata=self.identity.metadata())
+        call = stub.Connect(self._requests(), metadata=self._caller)
         try:
             async with asyncio.timeout(timeout):
                 first = await call.read()
             if first is grpc.aio.EOF:
                 raise ConnectionError("the device server closed the session at once")
         except BaseException as error:
+            self._outgoing.put_nowait(None)
             call.cancel()
             opened.set_exception(error if isinstance(error, Exception) else ConnectionError(
                 "the session was closed while opening"))
@@ -209,6 +215,7 @@ class AsyncSession:
             code, details = grpc.StatusCode.CANCELLED, CLOSED_BY_CLIENT
         finally:
             sender.cancel()
+            self._outgoing.put_nowait(None)    # the request stream ends: grpc's task with it
             call.cancel()
             self._to_caller(self._ended, code, details)
 
@@ -216,7 +223,7 @@ class AsyncSession:
         stub = device_service_pb2_grpc.DeviceServiceStub(self._keeper.channel)
         return await stub.Lock(control_pb2.LockRequest(
             session_id=self.session_id, session_secret=self.session_secret),
-            metadata=self.identity.metadata(), timeout=timeout)
+            metadata=self._caller, timeout=timeout)
 
     async def _requests(self):
         while (item := await self._outgoing.get()) is not None:

@@ -23,7 +23,7 @@ import asyncio
 import grpc
 
 from landscape.client.aio_session import AsyncRsvpHandler, AsyncSession
-from landscape.client.credentials import Endpoint
+from landscape.client.credentials import Endpoint, bearer
 from landscape.client.errors import ServerUnavailable
 from landscape.client.event_feed import EventFeed
 from landscape.client.identity import Identity
@@ -35,13 +35,17 @@ from landscape.v1 import state_service_pb2
 class DeviceLink:
     """`device`: an Endpoint (the link opens its channels and a keeper thread), or a grpc.aio
     channel of the caller's (then the session streams run on its loop, which must stay free,
-    and the caller closes it)."""
+    and the caller closes it). `token`: the role token the link's own calls (its feeds)
+    present, when the endpoint has none because each session presents its person's
+    (session(token=...)); with the endpoint's token, every call presents that one."""
 
     def __init__(self, device: Endpoint | grpc.aio.Channel, identity: Identity, *,
+                 token: str | None = None,
                  state: state_service_pb2.StreamStateRequest | None = None):
         self.endpoint = device if isinstance(device, Endpoint) else None
         self.target = self.endpoint.target if self.endpoint else "the channel given"
         self.identity = identity
+        self.metadata = (*identity.metadata(), *bearer(token))   # on the link's own calls
         self.channel: grpc.aio.Channel | None = None if self.endpoint else device
         self.keeper: Keeper | None = None
         self.events: EventFeed | None = None
@@ -63,20 +67,20 @@ class DeviceLink:
                                         f"{timeout} s", grpc.StatusCode.UNAVAILABLE) from None
         self.keeper = (Keeper.start(self.endpoint) if self.endpoint is not None
                        else Keeper.on(self.channel))
-        metadata = self.identity.metadata()
-        self.events = EventFeed(self.channel, metadata)
+        self.events = EventFeed(self.channel, self.metadata)
         self.events.start()
         if self._state_request is not None:
-            self.state = StateFeed(self.channel, self._state_request, metadata)
+            self.state = StateFeed(self.channel, self._state_request, self.metadata)
             self.state.start()
         return self
 
     def session(self, client_name: str, on_rsvp: AsyncRsvpHandler | None = None, *,
-                identity: Identity | None = None) -> AsyncSession:
+                identity: Identity | None = None, token: str | None = None) -> AsyncSession:
         """A session (not yet open) on this link's keeper, under `identity` (the link's by
-        default). Its commands' waits end when it does (event_feed.py)."""
+        default), presenting `token` on its calls if given (a person's own). Its commands'
+        waits end when it does (event_feed.py)."""
         session = AsyncSession(self.keeper, client_name, on_rsvp,
-                               identity=identity or self.identity)
+                               identity=identity or self.identity, token=token)
         session.add_end_listener(lambda lost: self.events.wake())
         return session
 

@@ -19,6 +19,7 @@ from typing import Callable
 import grpc
 
 from landscape.client.aio_session import LEASE_KEY
+from landscape.client.credentials import CallDetails
 from landscape.v1 import control_pb2, device_service_pb2_grpc, event_service_pb2
 from landscape.v1 import session_service_pb2 as pb
 from landscape.v1 import session_service_pb2_grpc
@@ -119,7 +120,7 @@ class _LeaseInterceptor(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClient
         if not self._session.lease:
             return details
         metadata = [*(details.metadata or ()), (LEASE_KEY, self._session.lease)]
-        return _CallDetails(details.method, details.timeout, metadata, details.credentials,
+        return CallDetails(details.method, details.timeout, metadata, details.credentials,
                             details.wait_for_ready, details.compression)
 
     def intercept_unary_unary(self, continuation, details, request):
@@ -133,10 +134,3 @@ class _LeaseInterceptor(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClient
 
     def intercept_stream_stream(self, continuation, details, request_iterator):
         return continuation(self._details(details), request_iterator)
-
-
-class _CallDetails(grpc.ClientCallDetails):
-    def __init__(self, method, timeout, metadata, credentials, wait_for_ready, compression):
-        self.method, self.timeout, self.metadata = method, timeout, metadata
-        self.credentials, self.wait_for_ready, self.compression = (credentials, wait_for_ready,
-                                                                   compression)

@@ -202,7 +202,7 @@ async def move_screw(session, cmd: m.MoveScrew) -> str:
     helix = await helix_off_loop(here, center, axis, turn, advance, steps)
     points = [(pose, speed, accel) for pose in helix]
     await run_path(session, cmd.command_id, points, True, overrides)
-    return await _check_end(session, points[-1][0], cmd.start)
+    return await _check_end(session, np.array(helix[-1]), cmd.start)
 
 
 async def actuate_joints(session, cmd: m.ActuateJoints) -> str:

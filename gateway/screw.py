@@ -36,18 +36,18 @@ def point_count(turn: float, advance: float, radius: float) -> int:
 
 
 def helix(start: np.ndarray, center: np.ndarray, axis: np.ndarray, turn: float,
-          advance: float, steps: int) -> np.ndarray:
-    """(steps, 6) SI x, y, z, roll, pitch, yaw: `start` (4x4, m) turned by `turn` rad about the
-    unit `axis` through `center` (3,) and advanced `advance` m along it, in `steps` equal parts
-    (the start itself not included)."""
+          advance: float, steps: int) -> list[list[float]]:
+    """`steps` SI poses x, y, z, roll, pitch, yaw: `start` (4x4, m) turned by `turn` rad about
+    the unit `axis` through `center` (3,) and advanced `advance` m along it, in equal parts (the
+    start itself not included). Plain floats: numpy's cost ten times as much in a request."""
     fractions = np.arange(1, steps + 1) / steps
     spins = Rotation.from_rotvec(np.outer(fractions * turn, axis)).as_matrix()     # (N, 3, 3)
     positions = (center + spins @ (start[:3, 3] - center)
                  + np.outer(fractions * advance, axis))
     angles = Rotation.from_matrix(spins @ start[:3, :3]).as_euler("xyz")
-    return np.hstack([positions, angles])
+    return np.hstack([positions, angles]).tolist()
 
 
-async def helix_off_loop(*args) -> np.ndarray:
+async def helix_off_loop(*args) -> list[list[float]]:
     """`helix(*args)` on the loop's worker threads."""
     return await asyncio.get_running_loop().run_in_executor(None, functools.partial(helix, *args))

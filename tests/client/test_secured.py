@@ -6,7 +6,8 @@ import asyncio
 
 import pytest
 
-from landscape.client import (AsyncRobot, ClientTLS, Frame, NotAllowed, Robot, open_aio_channel)
+from landscape.client import (AsyncRobot, ClientTLS, DeviceLink, Endpoint, Frame, Identity,
+                              NotAllowed, Robot, open_aio_channel)
 from landscape.client.errors import TransportError
 from landscape.server.states import State
 
