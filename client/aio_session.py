@@ -64,7 +64,6 @@ class AsyncSession:
         self.session_id = ""
         self.session_secret = ""
         self.lease: str | None = None
-        self.keepalive_timeout = 0.0            # s without a keep-alive the device allows
         self.rsvp_requests: asyncio.Queue = asyncio.Queue()   # every question asked
         self.ended = asyncio.Event()
         self.end_status: grpc.StatusCode | None = None   # how the stream ended
@@ -95,7 +94,6 @@ class AsyncSession:
         self._stream = self._keeper.submit(self._run(opened, timeout))
         reply = await asyncio.wrap_future(opened)
         self.session_id, self.session_secret = reply.session_id, reply.session_secret
-        self.keepalive_timeout = reply.keepalive_timeout_ms / 1000.0
         return self
 
     async def close(self, timeout: float = 5.0) -> None:

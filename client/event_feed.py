@@ -2,7 +2,8 @@
 the commands it started followed by their command ids.
 
 The subscription starts live (replaying the device's history costs about 0.7 ms per kept
-event) and is `ready` once the device has registered it (it sends the call's headers then), so
+event; `replay` asks for it, for a program that shows the history) and is `ready` once the
+device has registered it (it sends the call's headers then), so
 a command started after `ready()` cannot have events the feed misses. When the stream breaks it
 is opened again after the last event seen, so nothing is missed across the gap; a device that
 restarted (it no longer has that event: OUT_OF_RANGE) is followed live again, its command ids
@@ -34,9 +35,10 @@ LOSS_GRACE = 5.0      # s for a session's end after the device said its lock hol
 
 
 class EventFeed:
-    def __init__(self, channel: grpc.aio.Channel, metadata=()):
+    def __init__(self, channel: grpc.aio.Channel, metadata=(), replay: bool = False):
         self._stub = event_service_pb2_grpc.EventServiceStub(channel)
         self._metadata = tuple(metadata)
+        self._replay = replay
         self.log = CommandLog()
         self.listeners: list[Callable[[pb.Event], None]] = []
         self.failure = ""                    # why the stream is down, while it is
@@ -72,7 +74,7 @@ class EventFeed:
 
     async def _run(self) -> None:
         pause = RETRY_FIRST
-        after: int | None = None             # live first; then after the last event seen
+        after: int | None = 0 if self._replay else None   # then after the last event seen
         while True:
             try:
                 await self._stream(after)

@@ -37,11 +37,14 @@ class DeviceLink:
     channel of the caller's (then the session streams run on its loop, which must stay free,
     and the caller closes it). `token`: the role token the link's own calls (its feeds)
     present, when the endpoint has none because each session presents its person's
-    (session(token=...)); with the endpoint's token, every call presents that one."""
+    (session(token=...)); with the endpoint's token, every call presents that one. `state`:
+    the live state stream to keep (rate, frame, units), if any. `replay_events`: the event
+    feed starts with the device's kept history (for a program that shows it)."""
 
     def __init__(self, device: Endpoint | grpc.aio.Channel, identity: Identity, *,
                  token: str | None = None,
-                 state: state_service_pb2.StreamStateRequest | None = None):
+                 state: state_service_pb2.StreamStateRequest | None = None,
+                 replay_events: bool = False):
         self.endpoint = device if isinstance(device, Endpoint) else None
         self.target = self.endpoint.target if self.endpoint else "the channel given"
         self.identity = identity
@@ -51,6 +54,7 @@ class DeviceLink:
         self.events: EventFeed | None = None
         self.state: StateFeed | None = None
         self._state_request = state
+        self._replay = replay_events
 
     async def open(self, timeout: float | None = 10.0) -> "DeviceLink":
         """Channels, keeper and feeds; with a timeout, ServerUnavailable if the device does not
@@ -67,7 +71,7 @@ class DeviceLink:
                                         f"{timeout} s", grpc.StatusCode.UNAVAILABLE) from None
         self.keeper = (Keeper.start(self.endpoint) if self.endpoint is not None
                        else Keeper.on(self.channel))
-        self.events = EventFeed(self.channel, self.metadata)
+        self.events = EventFeed(self.channel, self.metadata, self._replay)
         self.events.start()
         if self._state_request is not None:
             self.state = StateFeed(self.channel, self._state_request, self.metadata)
