@@ -115,7 +115,7 @@ class AsyncRobot(DeviceCommands):
                                token=self._token)
         try:
             self._session = await session.open(timeout)
-        except grpc.aio.AioRpcError as error:
+        except grpc.RpcError as error:
             refused = from_rpc_error(error, "Connect")
             if not isinstance(refused, NotAllowed):
                 await self.close()
@@ -158,7 +158,7 @@ class AsyncRobot(DeviceCommands):
         await self._link.events.ready(FENCE_TIMEOUT)   # its commands' events will be seen
         try:
             return await self._session.lock(timeout)
-        except grpc.aio.AioRpcError as error:
+        except grpc.RpcError as error:
             raise from_rpc_error(error, "Lock") from None
 
     @contextlib.asynccontextmanager

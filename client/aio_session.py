@@ -8,9 +8,9 @@ keep-alives, the lock's lease, the device's RSVP questions, and the session's en
         device = DeviceServiceStub(link.channel)
         await device.Activate(ActivateRequest(), metadata=session.metadata())
 
-The stream runs on a Keeper (keeper.py): a loop and a channel of its own, so the keep-alives go
-out however busy the caller's loop is. Given a grpc.aio channel instead (the caller's own),
-the stream runs on that channel's loop, which must then stay free.
+The stream runs on a Keeper's threads (keeper.py), so the keep-alives go out however busy the
+caller's loop is. Given a grpc.aio channel instead (the caller's own), the stream runs on that
+channel's loop (loop_stream.py), which must then stay free.
 
 When the device ends the session (no keep-alive arrived in time, the server stopped), `ended`
 is set, `lost` says why in the device's words (errors.SessionEnded), and the end listeners are
@@ -21,7 +21,6 @@ here takes it back. RSVP questions go to `on_rsvp` (a plain or async function re
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import inspect
 import logging
 from typing import Awaitable, Callable
@@ -32,14 +31,13 @@ from landscape.client.credentials import bearer
 from landscape.client.errors import SessionEnded
 from landscape.client.identity import Identity
 from landscape.client.keeper import Keeper
-from landscape.v1 import control_pb2, device_service_pb2_grpc, event_service_pb2
+from landscape.client.loop_stream import LoopStream
+from landscape.v1 import control_pb2, event_service_pb2
 from landscape.v1 import session_service_pb2 as pb
-from landscape.v1 import session_service_pb2_grpc
 
 log = logging.getLogger(__name__)
 
 LEASE_KEY = "landscape-lease"
-CLOSED_BY_CLIENT = "closed by this client"
 
 AsyncRsvpHandler = Callable[[event_service_pb2.RsvpRequest],
                             "tuple[str, list[str]] | None | Awaitable[tuple[str, list[str]] | None]"]
@@ -70,11 +68,8 @@ class AsyncSession:
         self.end_details = ""
         self.lost: SessionEnded | None = None   # why the device ended it, if it did
         self._listeners: list[EndListener] = []
-        self._keeper: Keeper | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._stream: concurrent.futures.Future | None = None
-        self._outgoing: asyncio.Queue | None = None   # on the keeper's loop
-        self._lapsed = False       # the keeper stalled past the device's keep-alive timeout
+        self._stream = None
         self._closing = False
 
     async def __aenter__(self) -> "AsyncSession":
@@ -83,18 +78,24 @@ class AsyncSession:
     async def __aexit__(self, *exc) -> None:
         await self.close()
 
-    # ---- the caller's side ----------------------------------------------------------------
-
     async def open(self, timeout: float = 10.0) -> "AsyncSession":
-        """Open the stream; raises the call's grpc.aio.AioRpcError if the device refuses."""
+        """Open the stream; raises the call's grpc.RpcError if the device refuses."""
         self._loop = asyncio.get_running_loop()
-        self._keeper = self._device if isinstance(self._device, Keeper) else Keeper.on(
-            self._device)
-        opened: concurrent.futures.Future = concurrent.futures.Future()
-        self._stream = self._keeper.submit(self._run(opened, timeout))
-        reply = await asyncio.wrap_future(opened)
-        self.session_id, self.session_secret = reply.session_id, reply.session_secret
+        hello = pb.ConnectRequest(hello=pb.Hello(client_name=self.client_name))
+        make = self._device.stream if isinstance(self._device, Keeper) else self._on_loop
+        self._stream = make(hello, self._caller, self._message, self._end)
+        try:
+            async with asyncio.timeout(timeout):
+                opened = await asyncio.wrap_future(self._stream.opened)
+        except BaseException:
+            self._closing = True
+            self._stream.cancel()
+            raise
+        self.session_id, self.session_secret = opened.session_id, opened.session_secret
         return self
+
+    def _on_loop(self, *args) -> LoopStream:
+        return LoopStream(self._device, *args)
 
     async def close(self, timeout: float = 5.0) -> None:
         """End the session (the device stops, deactivates and releases if it held the lock)."""
@@ -112,10 +113,15 @@ class AsyncSession:
     async def lock(self, timeout: float = 10.0) -> str:
         """Take the lock for this session; returns the lease (also kept for `metadata()`).
         A session the device ended raises SessionEnded: the lock is never taken back by
-        itself, a new session must ask for it."""
+        itself, a new session must ask for it. A refusal is the call's grpc.RpcError."""
         if self.lost is not None:
             raise self.lost
-        reply = await self._keeper.run(self._lock(timeout))
+        request = control_pb2.LockRequest(session_id=self.session_id,
+                                          session_secret=self.session_secret)
+        if isinstance(self._device, Keeper):
+            reply = await asyncio.to_thread(self._device.lock, request, self._caller, timeout)
+        else:
+            reply = await self._stream.lock(request, self._caller, timeout)
         self.lease = reply.lease
         return self.lease
 
@@ -147,6 +153,23 @@ class AsyncSession:
                 pass
         return self.lost
 
+    # ---- from the stream (any thread) ------------------------------------------------------
+
+    def _message(self, message: pb.ConnectResponse) -> None:
+        if message.WhichOneof("message") == "rsvp_request":
+            self._to_caller(self._asked, message.rsvp_request)
+
+    def _end(self, code: grpc.StatusCode, details: str) -> None:
+        self._to_caller(self._ended, code, details)
+
+    def _to_caller(self, callback, *args) -> None:
+        try:
+            self._loop.call_soon_threadsafe(callback, *args)
+        except RuntimeError:     # the caller's loop is closed: nobody is left to tell
+            pass
+
+    # ---- on the caller's loop ------------------------------------------------------------
+
     def _ended(self, code: grpc.StatusCode, details: str) -> None:
         self.end_status, self.end_details = code, details
         held = self.lease is not None
@@ -171,80 +194,5 @@ class AsyncSession:
         if answer is None or self.ended.is_set():
             return   # left to the device's timeout
         choice, data = answer
-        self._keeper.call_soon(self._send, pb.ConnectRequest(
-            rsvp_answer=event_service_pb2.RsvpAnswer(rsvp_id=request.rsvp_id, choice=choice,
-                                                     data=data)))
-
-    def _to_caller(self, callback, *args) -> None:
-        try:
-            self._loop.call_soon_threadsafe(callback, *args)
-        except RuntimeError:     # the caller's loop is closed: nobody is left to tell
-            pass
-
-    # ---- the keeper's side: the stream ----------------------------------------------------
-
-    async def _run(self, opened: concurrent.futures.Future, timeout: float) -> None:
-        self._outgoing = asyncio.Queue()
-        self._outgoing.put_nowait(pb.ConnectRequest(hello=pb.Hello(client_name=self.client_name)))
-        stub = session_service_pb2_grpc.SessionServiceStub(self._keeper.channel)
-        call = stub.Connect(self._requests(), metadata=self._caller)
-        try:
-            async with asyncio.timeout(timeout):
-                first = await call.read()
-            if first is grpc.aio.EOF:
-                raise ConnectionError("the device server closed the session at once")
-        except BaseException as error:
-            self._outgoing.put_nowait(None)
-            call.cancel()
-            opened.set_exception(error if isinstance(error, Exception) else ConnectionError(
-                "the session was closed while opening"))
-            return
-        opened.set_result(first.opened)
-        sender = asyncio.create_task(self._keep_alive(first.opened.keepalive_interval_ms / 1e3,
-                                                      first.opened.keepalive_timeout_ms / 1e3))
-        code, details = grpc.StatusCode.OK, "the device server closed it"
-        try:
-            while (message := await call.read()) is not grpc.aio.EOF:
-                if message.WhichOneof("message") == "rsvp_request":
-                    self._to_caller(self._asked, message.rsvp_request)
-        except grpc.aio.AioRpcError as error:
-            code, details = error.code(), error.details() or error.code().name
-        except asyncio.CancelledError:
-            code, details = grpc.StatusCode.CANCELLED, CLOSED_BY_CLIENT
-        finally:
-            sender.cancel()
-            self._outgoing.put_nowait(None)    # the request stream ends: grpc's task with it
-            call.cancel()
-            self._to_caller(self._ended, code, details)
-
-    async def _lock(self, timeout: float) -> control_pb2.LockResponse:
-        stub = device_service_pb2_grpc.DeviceServiceStub(self._keeper.channel)
-        return await stub.Lock(control_pb2.LockRequest(
-            session_id=self.session_id, session_secret=self.session_secret),
-            metadata=self._caller, timeout=timeout)
-
-    async def _requests(self):
-        while (item := await self._outgoing.get()) is not None:
-            yield item
-
-    async def _keep_alive(self, interval: float, timeout: float) -> None:
-        """A keep-alive every `interval` s. If this thread was held up past the device's
-        `timeout` (the whole process stopped, the machine suspended), the device has ended the
-        session: nothing more is sent, and the stream's end says why (a write after the
-        device's status would hide it: grpc.aio reports it as INTERNAL, grpc/grpc#36066)."""
-        loop = asyncio.get_running_loop()
-        counter, last = 0, loop.time()
-        while True:
-            await asyncio.sleep(interval)
-            if loop.time() - last >= timeout:
-                self._lapsed = True
-                log.info("session %s: no keep-alive could go out for %.1f s", self.session_id,
-                         loop.time() - last)
-                return
-            last = loop.time()
-            counter += 1
-            self._send(pb.ConnectRequest(keep_alive=pb.KeepAlive(counter=counter)))
-
-    def _send(self, request: pb.ConnectRequest) -> None:
-        if not self._lapsed:
-            self._outgoing.put_nowait(request)
+        self._stream.send(pb.ConnectRequest(rsvp_answer=event_service_pb2.RsvpAnswer(
+            rsvp_id=request.rsvp_id, choice=choice, data=data)))

@@ -8,7 +8,7 @@
 A link holds, for all the program's users of one device (a gateway's CRCL connections, a
 supervisor's browsers, a script's one robot):
 - `channel`: the program's channel on its own loop, for calls;
-- `keeper`: the thread, loop and channel where the session streams and their keep-alives run
+- `keeper`: the channel and threads where the session streams and their keep-alives run
   (keeper.py), so no computation on the program's loop can starve them;
 - `events`: one event subscription, which follows every command by its id (event_feed.py);
 - `state` (when asked for): one live state stream, its newest sample at hand (state_feed.py);
@@ -33,9 +33,9 @@ from landscape.v1 import state_service_pb2
 
 
 class DeviceLink:
-    """`device`: an Endpoint (the link opens its channels and a keeper thread), or a grpc.aio
-    channel of the caller's (then the session streams run on its loop, which must stay free,
-    and the caller closes it). `token`: the role token the link's own calls (its feeds)
+    """`device`: an Endpoint (the link opens its channels and a keeper), or a grpc.aio channel
+    of the caller's (then the session streams run on its loop, which must stay free, and the
+    caller closes it). `token`: the role token the link's own calls (its feeds)
     present, when the endpoint has none because each session presents its person's
     (session(token=...)); with the endpoint's token, every call presents that one. `state`:
     the live state stream to keep (rate, frame, units), if any. `replay_events`: the event
@@ -69,8 +69,7 @@ class DeviceLink:
                 await self._close_channel()
                 raise ServerUnavailable(f"no device server at {self.target} answered within "
                                         f"{timeout} s", grpc.StatusCode.UNAVAILABLE) from None
-        self.keeper = (Keeper.start(self.endpoint) if self.endpoint is not None
-                       else Keeper.on(self.channel))
+        self.keeper = Keeper.start(self.endpoint) if self.endpoint is not None else None
         self.events = EventFeed(self.channel, self.metadata, self._replay)
         self.events.start()
         if self._state_request is not None:
@@ -80,10 +79,10 @@ class DeviceLink:
 
     def session(self, client_name: str, on_rsvp: AsyncRsvpHandler | None = None, *,
                 identity: Identity | None = None, token: str | None = None) -> AsyncSession:
-        """A session (not yet open) on this link's keeper, under `identity` (the link's by
-        default), presenting `token` on its calls if given (a person's own). Its commands'
-        waits end when it does (event_feed.py)."""
-        session = AsyncSession(self.keeper, client_name, on_rsvp,
+        """A session (not yet open) on this link's keeper (or the channel given), under
+        `identity` (the link's by default), presenting `token` on its calls if given (a
+        person's own). Its commands' waits end when it does (event_feed.py)."""
+        session = AsyncSession(self.keeper or self.channel, client_name, on_rsvp,
                                identity=identity or self.identity, token=token)
         session.add_end_listener(lambda lost: self.events.wake())
         return session
@@ -93,7 +92,7 @@ class DeviceLink:
             if feed is not None:
                 await feed.close()
         if self.keeper is not None:
-            await asyncio.to_thread(self.keeper.close)
+            self.keeper.close()
         await self._close_channel()
 
     async def _close_channel(self) -> None:

@@ -31,7 +31,8 @@ class Gateway:
     device: CrclDevice
     options: GatewayOptions
     server: asyncio.base_events.Server | None = None
-    connections: set = field(default_factory=set)    # their tasks
+    connections: set = field(default_factory=set)    # their tasks, until they have ended
+    reading: set = field(default_factory=set)        # those not ending yet
 
     @property
     def port(self) -> int:
@@ -48,7 +49,7 @@ class Gateway:
         closes: the device stops the arm and frees the lock), its socket closed in order."""
         if self.server is not None:
             self.server.close()
-            for task in list(self.connections):
+            for task in list(self.reading):   # one ending already finishes in its own time
                 task.cancel()
             await asyncio.gather(*self.connections, return_exceptions=True)
             await self.server.wait_closed()
@@ -59,6 +60,7 @@ class Gateway:
         splitter = DocumentSplitter(self.options.max_document)
         log.debug("%s connected", session.name)
         self.connections.add(asyncio.current_task())
+        self.reading.add(asyncio.current_task())
         closing = ""                      # why the gateway ends the connection, if it does
         try:
             while data := await self._read(reader, splitter):
@@ -84,17 +86,26 @@ class Gateway:
         except asyncio.CancelledError:
             pass                          # the gateway is closing (close()): end in order
         finally:
-            self.connections.discard(asyncio.current_task())
+            self.reading.discard(asyncio.current_task())
             if closing:                   # the one line this connection gets
                 log.warning("%s: closing: %s", session.name, closing)
             else:
                 log.info("%s disconnected", session.name)
-            await session.close()
-            writer.close()
             try:
-                await writer.wait_closed()
-            except ConnectionError:
-                pass
+                await self._end(session, writer)
+            finally:
+                self.connections.discard(asyncio.current_task())
+
+    @staticmethod
+    async def _end(session: CrclSession, writer: asyncio.StreamWriter) -> None:
+        """The connection's session ends (the device stops the arm and frees the lock), then
+        its socket closes in order."""
+        await session.close()
+        writer.close()
+        try:
+            await writer.wait_closed()
+        except ConnectionError:
+            pass
 
     async def _read(self, reader: asyncio.StreamReader, splitter: DocumentSplitter) -> bytes:
         """The next bytes; TimeoutError if a started document gets none for document_idle s

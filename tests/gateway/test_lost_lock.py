@@ -65,12 +65,13 @@ def test_a_lost_lock_is_an_error_until_init_canon_takes_it_again(paced):
         assert field(ended, "CommandState") == "CRCL_Error"
         lost = field(ended, "StateDescription")
         assert "the lock is lost" in lost and "no keep-alive for 2 s" in lost, lost
+        lost = lost.split("; the device's state is")[0]     # (the state stream may lag)
         again = client.status()                             # and so says every status
-        assert (field(again, "CommandState"), field(again, "StateDescription")) == (
-            "CRCL_Error", lost)
+        assert field(again, "CommandState") == "CRCL_Error"
+        assert field(again, "StateDescription").startswith(lost)
         later = client.run("Dwell", 4, "<DwellTime>0</DwellTime>")
         assert field(later, "CommandState") == "CRCL_Error"
-        assert field(later, "StateDescription") == lost
+        assert field(later, "StateDescription").startswith(lost)
         assert not paced.device.status().locked             # nothing took it back
         assert field(client.run("EndCanon", 5), "CommandState") == "CRCL_Done"
         assert field(client.run("InitCanon", 6), "CommandState") == "CRCL_Done"
