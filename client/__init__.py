@@ -7,7 +7,7 @@
 
 `Robot` (blocking) and `AsyncRobot` (asyncio) have a method per command of the contract;
 errors are the exceptions below (module errors). They are one client core: AsyncRobot is a
-session (AsyncSession) on a DeviceLink (a device's channel, the keeper thread where session
+session (AsyncSession) on a DeviceLink (a device's channel, the keeper threads where session
 keep-alives run, one shared event subscription and state stream), and Robot runs it on a
 loop thread. A program that serves many people on one device (a gateway, a supervisor) opens
 one DeviceLink and an AsyncRobot or AsyncSession per person on it, each with its Identity

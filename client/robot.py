@@ -100,11 +100,13 @@ class Robot(DeviceCommands):
 
     def when_lost(self, callback) -> None:
         """`callback(lost)` on a thread of the client's as soon as the device ends the session
-        (not when this program closes it)."""
+        (not when this program closes it); never without a session (a viewer's)."""
         def listener(lost):
             if lost is not None:
                 self._thread.loop.run_in_executor(None, callback, lost)
-        self._thread.loop.call_soon_threadsafe(self._robot.session.add_end_listener, listener)
+        if self._robot.session is not None:
+            self._thread.loop.call_soon_threadsafe(self._robot.session.add_end_listener,
+                                                   listener)
 
     # ---- the lock ----
 

@@ -8,7 +8,7 @@ RSVP questions, on threads.
         device.Activate(ActivateRequest())
 
 Front ends and client programs use the client core instead (AsyncRobot, Robot, DeviceLink),
-whose sessions keep their keep-alives on a keeper thread and report a lost session.
+whose sessions keep their keep-alives on keeper threads and report a lost session.
 """
 from __future__ import annotations
 

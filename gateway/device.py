@@ -2,7 +2,7 @@
 hold on it.
 
 `CrclDevice` is shared by every CRCL connection of a gateway: the core's link (the channel;
-the keeper thread where every session's keep-alives run, whatever the connections compute;
+the keeper threads where every session's keep-alives run, whatever the connections compute;
 the event feed that follows commands by id; the live state stream, world frame, m and rad),
 and the rack slots last seen. `Control` is one CRCL session's hold on the device: an
 AsyncRobot on that link, acting for the CRCL peer ("crcl <ip:port>"), that took the lock, and

@@ -34,7 +34,7 @@ def end_session(server, session_id: str, reason: str = "no keep-alive for 2 s") 
 
 def test_a_blocked_event_loop_keeps_its_session_and_lock(server):
     """The program's loop does nothing for 3 s (more than the device's 2 s keep-alive
-    timeout): the keep-alives go out from the keeper thread all the same."""
+    timeout): the keep-alives go out from the keeper's threads all the same."""
     async def body():
         async with AsyncRobot(server.target, "busy") as robot:
             await robot.lock()

@@ -38,7 +38,7 @@ def paced():
 
 def test_a_blocked_gateway_loop_keeps_its_lock(server, gateway, client):
     """The gateway's loop does nothing for 3 s (past the device's 2 s keep-alive timeout):
-    the keep-alives go out from the core's keeper thread all the same."""
+    the keep-alives go out from the core's keeper threads all the same."""
     holder = server.device.status().lock_holder
     gateway.loop.call_soon_threadsafe(time.sleep, 3.0)
     time.sleep(3.5)
