@@ -41,6 +41,8 @@ def helix(start: np.ndarray, center: np.ndarray, axis: np.ndarray, turn: float,
     the unit `axis` through `center` (3,) and advanced `advance` m along it, in equal parts (the
     start itself not included). Plain floats: numpy's cost ten times as much in a request."""
     fractions = np.arange(1, steps + 1) / steps
+    # All points in one call each: scipy's rotations are batched (pinocchio's exp3 and
+    # matrixToRpy take one rotation a call); "xyz" extrinsic is the device's R = Rz Ry Rx.
     spins = Rotation.from_rotvec(np.outer(fractions * turn, axis)).as_matrix()     # (N, 3, 3)
     positions = (center + spins @ (start[:3, 3] - center)
                  + np.outer(fractions * advance, axis))
