@@ -1,4 +1,4 @@
-"""`AsyncRobot`: the asyncio twin of `Robot`, on a grpc.aio channel.
+"""`AsyncRobot`: one device server for asyncio programs, the client core every front end uses.
 
     async with AsyncRobot("127.0.0.1:50051", "my-program") as robot:   # or tls=, token=
         async with robot.control():
@@ -7,12 +7,16 @@
         async for event in robot.events():
             ...
 
-The command methods are Robot's (commands.py); here each returns an awaitable. Must be used
-from one event loop.
+The command methods are in commands.py; here each returns an awaitable. A robot is a session
+(aio_session.py) on a DeviceLink (link.py): its own link for a "host:port" or Endpoint, or a
+link the program shares among many robots (the gateway's CRCL connections each have one).
+Must be used from one event loop. If the device ends the session (errors.SessionEnded: it
+stopped the arm and freed the lock), the command waited for and every later call that needed
+the lock raise it with the device's reason; `lock()` raises it too: a program that wants the
+lock back opens a new AsyncRobot.
 """
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 from dataclasses import dataclass, field
@@ -21,14 +25,16 @@ from typing import AsyncIterator, Sequence
 import grpc
 
 from landscape.client.aio_session import AsyncRsvpHandler, AsyncSession
+from landscape.client.aio_streams import (AsyncEventStream, AsyncStateStream, state_request,
+                                          subscribe_request)
 from landscape.client.commands import (DEVICE, EVENTS, IO, RELINQUISH_MAX_STEPS,
                                        RELINQUISH_STEP, DeviceCommands, jog_request)
-from landscape.client.credentials import ClientTLS, open_aio_channel
-from landscape.client.errors import (CommandRefused, CommandTimeout, LandscapeError,
-                                     NotAllowed, NotLockHolder, ServerUnavailable, SessionEnded,
-                                     from_rpc_error)
-from landscape.client.streams import state_request, subscribe_request
-from landscape.client.tracking import ALARM_GRACE, CommandLog
+from landscape.client.credentials import ClientTLS, Endpoint, bearer
+from landscape.client.errors import (CommandRefused, NotAllowed, NotLockHolder, SessionEnded,
+                                     WrongState, from_rpc_error)
+from landscape.client.event_feed import LOSS_GRACE, EventFeed
+from landscape.client.identity import Identity
+from landscape.client.link import DeviceLink
 from landscape.client.values import DeviceState, Frame
 from landscape.v1 import (device_service_pb2_grpc, digital_io_service_pb2_grpc, event_service_pb2,
                           event_service_pb2_grpc, sensing_pb2, state_service_pb2,
@@ -37,162 +43,93 @@ from landscape.v1 import (device_service_pb2_grpc, digital_io_service_pb2_grpc, 
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT = 30.0   # seconds, for a blocking call that names none
-FENCE_TIMEOUT = 2.0      # seconds for the command subscription to prove live (tracking.py)
-
-
-class _AsyncTracker:
-    """Reads one event subscription in a task into a CommandLog and wakes waiters."""
-
-    def __init__(self, call):
-        self._call = call
-        self._log = CommandLog()
-        self._changed = asyncio.Condition()
-        self._ended: LandscapeError | None = None
-        self._task = asyncio.create_task(self._run())
-
-    async def close(self) -> None:
-        self._call.cancel()
-        self._task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await self._task
-
-    async def _run(self) -> None:
-        error: LandscapeError = SessionEnded("the event stream ended")
-        try:
-            async for reply in self._call:
-                async with self._changed:
-                    self._log.record(reply.event)
-                    self._changed.notify_all()
-        except grpc.aio.AioRpcError as failure:
-            error = from_rpc_error(failure)
-        finally:
-            self._ended = error
-            async with self._changed:
-                self._changed.notify_all()
-
-    async def wait(self, command_id: str, timeout: float) -> event_service_pb2.Event:
-        try:
-            async with asyncio.timeout(timeout):
-                await self._until(lambda: self._log.final(command_id) is not None, command_id)
-        except TimeoutError:
-            raise CommandTimeout(f"{command_id} did not end in time (it may still run)") from None
-        with contextlib.suppress(TimeoutError):   # a failure's alarm follows its event
-            async with asyncio.timeout(ALARM_GRACE):
-                await self._until(lambda: not self._log.needs_alarm(command_id), command_id)
-        return self._log.outcome(command_id)
-
-    async def follow(self, command_id: str, timeout: float):
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + timeout
-        seen = 0
-        while self._log.final(command_id) is None or seen < len(self._log.events(command_id)):
-            try:
-                async with asyncio.timeout_at(deadline):
-                    await self._until(lambda: len(self._log.events(command_id)) > seen,
-                                      command_id)
-            except TimeoutError:
-                raise CommandTimeout(f"{command_id} did not end in time") from None
-            fresh = self._log.events(command_id)[seen:]
-            seen += len(fresh)
-            for event in fresh:
-                yield event
-        await self.wait(command_id, max(0.0, deadline - loop.time()))   # raises on failure
-
-    async def wait_live(self, timeout: float) -> bool:
-        """Whether the subscription delivered an event within `timeout` s (see tracking.py)."""
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(timeout), self._changed:
-                await self._changed.wait_for(lambda: self._log.received or self._ended)
-        return self._log.received > 0
-
-    def events(self, command_id: str) -> list[event_service_pb2.Event]:
-        return self._log.events(command_id)
-
-    async def _until(self, predicate, command_id: str) -> None:
-        async with self._changed:
-            while not predicate():
-                self._log.check_not_lost(command_id)
-                if self._ended is not None:
-                    raise self._ended
-                await self._changed.wait()
+FENCE_TIMEOUT = 5.0      # seconds for the event subscription to be registered (event_feed.py)
 
 
 @dataclass
 class AsyncCommand:
-    """A started non-blocking command (see command.Command), awaited on the event loop."""
+    """A started non-blocking command: its id (named by its events) and the reply's RetVal."""
     command_id: str
     command: str
     ret_val: types_pb2.RetVal
-    _tracker: _AsyncTracker = field(repr=False)
+    _feed: EventFeed = field(repr=False)
+    _session: AsyncSession | None = field(repr=False, default=None)
 
-    async def wait(self, timeout: float = 60.0) -> event_service_pb2.Event:
-        """Its done event; raises CommandFailed / CommandAborted / CommandTimeout."""
-        return await self._tracker.wait(self.command_id, timeout)
+    async def wait(self, timeout: float | None = 60.0) -> event_service_pb2.Event:
+        """Its done event; raises CommandFailed (with the alarm) / CommandAborted when it ends
+        otherwise, SessionEnded if its session was lost, CommandTimeout after `timeout` s."""
+        return await self._feed.wait(self.command_id, timeout, self._session)
 
-    def follow(self, timeout: float = 60.0) -> AsyncIterator[event_service_pb2.Event]:
+    def follow(self, timeout: float | None = 60.0) -> AsyncIterator[event_service_pb2.Event]:
         """`async for` each of its events, ending with the done event (raises as `wait`)."""
-        return self._tracker.follow(self.command_id, timeout)
+        return self._feed.follow(self.command_id, timeout, self._session)
 
     @property
     def events(self) -> list[event_service_pb2.Event]:
-        return self._tracker.events(self.command_id)
+        return self._feed.events(self.command_id)
 
 
 class AsyncRobot(DeviceCommands):
-    """Robot for asyncio programs. target: "host:port" (with `tls` and `token` as Robot's), or
-    an open grpc.aio.Channel (then the caller closes it). on_rsvp may be a plain or an async
-    function."""
+    """target: "host:port" (with `tls` and `token`), an Endpoint, an open grpc.aio.Channel (the
+    caller closes it; the session's keep-alives then share its loop), or a DeviceLink shared
+    with other robots (opened and closed by its owner; `token` is then this robot's own, on
+    each of its calls: a person's, on a link opened without one). client_name: shown to other
+    clients as the lock holder. identity: who calls, for the device's records (identity.py;
+    default: client_name for itself). on_rsvp: answers the device's RSVP questions (a plain or
+    async function; see AsyncSession)."""
 
-    def __init__(self, target: str | grpc.aio.Channel, client_name: str = "landscape-client", *,
+    def __init__(self, target: str | Endpoint | grpc.aio.Channel | DeviceLink,
+                 client_name: str = "landscape-client", *,
                  on_rsvp: AsyncRsvpHandler | None = None, tls: ClientTLS | None = None,
-                 token: str | None = None):
-        self._own_channel = isinstance(target, str)
-        if not self._own_channel and (tls is not None or token):
+                 token: str | None = None, identity: Identity | None = None):
+        shared = isinstance(target, DeviceLink)
+        if not isinstance(target, str) and (tls is not None or token and not shared):
             raise ValueError("TLS and the token belong to the channel: give them to "
                              "open_aio_channel, or give AsyncRobot a \"host:port\"")
-        self.target = target if self._own_channel else "the channel given"
-        self._credentials = (tls, token)
-        self._given = None if self._own_channel else target
         self.client_name = client_name
+        self.identity = identity or Identity(client_name)
+        self._token = token if shared else None       # presented per call, on a shared link
+        self._own_link = not shared
+        if isinstance(target, str):
+            target = Endpoint(target, tls, token)
+        self._link = target if not self._own_link else DeviceLink(target, self.identity)
+        self.target = self._link.target
         self._on_rsvp = on_rsvp
-        self._channel: grpc.aio.Channel | None = None
         self._session: AsyncSession | None = None
         self._no_session: NotAllowed | None = None   # why there is no session, if refused
-        self._tracker: _AsyncTracker | None = None
 
     async def open(self, timeout: float = 10.0) -> "AsyncRobot":
-        self._channel = (open_aio_channel(self.target, *self._credentials) if self._own_channel
-                         else self._given)
-        try:
-            await asyncio.wait_for(self._channel.channel_ready(), timeout)
-        except asyncio.TimeoutError:
-            if self._own_channel:
-                await self._channel.close()
-            raise ServerUnavailable(f"no device server at {self.target} answered within "
-                                    f"{timeout} s", grpc.StatusCode.UNAVAILABLE) from None
-        self._events = event_service_pb2_grpc.EventServiceStub(self._channel)
-        session = AsyncSession(self._channel, self.client_name, self._on_rsvp)
+        """The link (if this robot's own) and the session; a role token that may not open a
+        session (a viewer's) leaves the robot to reads and streams. Once open, opening again
+        does nothing."""
+        if self._session is not None or self._no_session is not None:
+            return self
+        if self._own_link:
+            await self._link.open(timeout)
+        link = self._link
+        self._stubs = {DEVICE: device_service_pb2_grpc.DeviceServiceStub(link.channel),
+                       IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(link.channel),
+                       EVENTS: event_service_pb2_grpc.EventServiceStub(link.channel)}
+        self._state = state_service_pb2_grpc.StateServiceStub(link.channel)
+        session = link.session(self.client_name, self._on_rsvp, identity=self.identity,
+                               token=self._token)
         try:
             self._session = await session.open(timeout)
-        except grpc.aio.AioRpcError as error:
-            refused = from_rpc_error(error)
+        except grpc.RpcError as error:
+            refused = from_rpc_error(error, "Connect")
             if not isinstance(refused, NotAllowed):
                 await self.close()
                 raise refused from None
-            self._no_session = refused   # a viewer's token: reads and streams only
-        self._stubs = {DEVICE: device_service_pb2_grpc.DeviceServiceStub(self._channel),
-                       IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(self._channel),
-                       EVENTS: self._events}
-        self._state = state_service_pb2_grpc.StateServiceStub(self._channel)
+            self._no_session = refused
         return self
 
     async def close(self) -> None:
-        if self._tracker is not None:
-            await self._tracker.close()
+        """End the session (the device releases the lock if it was held), and the link if it
+        is this robot's own."""
         if self._session is not None:
             await self._session.close()
-        if self._channel is not None and self._own_channel:
-            await self._channel.close()
+        if self._own_link:
+            await self._link.close()
 
     async def __aenter__(self) -> "AsyncRobot":
         return await self.open()
@@ -202,37 +139,27 @@ class AsyncRobot(DeviceCommands):
 
     @property
     def session(self) -> AsyncSession | None:
-        """None when the role token may not open a session (see Robot.session)."""
+        """The session (session_id, lease, ended, lost); None when the role token may not open
+        one (a viewer's: reads and streams only)."""
         return self._session
 
-    def _lease(self) -> tuple[tuple[str, str], ...]:
-        return self._session.metadata() if self._session else ()
+    @property
+    def lost(self) -> SessionEnded | None:
+        """Why the device ended this robot's session, if it did."""
+        return self._session.lost if self._session is not None else None
 
-    def _track_commands(self, after_sequence: int | None = None) -> _AsyncTracker:
-        """As Robot._track_commands: opened before the first lock or command."""
-        if self._tracker is None:
-            self._tracker = _AsyncTracker(self._events.Subscribe(
-                subscribe_request(after_sequence)))
-        return self._tracker
-
-    async def _live_tracker(self) -> _AsyncTracker:
-        """As Robot._live_tracker."""
-        tracker = self._track_commands()
-        if not await tracker.wait_live(FENCE_TIMEOUT):
-            log.warning("no event arrived on the command subscription; replaying the device's")
-            await tracker.close()
-            self._tracker = None
-            tracker = self._track_commands(after_sequence=0)
-        return tracker
+    # ---- the lock ----
 
     async def lock(self, timeout: float = 10.0) -> str:
+        """Seed 3.1.1: take the lock for this session; returns the lease, which every later
+        call carries. SessionEnded if the device ended the session."""
         if self._session is None:
             raise self._no_session
-        self._track_commands()   # before the lock, whose event then proves it live
+        await self._link.events.ready(FENCE_TIMEOUT)   # its commands' events will be seen
         try:
             return await self._session.lock(timeout)
-        except grpc.aio.AioRpcError as error:
-            raise from_rpc_error(error) from None
+        except grpc.RpcError as error:
+            raise from_rpc_error(error, "Lock") from None
 
     @contextlib.asynccontextmanager
     async def control(self, activate: bool = True):
@@ -246,48 +173,57 @@ class AsyncRobot(DeviceCommands):
             await self.relinquish()
 
     async def relinquish(self) -> DeviceState:
+        """Stop, abort, deactivate and release as the state needs; returns the state reached.
+        After a lost session there is nothing to hand back: the device did it."""
         state = DeviceState.UNLOCKED
         for _ in range(RELINQUISH_MAX_STEPS):
+            if self.lost is not None:
+                return state
             state = DeviceState((await self.get_device_state()).state)
             step = RELINQUISH_STEP.get(state)
             if step is None:
                 return state
             try:
                 await getattr(self, step)()
-            except (NotLockHolder, NotAllowed):   # not (or no longer) ours to hand back
+            except (NotLockHolder, NotAllowed, SessionEnded):   # not (or no longer) ours
                 return state
-            except CommandRefused as refused:
+            except CommandRefused as refused:   # the state moved on by itself: look again
                 log.debug("relinquish: %s refused: %s", step, refused)
         return state
 
+    # ---- streams ----
+
+    def event_stream(self, after_sequence: int | None = None,
+                     timeout: float | None = None) -> AsyncEventStream:
+        """Events and alarms (seed 2.1): live only, or the kept ones after `after_sequence`
+        first; with `timeout` (s) the stream raises RpcTimeout when that time is up."""
+        return AsyncEventStream(self._stubs[EVENTS].Subscribe(
+            subscribe_request(after_sequence), metadata=self._metadata(), timeout=timeout))
+
     async def events(self, after_sequence: int | None = None, timeout: float | None = None
                      ) -> AsyncIterator[event_service_pb2.Event]:
-        """`async for` events and alarms, live or from after `after_sequence` (timeout: the
-        stream raises RpcTimeout after that many seconds)."""
-        call = self._events.Subscribe(subscribe_request(after_sequence), timeout=timeout)
-        try:
-            async for reply in call:
-                yield reply.event
-        except grpc.aio.AioRpcError as error:
-            raise from_rpc_error(error) from None
-        finally:
-            call.cancel()
+        """`async for` events and alarms (see event_stream)."""
+        async with self.event_stream(after_sequence, timeout) as stream:
+            async for event in stream:
+                yield event
+
+    def state_stream(self, rate_hz: float = 10.0, frame: Frame | None = None,
+                     units: types_pb2.Units | None = None, sensors: Sequence[str] = (),
+                     timeout: float | None = None) -> AsyncStateStream:
+        """The device's state at `rate_hz` samples per second (0: every 4 ms cycle); see
+        state_service.proto."""
+        return AsyncStateStream(self._state.StreamState(
+            state_request(rate_hz, frame, units, sensors), metadata=self._metadata(),
+            timeout=timeout))
 
     async def live_state(self, rate_hz: float = 10.0, frame: Frame | None = None,
                          units: types_pb2.Units | None = None, sensors: Sequence[str] = (),
                          timeout: float | None = None
                          ) -> AsyncIterator[state_service_pb2.StateSample]:
-        """`async for` state samples (the StreamStarted terms are skipped)."""
-        call = self._state.StreamState(state_request(rate_hz, frame, units, sensors),
-                                       timeout=timeout)
-        try:
-            async for message in call:
-                if message.WhichOneof("message") == "sample":
-                    yield message.sample
-        except grpc.aio.AioRpcError as error:
-            raise from_rpc_error(error) from None
-        finally:
-            call.cancel()
+        """`async for` state samples (see state_stream)."""
+        async with self.state_stream(rate_hz, frame, units, sensors, timeout) as stream:
+            async for sample in stream:
+                yield sample
 
     async def jog(self, velocities, frame: Frame) -> AsyncIterator[sensing_pb2.JogResponse]:
         """`async for` a JogResponse (joints, pose) per message, the deadman held while
@@ -303,26 +239,52 @@ class AsyncRobot(DeviceCommands):
                     yield jog_request(velocity, frame)
             yield jog_request(None, frame)
 
-        call = self._stubs[DEVICE].Jog(requests(), metadata=self._lease())
+        call = self._stubs[DEVICE].Jog(requests(), metadata=self._metadata())
         try:
             async for reply in call:
                 yield reply
         except grpc.aio.AioRpcError as error:
-            raise from_rpc_error(error) from None
+            raise await self._refusal(error, "Jog") from None
         finally:
             call.cancel()
 
-    async def _invoke(self, service, rpc, request, started, timeout):
-        tracker = await self._live_tracker() if started else None
+    # ---- every command goes through here ----
+
+    def _metadata(self) -> tuple[tuple[str, str], ...]:
+        return self._session.metadata() if self._session else (
+            *self.identity.metadata(), *bearer(self._token))
+
+    async def invoke(self, service: str, rpc: str, request, started: bool = False,
+                     timeout: float | None = None):
+        """One call of the contract: the reply, or for a started command an AsyncCommand;
+        the client's exceptions when it fails (errors.py)."""
+        if started:
+            await self._link.events.ready(FENCE_TIMEOUT)
         try:
             reply = await getattr(self._stubs[service], rpc)(
-                request, metadata=self._lease(), timeout=timeout or DEFAULT_TIMEOUT)
+                request, metadata=self._metadata(), timeout=timeout or DEFAULT_TIMEOUT)
         except grpc.aio.AioRpcError as error:
-            raise from_rpc_error(error) from None
+            raise await self._refusal(error, rpc) from None
+        if rpc == "Release" and self._session is not None:
+            self._session.released()
         if started:
-            return AsyncCommand(reply.ret_val.command_id, rpc, reply.ret_val, tracker)
+            return AsyncCommand(reply.ret_val.command_id, rpc, reply.ret_val, self._link.events,
+                                self._session)
         return reply
+
+    async def _refusal(self, error: grpc.aio.AioRpcError, rpc: str) -> Exception:
+        """The client's exception for a failed call. Refused for want of the lock (or in a
+        state the loss left), after the device ended this session: the loss, in the device's
+        words; for want of the lock while this session held it: the loss, once its stream
+        says why (the device ends the session before it lets the lock go)."""
+        refused = from_rpc_error(error, rpc)
+        session = self._session
+        if session is None or not isinstance(refused, (NotLockHolder, WrongState)):
+            return refused
+        if session.lost is None and isinstance(refused, NotLockHolder) and session.lease:
+            await session.loss(LOSS_GRACE)
+        return session.lost or refused
 
     def _call(self, service: str, rpc: str, request, *, started: bool = False,
               timeout: float | None = None):
-        return self._invoke(service, rpc, request, started, timeout)
+        return self.invoke(service, rpc, request, started, timeout)

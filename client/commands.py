@@ -143,8 +143,10 @@ class DeviceCommands:
         frame = Frame(frame)
         header = motion_pb2.PathHeader(path_name=path_name, frame=frame, motion_type=Motion(motion),
                                        offset_type=Offset(offset), number_of_points=len(points))
-        tags = [point.to_pb(frame) for point in points]
-        return self._call(DEVICE, "PathLoad", _path_chunks(header, tags), timeout=timeout)
+        for point in points:
+            point.check(frame)
+        return self._call(DEVICE, "PathLoad", _path_chunks(header, points, frame),
+                          timeout=timeout)
 
     def path_clear_path(self, path_name: str):
         return self._call(DEVICE, "PathClearPath", motion_pb2.PathClearPathRequest(
@@ -286,11 +288,14 @@ class DeviceCommands:
         return self._call(IO, "ListDigitalIO", io_pb2.ListDigitalIORequest())
 
 
-def _path_chunks(header: motion_pb2.PathHeader,
-                 tags: list[types_pb2.TagStruct]) -> Iterator[motion_pb2.PathLoadRequest]:
-    yield motion_pb2.PathLoadRequest(header=header, tags=tags[:PATH_CHUNK])
-    for start in range(PATH_CHUNK, len(tags), PATH_CHUNK):
-        yield motion_pb2.PathLoadRequest(tags=tags[start:start + PATH_CHUNK])
+def _path_chunks(header: motion_pb2.PathHeader, points: Sequence[TagPoint],
+                 frame: Frame) -> Iterator[motion_pb2.PathLoadRequest]:
+    """The header with the first chunk, then the others; each converted as the stream takes
+    it, so a long path never holds up an event loop for long."""
+    for start in range(0, max(len(points), 1), PATH_CHUNK):
+        yield motion_pb2.PathLoadRequest(
+            header=header if start == 0 else None,
+            tags=[point.to_pb(frame) for point in points[start:start + PATH_CHUNK]])
 
 
 def jog_request(velocity: Sequence[float] | None, frame: Frame) -> sensing_pb2.JogRequest:

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import grpc
 
-from landscape.client.session import _CallDetails
 
 AUTHORIZATION = "authorization"
 
@@ -40,6 +39,26 @@ class ClientTLS:
 
     def options(self) -> list[tuple[str, str]]:
         return [("grpc.ssl_target_name_override", self.server_name)] if self.server_name else []
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """How to reach a device server: "host:port", TLS (None: plaintext) and the role token to
+    present (None: none). A client core opens its channels from it, one per event loop."""
+
+    target: str
+    tls: ClientTLS | None = None
+    token: str | None = None
+
+    def aio_channel(self, options=()) -> grpc.aio.Channel:
+        """A channel on the running loop (grpc.aio binds a channel to its loop)."""
+        return open_aio_channel(self.target, self.tls, self.token, options)
+
+
+def bearer(token: str | None) -> tuple[tuple[str, str], ...]:
+    """The call metadata that presents `token` (none without one): for a program that calls
+    for several people on one channel opened without a token, each call with its person's."""
+    return ((AUTHORIZATION, f"Bearer {token}"),) if token else ()
 
 
 def read_token(path: str | Path) -> str:
@@ -118,10 +137,10 @@ class _Bearer(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClientIntercepto
     """Adds the token to every call of a plaintext synchronous channel."""
 
     def __init__(self, token: str):
-        self._header = (AUTHORIZATION, f"Bearer {token}")
+        self._header, = bearer(token)
 
     def _details(self, d):
-        return _CallDetails(d.method, d.timeout, [*(d.metadata or ()), self._header],
+        return CallDetails(d.method, d.timeout, [*(d.metadata or ()), self._header],
                             d.credentials, d.wait_for_ready, d.compression)
 
     def intercept_unary_unary(self, continuation, details, request):
@@ -139,7 +158,7 @@ class _AioBearer:
     """Adds the token to every call of a plaintext grpc.aio channel."""
 
     def __init__(self, token: str):
-        self._header = (AUTHORIZATION, f"Bearer {token}")
+        self._header, = bearer(token)
 
     async def _intercept(self, continuation, details, request):
         metadata = grpc.aio.Metadata(*(details.metadata or ()), self._header)
@@ -167,3 +186,12 @@ class _AioBearerStreamUnary(_AioBearer, grpc.aio.StreamUnaryClientInterceptor):
 
 class _AioBearerStreamStream(_AioBearer, grpc.aio.StreamStreamClientInterceptor):
     intercept_stream_stream = _AioBearer._intercept
+
+
+class CallDetails(grpc.ClientCallDetails):
+    """A call's details with other metadata, for the synchronous channels' interceptors."""
+
+    def __init__(self, method, timeout, metadata, credentials, wait_for_ready, compression):
+        self.method, self.timeout, self.metadata = method, timeout, metadata
+        self.credentials, self.wait_for_ready, self.compression = (credentials, wait_for_ready,
+                                                                   compression)

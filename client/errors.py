@@ -11,6 +11,11 @@ Two families, as a caller needs to tell them apart (after Spot SDK's client exce
 
 Commands that run on after their RPC (moves, paths) end in `CommandFailed` / `CommandAborted`
 when their final event says so, or `CommandTimeout` when the caller stops waiting.
+
+`SessionEnded`: the device ended this client's session (its keep-alives stopped arriving, the
+server stopped); it stopped the arm and released the lock the session held. Every later call
+that needed the lock raises it, with the server's reason, until the program opens a new
+session: nothing takes the lock back by itself.
 """
 from __future__ import annotations
 
@@ -31,13 +36,14 @@ class CommandRefused(LandscapeError):
     """The device server refused the call; nothing changed (the contract's promise)."""
 
     def __init__(self, message: str, code: grpc.StatusCode, reason: str = "",
-                 ret_code: int = -1, metadata: dict[str, str] | None = None):
+                 ret_code: int = -1, metadata: dict[str, str] | None = None, rpc: str = ""):
         super().__init__(message)
         self.message = message
         self.code = code              # the gRPC status code
         self.reason = reason          # ErrorInfo.reason, e.g. "WRONG_STATE" ("" if none)
         self.ret_code = ret_code      # the seed's retVal, negative
         self.metadata = metadata or {}
+        self.rpc = rpc                # the call refused, e.g. "MoveAbsolute" ("" if unknown)
 
     def __str__(self) -> str:
         return f"{self.message} ({self.reason or self.code.name})"
@@ -98,10 +104,11 @@ class ServerError(CommandRefused):
 class TransportError(LandscapeError):
     """No answer from the device server."""
 
-    def __init__(self, message: str, code: grpc.StatusCode):
+    def __init__(self, message: str, code: grpc.StatusCode, rpc: str = ""):
         super().__init__(message)
         self.message = message
         self.code = code
+        self.rpc = rpc                # the call that got no answer ("" if unknown)
 
 
 class RetryableTransportError(TransportError):
@@ -144,7 +151,17 @@ class EventsMissed(LandscapeError):
 
 
 class SessionEnded(LandscapeError):
-    """The session stream ended: the device released the lock (seed 2.2)."""
+    """The device ended this client's session, for `reason` (its own words, e.g. "no keep-alive
+    for 2 s"); if the session held the lock, the device stopped the arm, turned the drives off
+    and released it (seed 2.2). Open a new session to go on."""
+
+    def __init__(self, reason: str, code: grpc.StatusCode | None = None,
+                 held_lock: bool = False):
+        self.message = f"your session ended: {reason}" + (
+            "; the device stopped the arm, turned the drives off and released the lock"
+            if held_lock else "")
+        super().__init__(self.message)
+        self.reason, self.code, self.held_lock = reason, code, held_lock
 
 
 # ---- the tables -----------------------------------------------------------------------------
@@ -188,18 +205,18 @@ TRANSPORT_BY_CODE: dict[grpc.StatusCode, type[TransportError]] = {
 }
 
 
-def from_rpc_error(error: grpc.RpcError) -> LandscapeError:
-    """The exception for a failed call (grpc.RpcError or grpc.aio.AioRpcError)."""
+def from_rpc_error(error: grpc.RpcError, rpc: str = "") -> LandscapeError:
+    """The exception for a failed call (grpc.RpcError or grpc.aio.AioRpcError) of `rpc`."""
     code = error.code()
     message = error.details() or code.name
     info = _error_info(error)
     if info is not None:   # the device answered with the contract's rich status
         ret_code = int(info.metadata.get("ret_code", -1))
         cls = REFUSED_BY_REASON.get(info.reason) or REFUSED_BY_CODE.get(code, CommandRefused)
-        return cls(message, code, info.reason, ret_code, dict(info.metadata))
+        return cls(message, code, info.reason, ret_code, dict(info.metadata), rpc)
     if code in TRANSPORT_BY_CODE:
-        return TRANSPORT_BY_CODE[code](message, code)
-    return REFUSED_BY_CODE.get(code, CommandRefused)(message, code)
+        return TRANSPORT_BY_CODE[code](message, code, rpc)
+    return REFUSED_BY_CODE.get(code, CommandRefused)(message, code, rpc=rpc)
 
 
 def _error_info(error) -> error_details_pb2.ErrorInfo | None:

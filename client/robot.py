@@ -9,120 +9,77 @@
 
 Leaving `control()` — normally or by an exception — stops any motion, deactivates and releases.
 Leaving the `Robot` ends the session; if it still held the lock, the device does the same
-(seed 2.2). Every failure is one of the exceptions in errors.py.
+(seed 2.2). Every failure is one of the exceptions in errors.py; a session the device ended
+raises SessionEnded with its reason.
+
+A Robot is the asyncio core (AsyncRobot, aio.py) run on a loop thread of its own: each method
+waits there for the coroutine it starts; the session's keep-alives run on the core's keeper
+thread, whatever this program's threads do.
 """
 from __future__ import annotations
 
+import asyncio
 import contextlib
-import logging
 from typing import Iterable, Iterator, Sequence
 
-import grpc
-
-from landscape.client.command import Command, CommandTracker
-from landscape.client.commands import (DEVICE, EVENTS, IO, RELINQUISH_MAX_STEPS,
-                                       RELINQUISH_STEP, DeviceCommands, jog_requests)
-from landscape.client.credentials import ClientTLS, open_channel
-from landscape.client.errors import (CommandRefused, NotAllowed, NotLockHolder,
-                                     ServerUnavailable, from_rpc_error)
-from landscape.client.session import RsvpHandler, Session
-from landscape.client.streams import EventStream, StateStream, state_request, subscribe_request
+from landscape.client.aio import AsyncRobot
+from landscape.client.aio_session import AsyncSession
+from landscape.client.command import Command
+from landscape.client.commands import DeviceCommands
+from landscape.client.credentials import ClientTLS, Endpoint
+from landscape.client.errors import SessionEnded
+from landscape.client.identity import Identity
+from landscape.client.loop_thread import LoopThread, pump
+from landscape.client.session import RsvpHandler
+from landscape.client.streams import EventStream, StateStream
 from landscape.client.values import DeviceState, Frame
-from landscape.v1 import (control_pb2, device_service_pb2_grpc, digital_io_service_pb2_grpc,
-                          event_service_pb2_grpc, state_service_pb2_grpc, types_pb2)
-
-log = logging.getLogger(__name__)
-
-DEFAULT_TIMEOUT = 30.0   # seconds, for a blocking call that names none
-FENCE_TIMEOUT = 2.0      # seconds for the command subscription to prove live (tracking.py)
+from landscape.v1 import types_pb2
 
 
 class Robot(DeviceCommands):
     """A session with one device server, and every command of the contract as a method.
 
-    target: "host:port", or an open grpc.Channel (then the caller closes it).
-    tls, token: with a "host:port", TLS (the CA to trust, a client certificate) and the role
-    token to present (credentials.py); plaintext and no token when unset.
+    target: "host:port" (with tls and token: TLS, the CA to trust and a client certificate,
+    and the role token to present, credentials.py; plaintext and no token when unset), or an
+    Endpoint.
     client_name: shown to other clients as the lock holder.
+    identity: who calls, for the device's records (identity.py; default: client_name).
     on_rsvp: answers the device's RSVP questions (seed 2.2): called with a landscape.v1
-    RsvpRequest on a background thread, returns (choice, data). Unset: the device waits out
+    RsvpRequest on a thread of its own, returns (choice, data). Unset: the device waits out
     its timeout and takes its default.
     """
 
-    def __init__(self, target: str | grpc.Channel, client_name: str = "landscape-client", *,
+    def __init__(self, target: str | Endpoint, client_name: str = "landscape-client", *,
                  on_rsvp: RsvpHandler | None = None, tls: ClientTLS | None = None,
-                 token: str | None = None):
-        self._own_channel = isinstance(target, str)
-        if not self._own_channel and (tls is not None or token):
-            raise ValueError("TLS and the token belong to the channel: give them to "
-                             "open_channel, or give Robot a \"host:port\"")
-        self._raw = open_channel(target, tls, token) if self._own_channel else target
+                 token: str | None = None, identity: Identity | None = None):
+        if not isinstance(target, (str, Endpoint)):
+            raise ValueError("TLS and the token belong to the channel: give Robot a "
+                             "\"host:port\" (with tls= and token=) or an Endpoint")
         self.client_name = client_name
-        self._on_rsvp = on_rsvp
-        self._session: Session | None = None
-        self._no_session: NotAllowed | None = None   # why there is no session, if refused
-        self._tracker: CommandTracker | None = None
+        self._thread = LoopThread(f"landscape-{client_name}")
+        answer = None if on_rsvp is None else (
+            lambda request: asyncio.to_thread(on_rsvp, request))   # off the loop: it may block
+        self._robot = AsyncRobot(target, client_name, on_rsvp=answer, tls=tls, token=token,
+                                 identity=identity)
 
     # ---- life cycle ----
 
     def open(self, timeout: float = 10.0) -> "Robot":
-        """Open the session and the event subscription that follows this client's commands."""
-        # A first call that waits for the connection (not channel_ready_future: its polling
-        # thread outlives a quick close and prints a traceback).
-        probe = device_service_pb2_grpc.DeviceServiceStub(self._raw)
+        """Open the session (ServerUnavailable if no device answers within `timeout` s); once
+        open, opening again does nothing."""
         try:
-            probe.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=timeout,
-                                 wait_for_ready=True)
-        except grpc.RpcError as error:
-            if error.code() is grpc.StatusCode.DEADLINE_EXCEEDED:
-                raise ServerUnavailable(f"no device server answered within {timeout} s",
-                                        grpc.StatusCode.UNAVAILABLE) from None
-            raise from_rpc_error(error) from None
-        channel = self._raw
-        events = event_service_pb2_grpc.EventServiceStub(channel)
-        try:
-            self._session = Session(channel, self.client_name, self._on_rsvp).open()
-        except grpc.RpcError as error:
-            refused = from_rpc_error(error)
-            if not isinstance(refused, NotAllowed):
-                self.close()
-                raise refused from None
-            self._no_session = refused   # a viewer's token: reads and streams only
-        # Carries the lease once locked.
-        lease_channel = self._session.channel if self._session else channel
-        self._stubs = {DEVICE: device_service_pb2_grpc.DeviceServiceStub(lease_channel),
-                       IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(lease_channel),
-                       EVENTS: event_service_pb2_grpc.EventServiceStub(lease_channel)}
-        self._events = events
-        self._state = state_service_pb2_grpc.StateServiceStub(channel)
+            self._thread.run(self._robot.open(timeout))
+        except BaseException:
+            self._thread.stop()
+            raise
         return self
-
-    def _track_commands(self, after_sequence: int | None = None) -> CommandTracker:
-        """The live subscription that follows this client's commands, opened before its first
-        lock or command (read-only clients need none); see tracking.py."""
-        if self._tracker is None:
-            self._tracker = CommandTracker(EventStream(self._events.Subscribe(
-                subscribe_request(after_sequence))))
-        return self._tracker
-
-    def _live_tracker(self) -> CommandTracker:
-        """The tracker, proved live before a command starts (else replaying, to be sure)."""
-        tracker = self._track_commands()
-        if not tracker.wait_live(FENCE_TIMEOUT):
-            log.warning("no event arrived on the command subscription; replaying the device's")
-            tracker.close()
-            self._tracker = None
-            tracker = self._track_commands(after_sequence=0)
-        return tracker
 
     def close(self) -> None:
         """End the session (the device releases the lock if it was held) and the streams."""
-        if self._tracker is not None:
-            self._tracker.close()
-        if self._session is not None:
-            self._session.close()
-        if self._own_channel:
-            self._raw.close()
+        try:
+            self._thread.run(self._robot.close())
+        finally:
+            self._thread.stop()
 
     def __enter__(self) -> "Robot":
         return self.open()
@@ -131,23 +88,32 @@ class Robot(DeviceCommands):
         self.close()
 
     @property
-    def session(self) -> Session | None:
-        """The underlying session: session_id, lease, rsvp_requests (every question asked);
-        None when the role token may not open one (a viewer's: reads and streams only)."""
-        return self._session
+    def session(self) -> AsyncSession | None:
+        """The underlying session: session_id, lease, lost; None when the role token may not
+        open one (a viewer's: reads and streams only)."""
+        return self._robot.session
+
+    @property
+    def lost(self) -> SessionEnded | None:
+        """Why the device ended this robot's session, if it did."""
+        return self._robot.lost
+
+    def when_lost(self, callback) -> None:
+        """`callback(lost)` on a thread of the client's as soon as the device ends the session
+        (not when this program closes it); never without a session (a viewer's)."""
+        def listener(lost):
+            if lost is not None:
+                self._thread.loop.run_in_executor(None, callback, lost)
+        if self._robot.session is not None:
+            self._thread.loop.call_soon_threadsafe(self._robot.session.add_end_listener,
+                                                   listener)
 
     # ---- the lock ----
 
     def lock(self, timeout: float = 10.0) -> str:
         """Seed 3.1.1: take the lock for this session; returns the lease, which every later
         call of this Robot carries."""
-        if self._session is None:
-            raise self._no_session
-        self._track_commands()   # before the lock, whose event then proves it live
-        try:
-            return self._session.lock(timeout)
-        except grpc.RpcError as error:
-            raise from_rpc_error(error) from None
+        return self._thread.run(self._robot.lock(timeout))
 
     @contextlib.contextmanager
     def control(self, activate: bool = True) -> Iterator["Robot"]:
@@ -163,19 +129,7 @@ class Robot(DeviceCommands):
 
     def relinquish(self) -> DeviceState:
         """Stop, abort, deactivate and release as the state needs; returns the state reached."""
-        state = DeviceState.UNLOCKED
-        for _ in range(RELINQUISH_MAX_STEPS):
-            state = DeviceState(self.get_device_state().state)
-            step = RELINQUISH_STEP.get(state)
-            if step is None:
-                return state
-            try:
-                getattr(self, step)()
-            except (NotLockHolder, NotAllowed):   # not (or no longer) ours to hand back
-                return state
-            except CommandRefused as refused:   # the state moved on by itself: look again
-                log.debug("relinquish: %s refused: %s", step, refused)
-        return state
+        return self._thread.run(self._robot.relinquish())
 
     # ---- streams ----
 
@@ -184,8 +138,8 @@ class Robot(DeviceCommands):
         """Events and alarms (seed 2.1): live only, or the kept ones after `after_sequence`
         first. Iterate it; close it (or use `with`) to stop. With `timeout` (seconds), the
         stream ends by raising RpcTimeout when that time is up."""
-        return EventStream(self._events.Subscribe(subscribe_request(after_sequence),
-                                                  timeout=timeout))
+        return EventStream(self._thread.run(self._stream(self._robot.event_stream,
+                                                         after_sequence, timeout)), self._thread)
 
     def live_state(self, rate_hz: float = 10.0, frame: Frame | None = None,
                    units: types_pb2.Units | None = None, sensors: Sequence[str] = (),
@@ -193,33 +147,28 @@ class Robot(DeviceCommands):
         """The device's state at `rate_hz` samples per second (0: every 4 ms cycle); see
         state_service.proto. Iterate it; close it (or use `with`) to stop; `timeout` as for
         events()."""
-        return StateStream(self._state.StreamState(
-            state_request(rate_hz, frame, units, sensors), timeout=timeout))
+        return StateStream(self._thread.run(self._stream(
+            self._robot.state_stream, rate_hz, frame, units, sensors, timeout)), self._thread)
 
     def jog(self, velocities: Iterable[Sequence[float]], frame: Frame) -> Iterator:
         """Jog with the deadman held while `velocities` (percent of each axis maximum) lasts;
         the iterable paces the stream (the deadman stops the arm if it pauses too long).
         Yields a JogResponse (joints, pose) per message. Needs manual_control(TEACHPENDANT)."""
-        try:
-            yield from self._stubs[DEVICE].Jog(jog_requests(velocities, frame))
-        except grpc.RpcError as error:
-            raise from_rpc_error(error) from None
+        return self._thread.iterate(self._robot.jog(pump(velocities), frame))
+
+    @staticmethod
+    async def _stream(open_stream, *args):
+        return open_stream(*args)   # a grpc.aio call is made on the loop it runs on
 
     # ---- every command goes through here ----
 
     def _call(self, service: str, rpc: str, request, *, started: bool = False,
               timeout: float | None = None):
-        tracker = self._live_tracker() if started else None
-        try:
-            reply = getattr(self._stubs[service], rpc)(request, timeout=timeout or DEFAULT_TIMEOUT)
-        except grpc.RpcError as error:
-            raise from_rpc_error(error) from None
-        if started:
-            return Command(reply.ret_val.command_id, rpc, reply.ret_val, tracker)
-        return reply
+        reply = self._thread.run(self._robot.invoke(service, rpc, request, started, timeout))
+        return Command(reply, self._thread) if started else reply
 
 
-def connect(target: str | grpc.Channel, client_name: str = "landscape-client",
+def connect(target: str | Endpoint, client_name: str = "landscape-client",
             **options) -> Robot:
     """An open Robot; use it in a `with` block (or call close())."""
     return Robot(target, client_name, **options).open()

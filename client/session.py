@@ -1,10 +1,14 @@
-"""A client's session with a device server: the Connect stream, keep-alives, the lock's lease
-and answers to the device's RSVP questions.
+"""A session for programs that drive the generated stubs on a synchronous channel themselves
+(probes, tests): the Connect stream, keep-alives, the lock's lease and answers to the device's
+RSVP questions, on threads.
 
     with grpc.insecure_channel(target) as channel, Session(channel, "cell-supervisor") as session:
         device = DeviceServiceStub(session.channel)   # calls carry the lease once locked
         session.lock()
         device.Activate(ActivateRequest())
+
+Front ends and client programs use the client core instead (AsyncRobot, Robot, DeviceLink),
+whose sessions keep their keep-alives on keeper threads and report a lost session.
 """
 from __future__ import annotations
 
@@ -14,11 +18,11 @@ from typing import Callable
 
 import grpc
 
+from landscape.client.aio_session import LEASE_KEY
+from landscape.client.credentials import CallDetails
 from landscape.v1 import control_pb2, device_service_pb2_grpc, event_service_pb2
 from landscape.v1 import session_service_pb2 as pb
 from landscape.v1 import session_service_pb2_grpc
-
-LEASE_KEY = "landscape-lease"
 
 # Decides an RSVP: returns the choice and the (inout) data.
 RsvpHandler = Callable[[event_service_pb2.RsvpRequest], tuple[str, list[str]]]
@@ -116,7 +120,7 @@ class _LeaseInterceptor(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClient
         if not self._session.lease:
             return details
         metadata = [*(details.metadata or ()), (LEASE_KEY, self._session.lease)]
-        return _CallDetails(details.method, details.timeout, metadata, details.credentials,
+        return CallDetails(details.method, details.timeout, metadata, details.credentials,
                             details.wait_for_ready, details.compression)
 
     def intercept_unary_unary(self, continuation, details, request):
@@ -130,10 +134,3 @@ class _LeaseInterceptor(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClient
 
     def intercept_stream_stream(self, continuation, details, request_iterator):
         return continuation(self._details(details), request_iterator)
-
-
-class _CallDetails(grpc.ClientCallDetails):
-    def __init__(self, method, timeout, metadata, credentials, wait_for_ready, compression):
-        self.method, self.timeout, self.metadata = method, timeout, metadata
-        self.credentials, self.wait_for_ready, self.compression = (credentials, wait_for_ready,
-                                                                   compression)

@@ -3,13 +3,11 @@
 A non-blocking command (moves, paths) answers CMD_STARTED_OK with a command id; its started,
 tag-reached, paused, resumed and final (done / failed / aborted) events follow on
 EventService.Subscribe, and a failure also raises an alarm naming the id. `CommandLog` keeps
-that per command id; the sync and asyncio clients feed it from one subscription each, opened
-before their first command so no event of theirs can be missed.
+that per command id; the client core feeds it from one subscription per device (event_feed.py).
 
-The subscription is live (a replay of the device's history costs about 0.7 ms per kept event:
-7 s for 10,000), opened before the client locks. Once it has delivered any event it is
-registered, and sees every later one; the client's lock and activation publish events, so by
-its first command it has. Only if none came does the client replay the history to be sure.
+It also keeps the device's lock-holder-lost alarms: the device publishes one as the lock
+holder's session ends, before it stops the arm, so a command aborted after such an alarm was
+aborted because its session (the lock holder's, as it ran) was lost.
 """
 from __future__ import annotations
 
@@ -23,6 +21,7 @@ FINAL_PHASES = frozenset({Phase.PHASE_DONE, Phase.PHASE_FAILED, Phase.PHASE_ABOR
 
 # After a failed event, how long the log waits for the alarm that explains it, in seconds.
 ALARM_GRACE = 1.0
+LOCK_HOLDER_LOST = 101      # the device's alarm code (server/alarms.py): the holder's session ended
 
 
 class CommandLog:
@@ -33,6 +32,7 @@ class CommandLog:
         self._keep = keep
         self._events: OrderedDict[str, list[pb.Event]] = OrderedDict()
         self._alarms: dict[str, pb.Alarm] = {}
+        self._lock_lost: list[tuple[int, pb.Alarm]] = []   # (sequence, alarm), the newest few
         self.lost = 0               # events the subscription lost (it fell behind)
         self.last_sequence = 0
         self.received = 0           # events delivered: one proves the subscription is live
@@ -46,6 +46,8 @@ class CommandLog:
         elif kind == "alarm" and event.alarm.command_id:
             self._alarms[event.alarm.command_id] = event.alarm
             self._bucket(event.alarm.command_id)
+        elif kind == "alarm" and event.alarm.code == LOCK_HOLDER_LOST:
+            self._lock_lost = [*self._lock_lost[-7:], (event.sequence, event.alarm)]
         elif kind == "events_lost":
             lost = event.events_lost
             self.lost += lost.last_sequence - lost.first_sequence + 1
@@ -61,6 +63,17 @@ class CommandLog:
 
     def alarm(self, command_id: str) -> pb.Alarm | None:
         return self._alarms.get(command_id)
+
+    def lock_lost_while_running(self, command_id: str) -> pb.Alarm | None:
+        """The lock-holder-lost alarm published after the command began and before its end:
+        it held the lock then, so the lock lost was its own."""
+        events = self._events.get(command_id)
+        if not events:
+            return None
+        end = self.final(command_id)
+        last = end.sequence if end is not None else self.last_sequence
+        return next((alarm for sequence, alarm in self._lock_lost
+                     if events[0].sequence < sequence < last), None)
 
     def needs_alarm(self, command_id: str) -> bool:
         """A failure is final, but its alarm (published right after) has not come yet."""

@@ -112,15 +112,19 @@ class TagPoint:
     accel: float = 0.0
     aux_commands: Sequence[str] = field(default_factory=tuple)
 
+    def check(self, frame: Frame) -> None:
+        """ValueError unless the point fits `frame` (a Cartesian point has 6 values)."""
+        if frame is not Frame.JOINT and len(self.values) != 6:
+            raise ValueError(f"a Cartesian point has 6 values (x y z roll pitch yaw), "
+                             f"got {len(self.values)}")
+
     def to_pb(self, frame: Frame) -> types_pb2.TagStruct:
         common = dict(tag_name=self.tag_name, tag_index=self.tag_index,
                       time_delay=self.time_delay, transition_speed=self.transition_speed,
                       speed=self.speed, accel=self.accel, aux_commands=list(self.aux_commands))
         if frame is Frame.JOINT:
             return types_pb2.TagStruct(joint_values=list(self.values), **common)
-        if len(self.values) != 6:
-            raise ValueError(f"a Cartesian point has 6 values (x y z roll pitch yaw), "
-                             f"got {len(self.values)}")
+        self.check(frame)
         x, y, z, roll, pitch, yaw = self.values
         return types_pb2.TagStruct(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw, **common)
 

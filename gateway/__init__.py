@@ -3,6 +3,7 @@
 CRCL documents arrive on TCP (wire.py), are parsed safely (xmlsafe.py), validated against the
 official schemas when configured (schemas.py) and always by the typed parser (parse.py into
 model.py), then carried out per connection (session.py) as landscape.v1 calls on a device
-server (device.py, motions.py); CRCLStatus answers come from the live state (state_feed.py,
-status.py).
+server through the client core, landscape.client (device.py: one DeviceLink per gateway, an
+AsyncRobot per CRCL session; motions.py, tooling.py); CRCLStatus answers come from the core's
+live state feed (live.py, status.py).
 """

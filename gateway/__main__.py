@@ -19,13 +19,13 @@ from pathlib import Path
 
 import grpc
 
-from landscape.client import credentials
-from landscape.gateway.device import DeviceLink
+from landscape.client import Endpoint, credentials
+from landscape.gateway.device import CrclDevice
 from landscape.gateway.schemas import SchemaSet, default_directory
 from landscape.gateway.server import DEFAULT_PORT, Gateway
 from landscape.gateway.session import GatewayOptions
 from landscape.gateway.status import DEFAULT_GRIPPER_STROKE
-from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT
+from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
 from landscape.server.tls import is_loopback
 
 
@@ -52,6 +52,9 @@ def arguments(argv=None) -> argparse.Namespace:
                              "../shared/crcl/xsd if present); 'none' to skip schema validation")
     parser.add_argument("--max-document", type=int, default=DEFAULT_MAX_DOCUMENT,
                         help="largest accepted document, bytes")
+    parser.add_argument("--document-idle", type=float, default=DOCUMENT_IDLE,
+                        help="seconds a started document may wait for its next bytes before "
+                             "the connection is dropped")
     parser.add_argument("--gripper-stroke", type=float, default=DEFAULT_GRIPPER_STROKE,
                         help="the gripper's opening in m, for GripperStatus")
     parser.add_argument("--state-rate", type=float, default=100.0,
@@ -98,15 +101,16 @@ def grpc_credentials(args: argparse.Namespace) -> grpc.ServerCredentials | None:
 
 
 async def serve(args: argparse.Namespace, ready=None) -> None:
-    link = DeviceLink(args.device, args.state_rate, *credentials.from_arguments(args))
-    await link.start()
-    options = GatewayOptions(schema_set(args.schemas), args.max_document, args.gripper_stroke)
-    gateway = await Gateway(link, options).serve(args.host, args.port)
+    device = CrclDevice(Endpoint(args.device, *credentials.from_arguments(args)), args.state_rate)
+    await device.start()
+    options = GatewayOptions(schema_set(args.schemas), args.max_document, args.document_idle,
+                             args.gripper_stroke)
+    gateway = await Gateway(device, options).serve(args.host, args.port)
     grpc_server = None
     if args.grpc_port is not None:
         from landscape.gateway.grpc_face import serve_grpc
         host = args.grpc_host or args.host
-        grpc_server, grpc_port = await serve_grpc(link, options, host, args.grpc_port,
+        grpc_server, grpc_port = await serve_grpc(device, options, host, args.grpc_port,
                                                   grpc_credentials(args))
         print(f"CRCL gRPC face listening on {host}:{grpc_port}", flush=True)
     print(f"CRCL gateway listening on {args.host}:{gateway.port} "
@@ -119,7 +123,7 @@ async def serve(args: argparse.Namespace, ready=None) -> None:
     await gateway.close()
     if grpc_server is not None:
         await grpc_server.stop(1.0)
-    await link.close()
+    await device.close()
 
 
 def main(argv=None) -> None:

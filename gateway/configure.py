@@ -8,7 +8,7 @@ import numpy as np
 from landscape.gateway import model as m
 from landscape.gateway.errors import CrclError
 from landscape.gateway.settings import DEFAULT_END_TOLERANCE, JOINTS, rate_si, tolerance_si
-from landscape.v1 import event_service_pb2, settings_pb2, types_pb2
+from landscape.client import Pose
 
 _RATE_FIELDS = {"TransSpeed": ("trans_speed", "length", "max_world_linear_velocity", "limits"),
                 "RotSpeed": ("rot_speed", "angle", "max_world_angular_velocity", "limits"),
@@ -100,9 +100,7 @@ async def dwell(session, cmd: m.Dwell) -> str:
 
 async def message(session, cmd: m.Message) -> str:
     # On the device's event stream, where every supervisor (the dashboard) shows it.
-    control = session.control
-    await control.call("PostMessage", event_service_pb2.PostMessageRequest(text=cmd.text),
-                       stub=control.link.event_service)
+    await session.control.robot.post_message(cmd.text)
     return "posted on the device's event stream"
 
 
@@ -126,15 +124,11 @@ def _pose_values(session, text: str) -> list[float]:
 
 
 async def _tool_offset(session, value: str) -> None:
-    x, y, z, roll, pitch, yaw = _pose_values(session, value)
-    await session.control.call("SetToolOffset", settings_pb2.SetToolOffsetRequest(
-        offset=types_pb2.Pose(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw)))
+    await session.control.robot.set_tool_offset(Pose(*_pose_values(session, value)))
 
 
 async def _workstation_frame(session, value: str) -> None:
-    x, y, z, roll, pitch, yaw = _pose_values(session, value)
-    await session.control.call("SetWorldCartesianFrame", settings_pb2.SetWorldCartesianFrameRequest(
-        frame=types_pb2.Pose(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw)))
+    await session.control.robot.set_world_cartesian_frame(Pose(*_pose_values(session, value)))
 
 
 # name -> what it sets; values are "x y z roll pitch yaw" in the session's units.

@@ -10,7 +10,7 @@ import asyncio
 import grpc
 from lxml import etree
 
-from landscape.gateway.device import DeviceLink
+from landscape.gateway.device import CrclDevice
 from landscape.gateway.session import CrclSession, GatewayOptions
 from landscape.v1 import crcl_service_pb2 as pb
 from landscape.v1 import crcl_service_pb2_grpc
@@ -25,11 +25,11 @@ def response(status_xml: bytes) -> pb.ExecuteResponse:
 
 
 class CrclServicer(crcl_service_pb2_grpc.CrclServiceServicer):
-    def __init__(self, link: DeviceLink, options: GatewayOptions):
-        self.link, self.options = link, options
+    def __init__(self, device: CrclDevice, options: GatewayOptions):
+        self.device, self.options = device, options
 
     async def Execute(self, request_iterator, context):
-        session = CrclSession(self.link, self.options, f"grpc {context.peer()}")
+        session = CrclSession(self.device, self.options, f"grpc {context.peer()}")
         out: asyncio.Queue = asyncio.Queue()
         last = None
 
@@ -68,11 +68,11 @@ class CrclServicer(crcl_service_pb2_grpc.CrclServiceServicer):
             await session.close()
 
 
-async def serve_grpc(link: DeviceLink, options: GatewayOptions, host: str, port: int,
+async def serve_grpc(device: CrclDevice, options: GatewayOptions, host: str, port: int,
                      credentials: grpc.ServerCredentials | None = None):
     """CrclService on host:port (0: any), over TLS with `credentials`; returns (server, port)."""
     server = grpc.aio.server()
-    crcl_service_pb2_grpc.add_CrclServiceServicer_to_server(CrclServicer(link, options), server)
+    crcl_service_pb2_grpc.add_CrclServiceServicer_to_server(CrclServicer(device, options), server)
     address = f"{host}:{port}"
     bound = (server.add_secure_port(address, credentials) if credentials is not None
              else server.add_insecure_port(address))

@@ -18,69 +18,68 @@ workstation coordinates, m and rad).
   after the device's done event, against the end tolerance (the pose's own, else
   SetEndPoseTolerance's, else the default: settings.py); with no such sample, or a motion the
   device fails or aborts, the command is an error.
+- Device calls go through the client core's AsyncRobot (session.control.robot): its typed
+  commands, its command handles (a started motion's end comes from the core's event feed,
+  which raises SessionEnded if the lock was lost meanwhile).
 """
 from __future__ import annotations
 
 import asyncio
-import math
+import contextlib
 
 import numpy as np
-import pinocchio as pin
 
+from landscape.client import CommandFailed, Frame, LandscapeError, Motion, TagPoint
 from landscape.gateway import model as m
 from landscape.gateway import poses
-from landscape.gateway.device import DeviceRefused
 from landscape.gateway.errors import CrclError
+from landscape.gateway.live import LiveState, live_state
 from landscape.gateway.rates import PERCENT_ACCEL, RatesFor, motion_rates, percent, speed_percent
+from landscape.gateway.screw import helix_off_loop, point_count
 from landscape.gateway.settings import DEFAULT_JOINT_TOLERANCE, ToleranceSi, tolerance_si
-from landscape.gateway.state_feed import LiveState
 from landscape.gateway.units import CrclUnits
-from landscape.v1 import control_pb2, motion_pb2, types_pb2
+from landscape.v1 import types_pb2
 
-SCREW_STEP = math.radians(5.0)   # helix points at most this far apart in turn
-SCREW_STEP_LENGTH = 0.005        # m, and along the axis
 SETTLE_TIMEOUT = 2.0             # s for a sample of the device taken after a motion's end
-JOINT_FRAME = types_pb2.REFERENCE_FRAME_JOINT_FRAME
-WORLD_FRAME = types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME
 
 
 # ---- running a device motion ----------------------------------------------------------------------
 
-async def _run(session, rpc: str, request, overrides=None) -> None:
-    """Start a non-blocking device motion and wait for its end; an error unless it is done."""
+async def _run(session, start, overrides=None) -> None:
+    """Start a non-blocking device motion (`start()`: the robot's call) and wait for its end;
+    an error unless it is done."""
     await session.control.ensure_active()
     async with RatesFor(session, overrides or {}):
-        session.motion_start = asyncio.ensure_future(session.control.call(rpc, request))
-        reply = await asyncio.shield(session.motion_start)
+        session.motion_start = asyncio.ensure_future(start())
+        command = await asyncio.shield(session.motion_start)
         session.motion_start = None
-    command_id = reply.ret_val.command_id
-    outcome = await session.link.events.outcome(command_id)
-    session.motion_ended = outcome.time
-    if outcome.result != "done":
-        raise CrclError(f"the device's {rpc} {command_id} {outcome.result}"
-                        f"{': ' + outcome.message if outcome.message else ''}")
+    try:
+        done = await command.wait(timeout=None)
+    except CommandFailed as failed:          # failed or aborted; a lost lock raises its own
+        raise CrclError(f"the device's {failed}") from None
+    session.motion_ended = done.time.ToNanoseconds() / 1e9
 
 
 async def present(session) -> LiveState:
     """The device's present state, to start a motion from; CrclError if the state stream has
     none (it is down or stalled)."""
-    feed = session.link.feed
-    live = await feed.present(SETTLE_TIMEOUT)
-    if live is None:
+    feed = session.device.feed
+    sample = await feed.present(SETTLE_TIMEOUT)
+    if sample is None:
         raise CrclError(f"no present state from the device to start from: {feed.stale()}")
-    return live
+    return live_state(sample)
 
 
 async def _settled(session) -> LiveState:
     """The device's state once the motion has ended: a sample of a cycle at or after its done
     event. An older one cannot say where the motion ended: then the command fails."""
-    feed = session.link.feed
-    live = await feed.taken_after(session.motion_ended, SETTLE_TIMEOUT)
-    if live is None:
+    feed = session.device.feed
+    sample = await feed.taken_after(session.motion_ended, SETTLE_TIMEOUT)
+    if sample is None:
         raise CrclError(f"the device reported the motion done, but no state taken after its "
                         f"end came within {SETTLE_TIMEOUT:g} s ({feed.stale() or 'no new sample'})"
                         f": the end pose is unchecked")
-    return live
+    return live_state(sample)
 
 
 def check_pose(units: CrclUnits, goal: np.ndarray, tolerance: ToleranceSi,
@@ -134,13 +133,10 @@ async def move_to(session, cmd: m.MoveTo) -> str:
     [(speed, accel)], overrides = motion_rates(session, [cmd.end])
     if accel is not None:
         overrides[PERCENT_ACCEL] = accel
-    request = motion_pb2.MoveAbsoluteRequest(
-        point_name=f"CRCL MoveTo {cmd.command_id}", frame=WORLD_FRAME, values=goal.tolist(),
-        motion_type=(types_pb2.MOTION_TYPE_STRAIGHT_MOTION if cmd.straight
-                     else types_pb2.MOTION_TYPE_JOINT_MOTION))
-    if speed is not None:
-        request.speed = speed
-    await _run(session, "MoveAbsolute", request, overrides)
+    robot = session.control.robot
+    await _run(session, lambda: robot.move_absolute(
+        goal.tolist(), Frame.WORLD, point_name=f"CRCL MoveTo {cmd.command_id}", speed=speed,
+        motion=Motion.STRAIGHT if cmd.straight else Motion.JOINT), overrides)
     return await _check_end(session, goal, cmd.end)
 
 
@@ -158,39 +154,26 @@ async def run_path(session, command_id: int, points, straight: bool, overrides=N
     the arm is, blended through all but the last."""
     live = await present(session)
     name = f"{session.name.split()[0]}-{command_id}"
-    motion = types_pb2.MOTION_TYPE_STRAIGHT_MOTION if straight else types_pb2.MOTION_TYPE_JOINT_MOTION
+    motion = Motion.STRAIGHT if straight else Motion.JOINT
     transition = speed_percent(session)
-    tags = [types_pb2.TagStruct(
-        x=p[0], y=p[1], z=p[2], roll=p[3], pitch=p[4], yaw=p[5], tag_name=f"waypoint {i + 1}",
-        tag_index=i + 1, transition_speed=0.0 if i == len(points) - 1 else transition,
-        speed=speed or 0.0, accel=accel or 0.0) for i, (p, speed, accel) in enumerate(points)]
-    control = session.control
+    tags = [TagPoint(list(p), tag_name=f"waypoint {i + 1}", tag_index=i + 1,
+                     transition_speed=0.0 if i == len(points) - 1 else transition,
+                     speed=speed or 0.0, accel=accel or 0.0)
+            for i, (p, speed, accel) in enumerate(points)]
+    robot = session.control.robot
     try:
         # The path starts where the arm is, so its first segment is straight when asked.
-        await _load(control, name, JOINT_FRAME, motion, [types_pb2.TagStruct(
-            joint_values=live.joint_positions.tolist(), tag_name="start")])
-        await _load(control, name, WORLD_FRAME, motion, tags)
-        await _run(session, "PathMove", motion_pb2.PathMoveRequest(path_name=name,
-                                                                    number_of_cycles=1), overrides)
+        await robot.path_load(name, [TagPoint(live.joint_positions.tolist(), tag_name="start")],
+                              Frame.JOINT, motion=motion)
+        await robot.path_load(name, tags, Frame.WORLD, motion=motion)
+        await _run(session, lambda: robot.path_move(name, 1), overrides)
     finally:
-        await asyncio.shield(_clear(control, name))
+        await asyncio.shield(_clear(robot, name))
 
 
-async def _load(control, name: str, frame: int, motion: int, tags) -> None:
-    header = motion_pb2.PathHeader(path_name=name, frame=frame, motion_type=motion,
-                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA,
-                                   number_of_points=len(tags))
-
-    async def stream():
-        yield motion_pb2.PathLoadRequest(header=header, tags=tags)
-    await control.call("PathLoad", stream())
-
-
-async def _clear(control, name: str) -> None:
-    try:
-        await control.call("PathClearPath", motion_pb2.PathClearPathRequest(path_name=name))
-    except Exception:   # noqa: BLE001 - a path that never loaded has nothing to clear
-        pass
+async def _clear(robot, name: str) -> None:
+    with contextlib.suppress(LandscapeError):   # a path that never loaded has nothing to clear
+        await robot.path_clear_path(name)
 
 
 async def move_screw(session, cmd: m.MoveScrew) -> str:
@@ -215,17 +198,11 @@ async def move_screw(session, cmd: m.MoveScrew) -> str:
          units.length_si(cmd.axis_point.z)])
     turn, advance = units.angle_si(cmd.turn), units.length_si(cmd.axial_distance_screw)
     radius = float(np.linalg.norm(np.cross(here[:3, 3] - center, axis)))
-    steps = max(1, math.ceil(max(abs(turn) / SCREW_STEP,
-                                 math.hypot(abs(turn) * radius, abs(advance)) / SCREW_STEP_LENGTH)))
-    points = []
-    for s in range(1, steps + 1):
-        spin = pin.exp3(axis * turn * s / steps)
-        pose = np.eye(4)
-        pose[:3, :3] = spin @ here[:3, :3]
-        pose[:3, 3] = center + spin @ (here[:3, 3] - center) + axis * advance * s / steps
-        points.append((poses.from_matrix(pose), speed, accel))
+    steps = point_count(turn, advance, radius)
+    helix = await helix_off_loop(here, center, axis, turn, advance, steps)
+    points = [(pose, speed, accel) for pose in helix]
     await run_path(session, cmd.command_id, points, True, overrides)
-    return await _check_end(session, points[-1][0], cmd.start)
+    return await _check_end(session, np.array(helix[-1]), cmd.start)
 
 
 async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
@@ -246,11 +223,10 @@ async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
         if joint.details.accel is not None:
             accels.append(percent(units.angle_si(joint.details.accel),
                                    accel_maxima[joint.joint - 1]))
-    request = motion_pb2.MoveAbsoluteRequest(point_name=f"CRCL ActuateJoints {cmd.command_id}",
-                                             frame=JOINT_FRAME, values=target.tolist())
-    if speeds:
-        request.speed = min(speeds)
-    await _run(session, "MoveAbsolute", request, {PERCENT_ACCEL: min(accels)} if accels else None)
+    await _run(session, lambda: control.robot.move_absolute(
+        target.tolist(), Frame.JOINT, point_name=f"CRCL ActuateJoints {cmd.command_id}",
+        speed=min(speeds) if speeds else None),
+        {PERCENT_ACCEL: min(accels)} if accels else None)
     return _check_joints(session, cmd, target, await _settled(session))
 
 
@@ -286,7 +262,7 @@ async def stop_motion(session, cmd: m.StopMotion) -> str:
 async def _deactivate(session) -> None:
     """Drives off (Deactivate stops a motion first); already off is fine."""
     try:
-        await session.control.call("Deactivate", control_pb2.DeactivateRequest())
-    except DeviceRefused:
+        await session.control.robot.deactivate()
+    except LandscapeError:
         if await session.control.state() != types_pb2.DEVICE_STATE_INACTIVE:
             raise

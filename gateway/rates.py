@@ -21,7 +21,7 @@ import asyncio
 
 from landscape.gateway import model as m
 from landscape.gateway.settings import SiRate, rate_si
-from landscape.v1 import settings_pb2, types_pb2
+from landscape.v1 import types_pb2
 
 MIN_PERCENT = 0.1            # the device needs a percent above 0
 PERCENT_SPEED = ("SetSpeed", types_pb2.SPEED_TYPE_PERCENT_SPEED)
@@ -73,10 +73,11 @@ async def push(session, wanted: dict[tuple[str, int], float]) -> None:
     for (rpc, kind), value in wanted.items():
         if control.pushed.get((rpc, kind)) == value:
             continue
-        request = (settings_pb2.SetSpeedRequest(speed=value, attribute=kind) if rpc == "SetSpeed"
-                   else settings_pb2.SetAccelerationRequest(accel=value, attribute=kind))
         control.pushed.pop((rpc, kind), None)   # unknown until the device says yes
-        await control.call(rpc, request)
+        if rpc == "SetSpeed":
+            await control.robot.set_speed(value, kind)
+        else:
+            await control.robot.set_acceleration(value, kind)
         control.pushed[(rpc, kind)] = value
 
 

@@ -15,6 +15,10 @@
 - InitCanon takes the device's lock for this session (one session at a time holds it), turns
   the drives on and resets units and settings; EndCanon stops, turns the drives off and
   releases. A connection that ends lets the device's disconnect handler do the same.
+- A lock lost (the device ended the session: its keep-alives stopped arriving, the server
+  stopped) ends the running command, and those queued, in CRCL_Error naming the loss and the
+  device's reason; every later status says so, until InitCanon takes the lock again (never
+  by itself). EndCanon then has nothing to release, and is done.
 """
 from __future__ import annotations
 
@@ -24,18 +28,20 @@ import itertools
 import logging
 from dataclasses import dataclass
 
+from landscape.client import LandscapeError, SessionEnded
 from landscape.gateway import model as m
 from landscape.gateway import parse, status, xmlsafe
-from landscape.gateway.device import Control, DeviceLink, DeviceRefused
-from landscape.gateway.errors import CrclError
+from landscape.gateway.device import Control, CrclDevice
+from landscape.gateway.errors import CrclError, describe
+from landscape.gateway.live import live_state
 from landscape.gateway.handlers import HANDLERS, immediate
 from landscape.gateway.rates import push_rates
 from landscape.gateway.program import expand
 from landscape.gateway.schemas import SchemaInvalid, SchemaSet
 from landscape.gateway.settings import CrclSettings
 from landscape.gateway.status import DONE, ERROR, WORKING, CommandRecord
-from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT
-from landscape.v1 import motion_pb2, types_pb2
+from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
+from landscape.v1 import types_pb2
 
 log = logging.getLogger(__name__)
 _session_numbers = itertools.count(1)
@@ -46,18 +52,21 @@ MAX_QUEUED = 10_000     # commands waiting behind the running one, per session
 class GatewayOptions:
     schemas: SchemaSet | None = None
     max_document: int = DEFAULT_MAX_DOCUMENT
+    document_idle: float = DOCUMENT_IDLE    # s a started document may wait for more bytes
     gripper_stroke: float = status.DEFAULT_GRIPPER_STROKE
 
 
 class CrclSession:
-    def __init__(self, link: DeviceLink, options: GatewayOptions, peer: str = ""):
-        self.link = link
+    def __init__(self, device: CrclDevice, options: GatewayOptions, peer: str = ""):
+        self.device = device
         self.options = options
+        self.peer = peer
         self.name = f"crcl-{next(_session_numbers)}{' ' + peer if peer else ''}"
         self.settings = CrclSettings()
         self.record = CommandRecord()
         self.control: Control | None = None
         self.ended = False                  # after EndCanon, until the next InitCanon
+        self.lost = ""                      # why the lock is lost, until the next InitCanon
         self._status_ids = itertools.count(1)
         self._queue: collections.deque = collections.deque()
         self._worker: asyncio.Task | None = None
@@ -65,6 +74,7 @@ class CrclSession:
         self._running_lasts = False         # the running command is preempted by the next
         self._must_halt = False             # a preempted motion may still move the arm
         self.motion_start: asyncio.Future | None = None   # a motion call in flight
+        self._dropped: asyncio.Future | None = None       # closing a lost control
         self.motion_ended = 0.0    # unix s the last device motion ended (its done event)
         self.listeners: list = []           # called with no argument when the record changes
 
@@ -115,8 +125,12 @@ class CrclSession:
         return None
 
     async def refuse(self, why: str, command_id: int | None = None) -> None:
-        """A document or stream fault that is no command: reported as an error."""
+        """A document or stream fault that is no command: logged, and reported as an error."""
         log.info("%s: %s", self.name, why)
+        self.fail(why, command_id)
+
+    def fail(self, why: str, command_id: int | None = None) -> None:
+        """The status says CRCL_Error, why, for `command_id` (default: the current one)."""
         self.record = CommandRecord(self.record.command_id if command_id is None else command_id,
                                     ERROR, why)
         self.changed()
@@ -126,8 +140,9 @@ class CrclSession:
             listener()
 
     def status(self) -> bytes:
-        feed = self.link.feed
-        return status.build(self.record, next(self._status_ids), self.settings, feed.latest,
+        feed = self.device.feed
+        live = live_state(feed.latest) if feed.latest is not None else None
+        return status.build(self.record, next(self._status_ids), self.settings, live,
                             feed.stale(), self.options.gripper_stroke)
 
     # ---- running commands ---------------------------------------------------------------------
@@ -172,8 +187,9 @@ class CrclSession:
             except asyncio.CancelledError:
                 if not self._running.cancelled():
                     raise              # the worker itself is cancelled: the session closes
-                record.state, record.description = ERROR, "preempted by the next command"
-                self._must_halt = lasts
+                record.state = ERROR
+                record.description = self.lost or "preempted by the next command"
+                self._must_halt = lasts and not self.lost
             finally:
                 self._running = None
                 self.changed()
@@ -184,8 +200,12 @@ class CrclSession:
             description = await running
             if self.record is record:
                 record.state, record.description = DONE, description or ""
-        except (CrclError, DeviceRefused) as error:
-            record.state, record.description = ERROR, str(error)
+        except SessionEnded as lost:
+            self.lose(lost)
+            record.state, record.description = ERROR, self.lost or str(lost)
+        except (CrclError, LandscapeError) as error:
+            record.state, record.description = ERROR, describe(error)
+            log.info("%s: command %d: %s", self.name, record.command_id, record.description)
         except Exception as error:   # a bug must not take the connection down silently
             log.exception("%s: command %d failed", self.name, record.command_id)
             record.state, record.description = ERROR, f"gateway error: {error!r}"
@@ -201,7 +221,7 @@ class CrclSession:
         if self.control is not None:
             try:
                 await self.halt()
-            except DeviceRefused as error:
+            except LandscapeError as error:
                 log.warning("%s: stopping the preempted motion: %s", self.name, error)
 
     async def halt(self) -> None:
@@ -216,10 +236,10 @@ class CrclSession:
     async def _halt_once(self) -> None:
         state = await self.control.state()
         if state == types_pb2.DEVICE_STATE_MOVING:
-            await self.control.call("StopMotion", motion_pb2.StopMotionRequest())
+            await self.control.robot.stop_motion()
             state = types_pb2.DEVICE_STATE_PAUSED
         if state == types_pb2.DEVICE_STATE_PAUSED:
-            await self.control.call("AbortMotion", motion_pb2.AbortMotionRequest())
+            await self.control.robot.abort_motion()
 
     async def execute(self, command: m.Command) -> str | None:
         """Carry out one command; returns a description for its Done status."""
@@ -228,6 +248,8 @@ class CrclSession:
                             "gateway; send the command without Guard elements")
         if isinstance(command, m.InitCanon):
             return await self.init_canon()
+        if self.control is None and self.lost:
+            return self._after_loss(command)
         if self.control is None:
             if isinstance(command, (m.EndCanon, m.StopMotion)):
                 return "no CRCL session is active: nothing to do"
@@ -239,17 +261,49 @@ class CrclSession:
 
     async def init_canon(self) -> str:
         if self.control is None:
-            self.control = await self.link.take_control(self.name)
+            control = self.control = await self.device.take_control(self.name, self.peer)
+            control.robot.session.add_end_listener(lambda lost: self._ended(control, lost))
         try:
             await self.control.prepare()
             self.settings = CrclSettings()
-            await self.link.feed.watch(self, ())
+            await self.device.feed.watch(self, ())
             await push_rates(self)
         except BaseException:
             await self.drop_control()
             raise
-        self.ended = False
+        self.ended, self.lost = False, ""
         return "session started: lock held, drives on, default units"
+
+    def _ended(self, control: Control, lost: SessionEnded | None) -> None:
+        """The device session of `control` ended: lost, unless this client closed it."""
+        if lost is not None and self.control is control:
+            self.lose(lost)
+
+    def lose(self, lost: SessionEnded) -> None:
+        """The device ended this session's own (it stopped the arm and freed the lock): the
+        running command and those queued end in CRCL_Error saying so, and so does every
+        status until InitCanon. Nothing takes the lock back by itself."""
+        if self.control is None:
+            return
+        self.lost = f"the lock is lost: {lost}; InitCanon takes it again"
+        log.warning("%s: %s", self.name, self.lost)
+        control, self.control = self.control, None
+        self._dropped = asyncio.ensure_future(control.close())   # its session has ended
+        self._queue.clear()
+        if self._running is not None and not self._running.done():
+            self._running.cancel()
+        self.record.state, self.record.description = ERROR, self.lost
+        self.changed()
+
+    def _after_loss(self, command: m.Command) -> str:
+        """A command after a lost lock: EndCanon and StopMotion have nothing to do (the
+        device stopped the arm and released), the others are errors saying so."""
+        if isinstance(command, m.EndCanon):
+            self.lost, self.ended = "", True
+            return "nothing to release: the lock was lost before"
+        if isinstance(command, m.StopMotion):
+            return f"nothing to stop: {self.lost}"
+        raise CrclError(self.lost)
 
     async def end_canon(self) -> str:
         control, self.control = self.control, None
@@ -272,8 +326,8 @@ class CrclSession:
                              return_exceptions=True)
         await self.drop_control()
         try:
-            await self.link.feed.watch(self, ())     # its sensors, if no one else's
-        except CrclError as error:
+            await self.device.feed.watch(self, ())     # its sensors, if no one else's
+        except LandscapeError as error:
             log.warning("%s: %s", self.name, error)
 
     # ---- programs ----------------------------------------------------------------------------
@@ -289,9 +343,11 @@ class CrclSession:
             self.changed()
             try:
                 await self.execute(command)
-            except (CrclError, DeviceRefused) as error:
+            except SessionEnded:
+                raise                             # the loss ends the program: lose() says so
+            except (CrclError, LandscapeError) as error:
                 raise CrclError(f"program stopped at command {index} ({command.KIND}, CommandID "
-                                f"{command.command_id}): {error}") from None
+                                f"{command.command_id}): {describe(error)}") from None
         return f"program done: {len(commands)} commands"
 
 

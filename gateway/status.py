@@ -17,7 +17,7 @@ from lxml import etree
 
 from landscape.gateway import poses
 from landscape.gateway.settings import CrclSettings, SiRate, ToleranceSi
-from landscape.gateway.state_feed import LiveState
+from landscape.gateway.live import LiveState
 from landscape.gateway.units import CrclUnits
 
 XSI = "http://www.w3.org/2001/XMLSchema-instance"

@@ -26,9 +26,8 @@ from landscape.gateway.errors import CrclError
 from landscape.gateway.motions import SETTLE_TIMEOUT, present
 from landscape.gateway.rates import push_rates
 from landscape.gateway.status import is_vacuum
-from landscape.v1 import control_pb2
-from landscape.v1 import digital_io_service_pb2 as dio
-from landscape.v1 import end_effector_pb2, settings_pb2, types_pb2
+from landscape.client import LandscapeError
+from landscape.v1 import types_pb2
 
 TOOL_CHANGER_OUTPUT = "toolchanger_lock"    # the cell's output: 1 couples, 0 releases
 MAIN_FUNCTION = 1                           # bit 0 of ActivateTool's bit field
@@ -44,40 +43,37 @@ _LENGTH_M = {types_pb2.LINEAR_UNIT_METERS: 1.0, types_pb2.LINEAR_UNIT_MILLIMETER
 
 
 async def _tool(session) -> tuple[str, str]:
-    reply = await session.link.read("GetEndEffectorState",
-                                    end_effector_pb2.GetEndEffectorStateRequest())
+    reply = await session.control.robot.get_end_effector_state()
     return reply.current_ee, reply.ee_state
 
 
 async def _changer(session, couple: bool) -> None:
-    io = await session.link.read("ListDigitalIO", dio.ListDigitalIORequest(),
-                                 stub=session.link.digital_io)
-    for unit in io.units:
+    robot = session.control.robot
+    for unit in (await robot.list_digital_io()).units:
         for bit in unit.bits:
             if unit.type == "output" and bit.name == TOOL_CHANGER_OUTPUT:
                 mask = 1 << bit.bit
-                await session.control.call("SetDigitalIO", dio.SetDigitalIORequest(
-                    type="output", unit_id=unit.unit_id, bits_on=mask if couple else 0,
-                    bits_off=0 if couple else mask, description="CRCL tool changer"),
-                    stub=session.link.digital_io)
+                await robot.set_digital_io(unit.unit_id, bits_on=mask if couple else 0,
+                                           bits_off=0 if couple else mask,
+                                           description="CRCL tool changer")
                 return
     raise CrclError(f"the cell has no {TOOL_CHANGER_OUTPUT!r} output: no tool changer")
 
 
 async def _slots(session) -> dict[str, np.ndarray]:
     """Each rack tool's plate in its slot (4x4, world, m). A tool on the flange has no place in
-    the cell's description: its slot is the one last seen (the link remembers them)."""
-    cell = await session.link.read("GetCellDescription", control_pb2.GetCellDescriptionRequest())
-    session.link.slots.update({body.name: poses.matrix(np.array(
+    the cell's description: its slot is the one last seen (the gateway's device remembers them)."""
+    cell = await session.control.robot.get_cell_description()
+    session.device.slots.update({body.name: poses.matrix(np.array(
         [body.pose.x, body.pose.y, body.pose.z, body.pose.roll, body.pose.pitch, body.pose.yaw]))
         for body in cell.bodies if body.kind == body.KIND_TOOL and not body.attached_to})
-    return session.link.slots
+    return session.device.slots
 
 
 async def _flange(session) -> np.ndarray:
     """The flange now (4x4, world, m): the controlled point less the tool offset."""
     live = await present(session)
-    reply = await session.link.read("GetToolOffsets", settings_pb2.GetToolOffsetsRequest())
+    reply = await session.control.robot.get_tool_offsets()
     o, scale = reply.offset, _LENGTH_M.get(reply.units.linear, 1.0)
     angles = np.array([o.roll, o.pitch, o.yaw])
     if reply.units.angular == types_pb2.ANGULAR_UNIT_DEGREES:
@@ -120,7 +116,7 @@ async def close_tool_changer(session, cmd: m.CloseToolChanger) -> str:
                 raise CrclError(f"the changer did not couple the {name} at its plate")
             return f"tool {tool} coupled"
         await _ready_to_move(session)
-        await session.control.call("GetTool", end_effector_pb2.GetToolRequest(tool_id=name))
+        await session.control.robot.get_tool(name)
         return f"tool {name} coupled (the device docked it from {above:.3f} m above)"
     raise CrclError(f"the arm is at no tool changer: the flange must be at a rack tool's plate "
                     f"or on its axis above it ({', '.join(slots) or 'no tools in the rack'})")
@@ -140,7 +136,7 @@ async def open_tool_changer(session, cmd: m.OpenToolChanger) -> str:
         await _changer(session, couple=False)
         return f"tool {tool} released"
     await _ready_to_move(session)
-    await session.control.call("PutTool", end_effector_pb2.PutToolRequest(tool_id=tool))
+    await session.control.robot.put_tool(tool)
     return f"tool {tool} released into its slot (the device docked it from {above:.3f} m above)"
 
 
@@ -151,15 +147,15 @@ async def set_end_effector(session, cmd: m.SetEndEffector) -> str:
     # A positive setting: open (gripper) or powered (vacuum); landscape.v1's main function
     # closes the gripper and powers the cup.
     activate = (cmd.setting > 0) == is_vacuum(tool, state)
+    robot = session.control.robot
     rpc = "ActivateTool" if activate else "DeactivateTool"
-    request = (end_effector_pb2.ActivateToolRequest if activate
-               else end_effector_pb2.DeactivateToolRequest)(tool_id=tool, bit_field=MAIN_FUNCTION)
-    await session.control.call(rpc, request)
+    switch = robot.activate_tool if activate else robot.deactivate_tool
+    await switch(tool, MAIN_FUNCTION)
     session.settings.end_effector_setting = cmd.setting
     # Done once the state stream shows it too, so the next GetStatus does.
     states = ON_STATES if activate else OFF_STATES
-    if await session.link.feed.until(lambda s: s.end_effector_state in states,
-                                     SETTLE_TIMEOUT) is None:
+    if await session.device.feed.until(lambda s: s.message.end_effector_state in states,
+                                       SETTLE_TIMEOUT) is None:
         raise CrclError(f"the device did {rpc} but its state stream does not show the {tool} "
                         f"{' or '.join(states)} within {SETTLE_TIMEOUT:g} s")
     return f"{tool}: {rpc}"
@@ -188,7 +184,7 @@ async def enable_sensor(session, cmd: m.EnableSensor) -> str:
     if cmd.options:
         raise CrclError("sensor options are not supported")
     # The gateway's one state stream carries it from now on, once the device has accepted it.
-    await session.link.feed.watch(session, session.settings.sensors | {cmd.sensor_id})
+    await _watch(session, session.settings.sensors | {cmd.sensor_id})
     session.settings.sensors.add(cmd.sensor_id)
     return f"sensor {cmd.sensor_id} reported"
 
@@ -197,11 +193,19 @@ async def disable_sensor(session, cmd: m.DisableSensor) -> str:
     if cmd.sensor_id not in session.settings.sensors:
         raise CrclError(f"sensor {cmd.sensor_id} is not enabled")
     session.settings.sensors.discard(cmd.sensor_id)
-    await session.link.feed.watch(session, session.settings.sensors)
+    await _watch(session, session.settings.sensors)
     return f"sensor {cmd.sensor_id} no longer reported"
 
 
+async def _watch(session, sensors) -> None:
+    """These sensors in the gateway's state stream; CrclError if the device cannot put them in."""
+    try:
+        await session.device.feed.watch(session, sensors)
+    except LandscapeError as refused:
+        raise CrclError(f"the device's state stream cannot carry {', '.join(sorted(sensors))} "
+                        f"({refused.code.name}: {refused.message})") from None
+
+
 async def run_program(session, cmd: m.RunProgram) -> str:
-    reply = await session.control.call("SendCommand",
-                                       end_effector_pb2.SendCommandRequest(input=cmd.text))
+    reply = await session.control.robot.send_command(cmd.text)
     return f"vendor program ran: {reply.result}"

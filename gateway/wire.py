@@ -3,23 +3,31 @@
 NIST's reference implementation sends UTF-8 XML documents back to back with no length prefix
 and no delimiter (../shared/crcl/README.md): a reader finds a document's end where its root
 element closes. TCP may split a document across reads or bring several in one; an XML
-declaration, comments and whitespace may come between documents.
+declaration, comments, processing instructions and whitespace may come between documents.
 
 `DocumentSplitter` scans markup incrementally (tags, comments, processing instructions, CDATA,
 quoted attribute values that may hold '>') and counts element depth; it never parses content,
-so it costs one `bytes.find` per markup token. It refuses a DOCTYPE outright (no DTD, hence
-no entity declarations can ever reach the parser) and bounds what one document may take.
+so it costs one `bytes.find` per markup token. Three things end the stream (WireError), since
+after them nothing the peer sends can be trusted to be CRCL:
+- bytes outside any document, before the first '<' of one: an HTTP request line and headers
+  (a browser's form or fetch POST, whose body would otherwise run as commands), or any other
+  protocol (OutsideDocument);
+- a DOCTYPE or other declaration: no DTD, hence no entity declaration, ever reaches the parser
+  (DeclarationRefused);
+- a single markup token, or a document being skipped, past the size bounds.
 A document that grows past the bound is skipped to its end while its bytes are dropped, so the
-connection stays usable; a single token past the bound cannot be skipped safely and is fatal.
-An XML declaration, or the start of a CRCL root element (`<CRCLCommandInstance`,
-`<CRCLProgram`: CRCL's roots never nest), inside a document means it was truncated: it is
-refused, and the next document starts there.
+connection stays usable. An XML declaration, or the start of a CRCL root element
+(`<CRCLCommandInstance`, `<CRCLProgram`: CRCL's roots never nest), inside a document means it
+was truncated: it is refused, and the next document starts there. A document whose bytes stop
+coming is the server's to drop (DOCUMENT_IDLE).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 DEFAULT_MAX_DOCUMENT = 1 << 20     # bytes; a CRCL command is a few hundred, a program a few 10k
+DOCUMENT_IDLE = 10.0               # s a started document may wait for its next bytes: a client
+                                   # writes a document at once, so a stall means it is gone
 SKIP_BUDGET = 256                  # an oversized document is skipped for this many times the
                                    # bound at most; past that the connection closes
 
@@ -46,6 +54,14 @@ class Refused:
 
 class WireError(Exception):
     """The stream cannot be resynchronised; the connection must close."""
+
+
+class OutsideDocument(WireError):
+    """Bytes that are no part of a CRCL document (an HTTP request, another protocol)."""
+
+
+class DeclarationRefused(WireError):
+    """A DOCTYPE or another declaration: DTDs and entities are not accepted."""
 
 
 class DocumentSplitter:
@@ -82,7 +98,7 @@ class DocumentSplitter:
         """Consume one token if it is complete; False when more bytes are needed."""
         buf = self._buf
         if not self._in_root:
-            if not self._skip_between_documents(out):
+            if not self._skip_between_documents():
                 return False
             lt = self._pos
         else:
@@ -94,8 +110,8 @@ class DocumentSplitter:
             self._pos = lt
         return self._token(out, lt)
 
-    def _skip_between_documents(self, out: list) -> bool:
-        """Before a root element: whitespace, then '<'. Text there is garbage: refuse, skip."""
+    def _skip_between_documents(self) -> bool:
+        """Before a root element: whitespace, then '<'. Anything else ends the stream."""
         buf, pos = self._buf, self._pos
         while pos < len(buf) and buf[pos] in _WHITESPACE:
             pos += 1
@@ -106,12 +122,8 @@ class DocumentSplitter:
             return False
         if buf[pos] == 0x3C:                             # '<'
             return True
-        lt = buf.find(b"<", pos)
-        end = len(buf) if lt < 0 else lt
-        out.append(Refused(f"text outside any document: {bytes(buf[pos:end][:40])!r}",
-                           self._base + pos))
-        self._pos = self._doc_start = end
-        return lt >= 0
+        raise OutsideDocument(f"bytes outside any CRCL document at byte {self._base + pos}: "
+                              f"{bytes(buf[pos:pos + 40])!r}")
 
     def _token(self, out: list, lt: int) -> bool:
         buf = self._buf
@@ -130,7 +142,8 @@ class DocumentSplitter:
             if b"<![CDATA[".startswith(bytes(buf[lt:lt + 9])) or \
                     b"<!--".startswith(bytes(buf[lt:lt + 4])):
                 return False                             # may still become CDATA or a comment
-            raise WireError("a DOCTYPE or other declaration: DTDs and entities are not accepted")
+            raise DeclarationRefused("a DOCTYPE or other declaration: DTDs and entities are "
+                                     "not accepted")
         else:
             end = self._tag_end(lt)
             if end <= -2:                                # a '<' inside a tag: it was cut short

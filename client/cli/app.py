@@ -3,7 +3,9 @@
 Exit codes: 0 done; 1 the device refused the command (its message is printed), or the motion
 failed or was aborted; 2 bad arguments or file; 3 no answer from the device server; 4 a
 command did not finish within --timeout; 5 not implemented by this device server yet;
-130 interrupted (Ctrl-C: the motion is stopped and the lock released).
+6 the device ended the session (its reason is printed, e.g. "your session ended: no
+keep-alive for 2 s"): it stopped the arm and released the lock; 130 interrupted (Ctrl-C: the
+motion is stopped and the lock released).
 """
 from __future__ import annotations
 

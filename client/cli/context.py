@@ -17,10 +17,12 @@ from landscape.client.cli.output import Output
 from landscape.client.credentials import ClientTLS
 from landscape.client.errors import (CommandAborted, CommandFailed, CommandRefused,
                                      CommandTimeout, LandscapeError, NotImplementedByServer,
-                                     RpcTimeout, TransportError)
+                                     RpcTimeout, SessionEnded, TransportError)
+from landscape.client.identity import Identity, user_at_host
 from landscape.client.robot import Robot
 
 DEFAULT_TARGET = "127.0.0.1:50051"
+PROGRAM = "landscape-cli"     # landscape-client on every call (identity.py)
 
 # Exit codes (documented in `landscape --help` and the README), most specific class first.
 EXIT_OK = 0
@@ -29,8 +31,11 @@ EXIT_USAGE = 2            # bad arguments or file (click's own code for usage er
 EXIT_UNREACHABLE = 3      # no answer from the device server
 EXIT_TIMEOUT = 4          # a command did not finish within --timeout
 EXIT_UNIMPLEMENTED = 5    # this device server does not carry the command out yet
+EXIT_SESSION_LOST = 6     # the device ended the session (its reason is printed): it stopped
+                          # the arm and released the lock; nothing takes it back
 EXIT_INTERRUPTED = 130    # Ctrl-C: motion stopped, lock released
 EXIT_CODES: tuple[tuple[type[LandscapeError], int], ...] = (
+    (SessionEnded, EXIT_SESSION_LOST),
     (NotImplementedByServer, EXIT_UNIMPLEMENTED),
     (CommandTimeout, EXIT_TIMEOUT),
     (RpcTimeout, EXIT_TIMEOUT),
@@ -85,8 +90,8 @@ class CliState:
             yield robot
 
     def open_robot(self) -> Robot:
-        return Robot(self.target, self.client_name, tls=self.tls,
-                     token=self.token).open(self.connect_timeout)
+        return Robot(self.target, self.client_name, tls=self.tls, token=self.token,
+                     identity=Identity(PROGRAM, user_at_host())).open(self.connect_timeout)
 
 
 pass_state = click.make_pass_decorator(CliState)

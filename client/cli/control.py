@@ -2,12 +2,16 @@
 plus reset and the operator panel's e-stop."""
 from __future__ import annotations
 
+import os
+import queue
 import shlex
 import sys
+import threading
 
 import click
 
-from landscape.client.cli.context import EXIT_OK, CliState, pass_state
+from landscape.client.cli.context import EXIT_OK, EXIT_SESSION_LOST, CliState, pass_state
+from landscape.client.errors import SessionEnded
 from landscape.client.robot import Robot
 from landscape.v1 import control_pb2
 
@@ -27,7 +31,8 @@ def session(ctx: click.Context, script, keep_going: bool) -> None:
     `move joint 0.5 0 1.57 0 1.57 0`, `path run p --file p.csv`, `deactivate`, `release`).
     Lines starting with # are comments; `exit` ends early. When the session ends, however it
     ends, the device is stopped, deactivated and released. The exit code is the first
-    failed line's (or 0).
+    failed line's (or 0). If the device ends the session (it says why), the script ends at
+    once, even while waiting for a line.
     """
     state: CliState = ctx.obj
     if state.in_session:
@@ -38,7 +43,7 @@ def session(ctx: click.Context, script, keep_going: bool) -> None:
     with state.open_robot() as robot:
         state.robot = robot
         try:
-            for line in _lines(script, interactive):
+            for line in _lines(script, interactive, robot):
                 argv = shlex.split(line, comments=True)
                 if not argv:
                     continue
@@ -46,7 +51,7 @@ def session(ctx: click.Context, script, keep_going: bool) -> None:
                     break
                 code = _run_line(root, argv, state)
                 first_failure = first_failure or code
-                if code and not (interactive or keep_going):
+                if code == EXIT_SESSION_LOST or code and not (interactive or keep_going):
                     break
         finally:
             state.robot = None
@@ -54,14 +59,41 @@ def session(ctx: click.Context, script, keep_going: bool) -> None:
     ctx.exit(first_failure)
 
 
-def _lines(script, interactive: bool):
-    while True:
+def _lines(script, interactive: bool, robot: Robot):
+    """The script's lines; SessionEnded as soon as the device ends the session, even while a
+    line is awaited (the lines are read on a thread of their own)."""
+    arrivals: queue.Queue = queue.Queue()
+    robot.when_lost(arrivals.put)
+    threading.Thread(target=_read, args=(script, interactive, arrivals), daemon=True,
+                     name="landscape-script").start()
+    while isinstance(item := arrivals.get(), str):
+        yield item
         if interactive:
             click.echo(PROMPT, nl=False, err=True)
-        line = script.readline()
-        if not line:
-            return
-        yield line
+    if isinstance(item, SessionEnded):
+        raise item
+
+
+def _read(script, interactive: bool, arrivals: queue.Queue) -> None:
+    """Put each line of the script, then None. From a file descriptor with os.read: a daemon
+    thread blocked in a buffered read would hold the buffer's lock at the interpreter's exit."""
+    if interactive:
+        click.echo(PROMPT, nl=False, err=True)
+    try:
+        fd = script.fileno()
+    except (AttributeError, OSError):   # no descriptor (a script in memory): nothing waits
+        for line in script:
+            arrivals.put(line)
+        arrivals.put(None)
+        return
+    pending = b""
+    while chunk := os.read(fd, 4096):
+        *lines, pending = (pending + chunk).split(b"\n")
+        for line in lines:
+            arrivals.put(line.decode() + "\n")
+    if pending:
+        arrivals.put(pending.decode())
+    arrivals.put(None)
 
 
 def _run_line(root: click.Group, argv: list[str], state: CliState) -> int:

@@ -6,7 +6,8 @@ import asyncio
 
 import pytest
 
-from landscape.client import (AsyncRobot, ClientTLS, Frame, NotAllowed, Robot, open_aio_channel)
+from landscape.client import (AsyncRobot, ClientTLS, DeviceLink, Endpoint, Frame, Identity,
+                              NotAllowed, Robot, open_aio_channel)
 from landscape.client.errors import TransportError
 from landscape.server.states import State
 
@@ -61,6 +62,33 @@ def test_async_robot_over_tls_with_a_token_and_on_a_given_channel(secured, keys)
                     await robot.lock()
             assert channel.get_state() is not None   # still the caller's to close
         return position
+
+    position = asyncio.run(asyncio.wait_for(body(), 120))
+    assert list(position.joint_position) == pytest.approx(GOAL, abs=1e-5)
+
+
+def test_one_link_serves_each_person_with_their_own_token(secured, keys):
+    """As a supervisor does: one channel without a token, the shared feeds under the
+    program's viewer token, and each person's robot presenting that person's token."""
+    async def body():
+        link = await DeviceLink(Endpoint(secured.target, keys.tls()), Identity("supervisor"),
+                                token=keys.token("viewer")).open()
+        try:
+            await link.events.ready(10)                 # the feed is let in as a viewer
+            operator = AsyncRobot(link, "ann", token=keys.token("operator"),
+                                  identity=Identity("supervisor", "ann"))
+            async with operator:
+                async with operator.control():
+                    move = await operator.move_absolute(GOAL, Frame.JOINT)
+                    await move.wait(timeout=60)
+            viewer = AsyncRobot(link, "bob", token=keys.token("viewer"),
+                                identity=Identity("supervisor", "bob"))
+            async with viewer:
+                with pytest.raises(NotAllowed):
+                    await viewer.lock()
+                return await viewer.get_robot_position()
+        finally:
+            await link.close()
 
     position = asyncio.run(asyncio.wait_for(body(), 120))
     assert list(position.joint_position) == pytest.approx(GOAL, abs=1e-5)

@@ -56,3 +56,17 @@ def test_any_delivered_event_proves_the_subscription_live():
     assert log.received == 0
     log.record(pb.Event(sequence=7, state_change=pb.StateChange(to_state="inactive")))
     assert log.received == 1 and log.last_sequence == 7
+
+
+def test_a_lock_holder_lost_while_a_command_ran_explains_its_abort():
+    log = CommandLog()
+    log.record(pb.Event(sequence=1, alarm=pb.Alarm(code=101, message="before: not this one")))
+    log.record(command(2, "a", Phase.PHASE_STARTED))
+    assert log.lock_lost_while_running("a") is None
+    log.record(pb.Event(sequence=3, alarm=pb.Alarm(
+        code=101, message="lock holder x disconnected (no keep-alive for 2 s)")))
+    log.record(command(4, "a", Phase.PHASE_ABORTED))
+    assert "no keep-alive" in log.lock_lost_while_running("a").message
+    log.record(command(5, "b", Phase.PHASE_STARTED))
+    log.record(command(6, "b", Phase.PHASE_ABORTED))
+    assert log.lock_lost_while_running("b") is None   # an abort of its own

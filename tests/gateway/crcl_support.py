@@ -15,7 +15,8 @@ import pytest
 from lxml import etree
 from scipy.spatial.transform import Rotation
 
-from landscape.gateway.device import DeviceLink
+from landscape.gateway.device import CrclDevice
+from landscape.client import Endpoint
 from landscape.gateway.schemas import SchemaSet, default_directory
 from landscape.gateway.server import Gateway
 from landscape.gateway.session import GatewayOptions
@@ -43,7 +44,7 @@ class RunningGateway:
         self.port = self.gateway.port
 
     async def _start(self, target: str, state_rate_hz: float):
-        link = DeviceLink(target, state_rate_hz)
+        link = CrclDevice(Endpoint(target), state_rate_hz)
         await link.start()
         gateway = await Gateway(link, self.options).serve("127.0.0.1", 0)
         return link, gateway

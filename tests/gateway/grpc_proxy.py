@@ -1,6 +1,7 @@
 """A forwarding gRPC proxy between the gateway and a real device server, for tests: every
 landscape.v1 call passes through unchanged (bytes, metadata, status and its details), counted
-per method, and a method's stream can be held (its messages wait) to play a stalled link.
+per method with their metadata, and a method's stream can be held (its messages wait) to
+play a stalled link.
 
 It is no stand-in for a component: the device server answers every call; the proxy only
 watches and, when told, delays."""
@@ -34,6 +35,7 @@ class GrpcProxy:
     def __init__(self, target: str):
         self.channel = grpc.insecure_channel(target)
         self.calls: collections.Counter[str] = collections.Counter()   # method name -> calls
+        self.metadata: list[tuple[str, dict]] = []    # (method name, its metadata), in order
         self._held: dict[str, threading.Event] = {}   # method -> cleared while held
         self._methods = _methods()
         self.server = grpc.server(futures.ThreadPoolExecutor(max_workers=64))
@@ -82,8 +84,10 @@ class _Handler(grpc.GenericRpcHandler):
                                            (True, True): "stream_stream"}[kind])(path)
 
         def metadata(context):
-            return [(k, v) for k, v in context.invocation_metadata()
+            kept = [(k, v) for k, v in context.invocation_metadata()
                     if not k.startswith(_SKIPPED_METADATA)]
+            proxy.metadata.append((name, dict(kept)))
+            return kept
 
         def fail(error: grpc.RpcError, context):
             context.set_trailing_metadata(error.trailing_metadata() or ())
@@ -101,6 +105,9 @@ class _Handler(grpc.GenericRpcHandler):
             call = upstream(request, metadata=metadata(context))
             context.add_callback(call.cancel)
             try:
+                # The headers as the device sends them: a subscriber waits for them (it is
+                # registered then) before the first event.
+                context.send_initial_metadata(call.initial_metadata())
                 for reply in call:
                     proxy._wait_gate(name, context)
                     yield reply

@@ -1,5 +1,6 @@
 """Hostile XML against the real gateway: a CRCL_Error or a closed connection, never a crash or
-a file or network access, and the gateway keeps serving its other clients."""
+a file or network access, and the gateway keeps serving its other clients. (Browsers' HTTP
+requests: test_crcl_port.py.)"""
 from __future__ import annotations
 
 import http.server
@@ -49,6 +50,13 @@ def closed(client: RawClient) -> bool:
     return False
 
 
+def refused_then_closed(client: RawClient) -> bool:
+    """A declaration is answered with a CRCL_Error status saying so, then the close."""
+    status = client.read_status()
+    return (field(status, "CommandState") == "CRCL_Error"
+            and "DOCTYPE" in field(status, "StateDescription") and closed(client))
+
+
 def test_external_entities_close_the_connection_without_any_fetch(gateway, bystander, web, tmp_path):
     port, hits = web
     secret = tmp_path / "secret"
@@ -57,7 +65,7 @@ def test_external_entities_close_the_connection_without_any_fetch(gateway, bysta
         attacker = RawClient(gateway.port)
         attacker.send(f'<?xml version="1.0"?><!DOCTYPE CRCLCommandInstance [<!ENTITY x SYSTEM '
                       f'"{target}">]>'.encode() + command("Message", 1, "<Message>&x;</Message>"))
-        assert closed(attacker)
+        assert refused_then_closed(attacker)
         attacker.close()
     schema_hint = command("GetStatus", 2).replace(
         b"<CRCLCommandInstance ", f'<CRCLCommandInstance xsi:noNamespaceSchemaLocation='
@@ -74,7 +82,7 @@ def test_entity_expansion_closes_the_connection(gateway, bystander):
         f'<!ENTITY {chr(98 + i)} "{("&" + chr(97 + i) + ";") * 10}">'.encode() for i in range(9)) + b"]>"
     attacker = RawClient(gateway.port)
     attacker.send(b'<?xml version="1.0"?>' + laughs + b"<r>&j;</r>")
-    assert closed(attacker)
+    assert refused_then_closed(attacker)
     attacker.close()
 
 
@@ -101,13 +109,16 @@ def test_truncated_and_interleaved_documents_are_errors(gateway, bystander):
     status = client.read_status()
     assert field(status, "CommandState") == "CRCL_Error"
     assert "truncated" in field(status, "StateDescription")
-    client.send(a[:40] + b[:60] + a[40:] + b[60:])         # interleaved halves
-    client.send(command("GetStatus", 13))
-    status = client.read_status()
-    assert field(status, "CommandState") == "CRCL_Error"
-    client.send(b"</CRCLCommandInstance>" * 3 + b"junk" + command("GetStatus", 14))
+    client.send(b"</CRCLCommandInstance>" * 3 + command("GetStatus", 13))
     assert field(client.read_status(), "CommandState") == "CRCL_Error"
+    client.send(b"junk" + command("GetStatus", 14))       # text outside a document: the end
+    assert closed(client)
     client.close()
+    interleaved = RawClient(gateway.port)                  # the halves leave text outside
+    interleaved.send(a[:40] + b[:60] + a[40:] + b[60:])
+    interleaved.send(command("GetStatus", 15))
+    assert closed(interleaved)
+    interleaved.close()
 
 
 def test_a_document_cut_at_a_tag_boundary_then_undeclared_documents_are_answered(gateway, bystander):
@@ -129,7 +140,11 @@ def test_nonsense_values_are_errors_not_crashes(gateway, bystander):
                  "<DwellTime>" + "9" * 5000 + "</DwellTime>"):
         client.send(command("Dwell", 21, body))
         assert field(client.status(), "CommandState") == "CRCL_Error"
-    client.send(b"\xff\xfe<\x00C\x00" + b"\x00" * 10 + command("GetStatus", 22))
+    client.send(b"<\x00C\x00" + b"\x00" * 10 + command("GetStatus", 22))
     client.send(command("GetStatus", 23))
     assert field(client.read_status(), "StatusID")
     client.close()
+    utf16 = RawClient(gateway.port)                       # a BOM is no '<': the end
+    utf16.send(b"\xff\xfe<\x00C\x00" + command("GetStatus", 24))
+    assert closed(utf16)
+    utf16.close()

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from landscape.gateway.wire import Document, DocumentSplitter, Refused, WireError
+from landscape.gateway.wire import (DeclarationRefused, Document, DocumentSplitter,
+                                    OutsideDocument, Refused, WireError)
 
 from crcl_support import EXAMPLES, command, pose
 
@@ -52,15 +53,23 @@ def test_an_oversized_document_is_dropped_and_the_next_one_is_read():
     assert documents(out) == [COMMANDS[1]]
 
 
-def test_text_between_documents_is_refused_and_skipped():
-    out = DocumentSplitter().feed(b"garbage" + COMMANDS[0])
-    assert isinstance(out[0], Refused) and "text outside" in out[0].reason
-    assert documents(out) == [COMMANDS[0]]
+@pytest.mark.parametrize("before", [b"garbage", b"POST / HTTP/1.1\r\nHost: x\r\n\r\n",
+                                    b"\xef\xbb\xbf", COMMANDS[0] + b" x"])
+def test_bytes_outside_a_document_end_the_stream(before):
+    splitter = DocumentSplitter()
+    with pytest.raises(OutsideDocument, match="outside any CRCL document"):
+        splitter.feed(before + COMMANDS[1])
+
+
+def test_declarations_comments_and_instructions_may_come_between_documents():
+    between = b'\n<!-- next --> <?crcl hint?>\r\n'
+    out = DocumentSplitter().feed(COMMANDS[0] + between + COMMANDS[1])
+    assert [d.strip() for d in documents(out)] == [COMMANDS[0], (between + COMMANDS[1]).strip()]
 
 
 @pytest.mark.parametrize("declaration", [b"<!DOCTYPE A [<!ENTITY e 'x'>]>", b"<!ENTITY e 'x'>"])
 def test_a_dtd_ends_the_stream(declaration):
-    with pytest.raises(WireError, match="DTD"):
+    with pytest.raises(DeclarationRefused, match="DTD"):
         DocumentSplitter().feed(b'<?xml version="1.0"?>' + declaration + b"<A>&e;</A>")
 
 

@@ -1,10 +1,13 @@
 """The `landscape` console script as users run it, against a real device server."""
 from __future__ import annotations
 
+import getpass
 import json
 import os
 import pty
 import select
+import signal
+import socket
 import subprocess
 import sys
 from concurrent import futures
@@ -16,7 +19,7 @@ import pytest
 from landscape.server.states import State
 from landscape.v1 import device_service_pb2_grpc
 
-from support import make_keys, start_secured_server, start_server
+from support import make_keys, start_secured_server, start_server, wait_until
 
 LANDSCAPE = Path(sys.executable).with_name("landscape")   # the installed console script
 
@@ -210,6 +213,35 @@ def test_a_server_without_the_command_exits_5():
     assert "error:" in done.stderr
 
 
+class _Recorder(grpc.GenericRpcHandler):
+    """A server of no method at all that keeps each call's metadata (UNIMPLEMENTED)."""
+
+    def __init__(self):
+        self.calls: list[tuple[str, dict]] = []
+
+    def service(self, details):
+        self.calls.append((details.method, dict(details.invocation_metadata)))
+        return None
+
+
+def test_every_call_says_the_cli_acts_for_the_user_at_this_host():
+    """identity.md: `landscape-client: landscape-cli`, `landscape-on-behalf-of: user@host`."""
+    recorder = _Recorder()
+    bare = grpc.server(futures.ThreadPoolExecutor(max_workers=2), handlers=[recorder])
+    port = bare.add_insecure_port("127.0.0.1:0")
+    bare.start()
+    try:
+        landscape(f"127.0.0.1:{port}", "status")
+    finally:
+        bare.stop(grace=None)
+    who = f"{getpass.getuser()}@{socket.gethostname()}"
+    methods = {method for method, _ in recorder.calls}
+    assert "/landscape.v1.SessionService/Connect" in methods, methods
+    for method, metadata in recorder.calls:
+        assert metadata.get("landscape-client") == "landscape-cli", method
+        assert metadata.get("landscape-on-behalf-of") == who, method
+
+
 def test_tls_and_a_token_file_from_the_flags_or_the_environment(tmp_path):
     keys = make_keys(tmp_path / "keys")
     secured = start_secured_server(keys)
@@ -238,3 +270,56 @@ def test_tls_and_a_token_file_from_the_flags_or_the_environment(tmp_path):
         assert missing.returncode == 2 and "nope" in missing.stderr
     finally:
         secured.stop(grace=None)
+
+
+@pytest.fixture
+def paced():
+    """A device whose motions last as long as on the arm (lock-step at real-time pace)."""
+    running = start_server(lockstep_pace=1.0)
+    yield running
+    running.stop(grace=None)
+
+
+def _starve(process: subprocess.Popen, server) -> None:
+    """Stop the CLI (SIGSTOP: no keep-alive goes out) until the device has ended its session
+    and let the arm go, then let it run again."""
+    os.kill(process.pid, signal.SIGSTOP)
+    try:
+        wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
+    finally:
+        os.kill(process.pid, signal.SIGCONT)
+
+
+def test_a_starved_move_says_the_session_ended_in_the_devices_words_and_exits_6(paced):
+    """Issue 25 item 4: the move's wait ends with the device's reason, not 'aborted'."""
+    cli = subprocess.Popen([str(LANDSCAPE), "--target", paced.target, "move", "joint", "2.5",
+                            "0", "1.57", "0", "1.57", "0", "--speed", "2"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_until(lambda: paced.device.state is State.MOVING, timeout=30)
+        _starve(cli, paced)
+        _, errors = cli.communicate(timeout=60)
+    finally:
+        cli.kill()
+    assert cli.returncode == 6, errors
+    assert "your session ended: no keep-alive for 2 s" in errors
+    assert paced.device.state is State.UNLOCKED and not paced.device.status().locked
+
+
+def test_a_starved_session_script_ends_at_once_without_another_line(paced):
+    """Waiting for its next line, `landscape session` hears the device end its session."""
+    cli = subprocess.Popen([str(LANDSCAPE), "--target", paced.target, "session"],
+                           stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
+    try:
+        cli.stdin.write("lock\n")
+        cli.stdin.flush()                       # and no more lines: stdin stays open
+        wait_until(lambda: paced.device.state is State.INACTIVE, timeout=30)
+        _starve(cli, paced)
+        cli.wait(timeout=30)
+        errors = cli.stderr.read()
+    finally:
+        cli.kill()
+    assert cli.returncode == 6, errors
+    assert "your session ended: no keep-alive for 2 s" in errors
+    assert paced.device.state is State.UNLOCKED

@@ -1,0 +1,77 @@
+"""The device's live state as CRCL reads it: a sample of the client core's state feed
+(landscape.client.state_feed: one StateService.StreamState per gateway, in the world frame,
+m and rad) as SI numpy arrays.
+
+GetStatus is answered from the newest sample, never by a round trip per poll; while the stream
+is down, status says why and how old its last sample is, and motions fail rather than judge
+their end on it. Each sample is converted once, however many connections poll it.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from landscape.client.state_feed import Sample
+from landscape.v1 import state_service_pb2, types_pb2
+
+_LINEAR_M = {types_pb2.LINEAR_UNIT_INCHES: 0.0254, types_pb2.LINEAR_UNIT_FEET: 0.3048,
+             types_pb2.LINEAR_UNIT_METERS: 1.0, types_pb2.LINEAR_UNIT_CENTIMETERS: 0.01,
+             types_pb2.LINEAR_UNIT_MILLIMETERS: 0.001}
+_ANGULAR_RAD = {types_pb2.ANGULAR_UNIT_DEGREES: np.pi / 180.0, types_pb2.ANGULAR_UNIT_RADIANS: 1.0}
+
+
+@dataclass(frozen=True, eq=False)
+class LiveState:
+    """One sample of the device, SI: joints rad (6,), rad/s (6,), N*m (6,) or empty; the tool
+    tip in the world frame as x, y, z (m), roll, pitch, yaw (rad). Each sample is its own
+    (compared and hashed by identity: status.py keeps what it made of the newest ones)."""
+
+    sequence: int
+    joint_positions: np.ndarray
+    tool_pose: np.ndarray
+    device_state: int                     # types_pb2.DeviceState
+    joint_velocities: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    joint_torques: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    command_id: str = ""
+    end_effector: str = ""
+    end_effector_state: str = ""
+    sensors: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    received: float = 0.0                 # time.monotonic() when it arrived
+    time: float = 0.0                     # unix s of the controller cycle it was taken in
+
+
+def _si(units: types_pb2.Units, joints, pose: types_pb2.Pose) -> tuple[np.ndarray, np.ndarray]:
+    """Joints (rad) and pose (m, rad) from values in `units`."""
+    scale_l = _LINEAR_M.get(units.linear, 1.0)
+    scale_a = _ANGULAR_RAD.get(units.angular, 1.0)
+    return (np.asarray(joints, dtype=float) * scale_a,
+            np.array([pose.x * scale_l, pose.y * scale_l, pose.z * scale_l,
+                      pose.roll * scale_a, pose.pitch * scale_a, pose.yaw * scale_a]))
+
+
+@functools.lru_cache(maxsize=8)
+def live_state(arrived: Sample) -> LiveState:
+    """The sample in SI (the same object for the same sample: status.py keeps what it made of
+    the newest ones)."""
+    sample = arrived.message
+    joints, pose = _si(sample.units, sample.joint_positions, sample.tool_pose)
+    scale_a = _ANGULAR_RAD.get(sample.units.angular, 1.0)
+    return LiveState(
+        sequence=sample.sequence, joint_positions=joints, tool_pose=pose,
+        device_state=sample.device_state,
+        joint_velocities=np.asarray(sample.joint_velocities) * scale_a,
+        joint_torques=np.asarray(sample.joint_torques),
+        command_id=sample.command_id, end_effector=sample.end_effector,
+        end_effector_state=sample.end_effector_state,
+        sensors={s.name: tuple(s.values) for s in sample.sensors}, received=arrived.received,
+        time=arrived.time)
+
+
+def world_si(rate_hz: float) -> state_service_pb2.StreamStateRequest:
+    """The stream CRCL reads: `rate_hz` samples a second, the world frame, m and rad."""
+    return state_service_pb2.StreamStateRequest(
+        rate_hz=rate_hz, frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
+        units=types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS,
+                              angular=types_pb2.ANGULAR_UNIT_RADIANS))
