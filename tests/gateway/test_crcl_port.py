@@ -133,5 +133,6 @@ def test_an_error_the_gateway_raises_is_logged(gateway, caplog):
     status = client.run("MoveTo", 3, "<MoveStraight>false</MoveStraight>" + pose(0.5, 0, 0.5))
     assert field(status, "CommandState") == "CRCL_Error"
     description = field(status, "StateDescription")
-    assert any(description in line for line in peer_lines(caplog, client.sock)), caplog.text
+    assert any(description in line for line in peer_lines(caplog, client.sock)), (
+        description, caplog.text)
     client.close()
