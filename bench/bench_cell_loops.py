@@ -30,22 +30,22 @@ import time
 import numpy as np
 from common import record
 
-from landscape.server.arm_dynamics import tool_payload
-from landscape.server.cycle_inputs import CycleSensors, IoMonitor
-from landscape.server.executor import Executor
-from landscape.server.run_arrays import pack_run
-from landscape.server.feedback import FeedbackRing
-from landscape.server.force_control import ComplySpec, GuardSpec
-from landscape.server.jog_control import MANUAL_TIP_SPEED, JogLimits
-from landscape.server.moves import Planner
-from landscape.server.settings import MotionSettings
-from landscape.server.targets import Frame
+from landscape.server.cycle.arm_dynamics import tool_payload
+from landscape.server.cycle.inputs import CycleSensors, IoMonitor
+from landscape.server.cycle.executor import Executor
+from landscape.server.cycle.run_arrays import pack_run
+from landscape.server.cycle.feedback import FeedbackRing
+from landscape.server.cycle.force_loops import ComplySpec, GuardSpec
+from landscape.server.cycle.jog_integrator import MANUAL_TIP_SPEED, JogLimits
+from landscape.server.planning.moves import Planner
+from landscape.server.device.motion_settings import MotionSettings
+from landscape.server.planning.targets import Frame
 from landscape.sim.bullet_controller import BulletController
-from landscape.sim.cell import load_cell
-from landscape.sim.controller import EnableState, JointFbk
-from landscape.sim.cycle_process import Mailbox
-from landscape.sim.kinematics import Kinematics
-from landscape.sim.shared_array import SharedArrays
+from landscape.robot.cell import load_cell
+from landscape.robot.controller import EnableState, JointFbk
+from landscape.server.cycle.process import Mailbox
+from landscape.robot.kinematics import Kinematics
+from landscape.server.cycle.shared_array import SharedArrays
 
 CUP = np.eye(4)
 CUP[2, 3] = 0.12

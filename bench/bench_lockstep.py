@@ -34,7 +34,7 @@ from landscape.server.app import serve  # noqa: E402
 from landscape.server.config import ServerConfig  # noqa: E402
 
 from landscape.sim.bullet_controller import BulletController  # noqa: E402
-from landscape.sim.cell import load_cell  # noqa: E402
+from landscape.robot.cell import load_cell  # noqa: E402
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,  # noqa: E402
                           event_service_pb2_grpc, motion_pb2, types_pb2)
 

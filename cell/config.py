@@ -24,8 +24,8 @@ from landscape.cell.config_model import (  # noqa: F401  (the parsed configurati
     FRONT_END_RATES, CellConfig, DeviceSpec, GatewaySpec, LauncherSpec, SecuritySpec,
     SupervisorSpec)
 from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
-from landscape.sim.cell import CellError, load_cell
-from landscape.sim.toml_tables import Table, flag, integer, number, problem, read_toml, string
+from landscape.robot.cell import CellError, load_cell
+from landscape.robot.toml_tables import Table, flag, integer, number, problem, read_toml, string
 
 DEFAULT_FILE = "cells/local.toml"
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
@@ -166,7 +166,7 @@ class SecurityTable(Table):
             if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not rate > 0:
                 raise problem(f"expected a number above 0, got {rate!r}", f"rate_limits.{name}")
         if self.tokens is not None:
-            from landscape.server.auth import TokenFileError, TokenStore
+            from landscape.server.security.auth import TokenFileError, TokenStore
             try:
                 TokenStore.load(self.tokens)
             except TokenFileError as error:
@@ -283,7 +283,7 @@ def _client_token(token: Path | None, security: SecuritySpec, key: str,
 
 def _check_exposure(config: CellConfig) -> None:
     """The device servers' rule (server/tls.py), said here first, naming the key."""
-    from landscape.server.tls import is_loopback
+    from landscape.server.security.tls import is_loopback
     security = config.security
     for index, device in enumerate(config.devices):
         if is_loopback(device.address) or security.insecure:
@@ -323,7 +323,7 @@ def _is_wildcard(address: str) -> bool:
 
 
 def builtin_worlds() -> list[str]:
-    cells = resources.files("landscape.sim").joinpath("cells")
+    cells = resources.files("landscape.robot").joinpath("cells")
     return sorted(item.name[:-5] for item in cells.iterdir() if item.name.endswith(".toml"))
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from landscape.server.limits import Cap
+from landscape.server.api.stream_caps import Cap
 
 CLOCKS = ("realtime", "fast", "lockstep")   # the controller's: controller_link.py
 PROCESS_CLOCKS = ("realtime", "fast")       # those that run the cycle in a process of its own

@@ -26,13 +26,13 @@ from typing import Any
 import numpy as np
 
 from landscape.sim.bullet_drives import Drives, connect
-from landscape.sim.cell import PANEL_WIRES, Cell
-from landscape.sim.controller import (
+from landscape.robot.cell import PANEL_WIRES, Cell
+from landscape.robot.controller import (
     CalibState, Controller, CyclicFunction, DioStatus, DoutValue, EnableState, EstopState,
     EventFunc, InitState, IoctrlCode, IoId, IoType, IoUnit, JointCmd, JointFbk, SensorInfo,
     State, Status)
 from landscape.sim.dio import DigitalIO
-from landscape.sim.kinematics import Config, Kinematics, ReversingResult
+from landscape.robot.kinematics import Config, Kinematics, ReversingResult
 from landscape.sim.panel import Panel
 from landscape.sim.sensors import SENSOR_CLASSES
 from landscape.sim.world import World

@@ -35,7 +35,7 @@ with silenced():   # pybullet's banner
     import pybullet as pb
     from pybullet_utils.bullet_client import BulletClient
 
-from landscape.sim.controller import JointFbk, SettleState
+from landscape.robot.controller import JointFbk, SettleState
 
 SETTLE_SPEED = 1e-3            # rad/s: slower than this on every joint ...
 SETTLE_ERROR = 1e-4            # rad: ... and this close to the command is SETTLED

@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.sim import panel
-from landscape.sim.controller import EnableState
+from landscape.robot.controller import EnableState
 from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
 from reliability_support import RowLog, columns

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import grpc
-from landscape.server import path_planning
-from landscape.server.states import State
-from landscape.server.units import pose_matrix
+from landscape.server.planning import path_planning
+from landscape.server.device.states import State
+from landscape.robot.units import pose_matrix
 from landscape.v1 import digital_io_service_pb2 as io_pb
 from landscape.v1 import end_effector_pb2 as ee
 from landscape.v1 import motion_pb2, types_pb2

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from landscape.client import Session
-from landscape.server import alarms
-from landscape.server.states import State
+from landscape.server.events import alarms
+from landscape.server.device.states import State
 from landscape.v1 import digital_io_service_pb2 as pb
 from landscape.v1 import end_effector_pb2 as ee
 

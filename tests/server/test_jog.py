@@ -12,10 +12,10 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server.collision import clearance
-from landscape.server.feedback import CMD, QD, SEQ
-from landscape.server.jog_control import MANUAL_TIP_SPEED
-from landscape.server.states import State
+from landscape.server.planning.collision import clearance
+from landscape.server.cycle.feedback import CMD, QD, SEQ
+from landscape.server.cycle.jog_integrator import MANUAL_TIP_SPEED
+from landscape.server.device.states import State
 from landscape.v1 import motion_pb2, sensing_pb2, settings_pb2, types_pb2
 
 from support import Arm, error_info, wait_until

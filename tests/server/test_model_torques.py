@@ -10,9 +10,9 @@ import threading
 import numpy as np
 import pytest
 
-from landscape.server.arm_dynamics import ArmDynamics, base_gravity
-from landscape.server.feedback import Sample
-from landscape.sim.cell import load_cell
+from landscape.server.cycle.arm_dynamics import ArmDynamics, base_gravity
+from landscape.server.cycle.feedback import Sample
+from landscape.robot.cell import load_cell
 from landscape.v1 import (end_effector_pb2, motion_pb2, state_service_pb2, state_service_pb2_grpc,
                           types_pb2)
 

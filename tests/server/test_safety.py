@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from landscape.client import Session
-from landscape.server import convert
-from landscape.server.feedback import CMD, ENABLE
-from landscape.server.sessions import Outbox
-from landscape.server.states import State
-from landscape.sim.controller import EnableState
-from landscape.sim.cycle_process import EVENT, MSG, Mailbox
+from landscape.server.api import convert
+from landscape.server.cycle.feedback import CMD, ENABLE
+from landscape.server.device.sessions import Outbox
+from landscape.server.device.states import State
+from landscape.robot.controller import EnableState
+from landscape.server.cycle.process import EVENT, MSG, Mailbox
 from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
 from support import Arm, error_info, stubs, wait_until

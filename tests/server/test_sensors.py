@@ -11,9 +11,9 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server import alarms
-from landscape.server.feedback import SENSORS, SEQ, WALL
-from landscape.server.states import State
+from landscape.server.events import alarms
+from landscape.server.cycle.feedback import SENSORS, SEQ, WALL
+from landscape.server.device.states import State
 from landscape.v1 import (control_pb2, motion_pb2, sensing_pb2, settings_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
 
