@@ -26,7 +26,7 @@ from landscape.robot.cell_model import (  # noqa: F401  (the parsed cell, named 
     BoxSpec, Cell, ControllerSpec, INPUT_WIRES, IoSignalSpec, IoSpec, IoUnitSpec, MAX_BITS,
     MAX_TOOL_ID_BITS, OUTPUT_WIRES, PANEL_WIRES, Pose, RecorderSpec, SENSOR_KINDS, SensorSpec,
     TOOL_KINDS, ToolSpec, WORLD_INPUT_WIRES, WorldSpec, ZoneSpec)
-from landscape.server.cycle.process import check_cycle_time
+from landscape.robot.controller import check_cycle_time
 from landscape.robot.toml_tables import (Table, flag, integer, names, number, problem, read_toml,
                                        string, vector)
 

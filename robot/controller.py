@@ -31,6 +31,14 @@ import numpy as np
 from landscape.robot.configurations import Config, ReversingResult
 
 
+def check_cycle_time(cycle_time: float) -> float:
+    """The LLI's rule (3.5.1): a positive multiple of 0.2 ms. Returns it as float, in s."""
+    ticks = round(cycle_time / 0.0002)
+    if ticks < 1 or abs(ticks * 0.0002 - cycle_time) > 1e-9:
+        raise ValueError(f"cycle time {cycle_time!r} s is not a positive multiple of 0.2 ms")
+    return float(cycle_time)
+
+
 class Status(enum.IntEnum):
     OK = 0
     ERROR = 1

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from google.protobuf import timestamp_pb2
 
-from landscape.server.api import request_bounds as bounds
+from landscape.server.api import request_bounds
 from landscape.server.events import bus as events
 from landscape.server.errors import OutOfRange, ParamError
 from landscape.server.planning.path_planning import PointSpec, at_point
@@ -224,7 +224,7 @@ class PathLoadStream:
         self.messages = 0
 
     def feed(self, request) -> None:
-        bounds.check(request)
+        request_bounds.check(request)
         if len(self.specs) + len(request.tags) > self.max_points:
             raise OutOfRange(f"a path holds at most {self.max_points} points")
         if self.messages == 0:

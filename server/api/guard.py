@@ -2,7 +2,7 @@
 
 `guarded(spec)` wraps each RPC a servicer class defines:
 
-1. Admission, on the event loop: the request's bounds (bounds.py), the state table
+1. Admission, on the event loop: the request's bounds (request_bounds.py), the state table
    (states.py) and the lease refuse the call (INVALID_ARGUMENT / OUT_OF_RANGE,
    FAILED_PRECONDITION / PERMISSION_DENIED) before anything happens, and the stream caps
    (limits.py) refuse a stream beyond its client's share (RESOURCE_EXHAUSTED).
@@ -29,7 +29,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import grpc
 
-from landscape.server.api import request_bounds as bounds
+from landscape.server.api import request_bounds
 from landscape.server.device import states
 from landscape.server.errors import CommandError, Internal, Unimplemented, to_status
 from landscape.server.api.stream_caps import client_of
@@ -119,7 +119,7 @@ def _unary(name: str, body):
     async def unary(self, request, context):
         lease = lease_of(context)
         try:
-            bounds.check(request)
+            request_bounds.check(request)
             self.device.admit(name, lease)
             lane = getattr(body, "blocking", None)
             if read_only and lane is None:
@@ -139,7 +139,7 @@ def _stream(name: str, body, streaming_response: bool):
 
     async def admitted(self, request, context):
         if hasattr(request, "ListFields"):
-            bounds.check(request)   # streamed requests are checked message by message
+            request_bounds.check(request)   # streamed requests are checked message by message
         self.device.admit(name, lease_of(context))
         return self.limits.acquire(name, client_of(context.peer())) if streaming_response else None
 

@@ -37,6 +37,7 @@ import time
 from collections import deque
 from typing import Any, Callable, Protocol
 
+from landscape.robot.controller import check_cycle_time  # noqa: F401  (named here too)
 from landscape.server.cycle.stats import StatsRing
 
 CALL, MSG, STOP, READY, REPLY, EVENT, FATAL = (
@@ -68,14 +69,6 @@ class Steppable(Protocol):
     cycle_time: float
 
     def step(self) -> Any: ...
-
-
-def check_cycle_time(cycle_time: float) -> float:
-    """The LLI's rule (3.5.1): a positive multiple of 0.2 ms. Returns it as float, in s."""
-    ticks = round(cycle_time / 0.0002)
-    if ticks < 1 or abs(ticks * 0.0002 - cycle_time) > 1e-9:
-        raise ValueError(f"cycle time {cycle_time!r} s is not a positive multiple of 0.2 ms")
-    return float(cycle_time)
 
 
 class Mailbox:

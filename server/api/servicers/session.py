@@ -6,7 +6,7 @@ import logging
 
 import grpc
 
-from landscape.server.api import request_bounds as bounds, convert, services
+from landscape.server.api import request_bounds, convert, services
 from landscape.server.device.device import Device
 from landscape.server.errors import CommandError, ParamError
 from landscape.server.api.guard import Dispatch, guarded
@@ -29,7 +29,7 @@ class SessionServicer(services.SESSIONS.servicer_base):
         first = await anext(aiter(request_iterator), None)
         if first is None or first.WhichOneof("message") != "hello":
             raise ParamError("a session starts with a hello message")
-        bounds.check(first)
+        request_bounds.check(first)
         session = registry.open(first.hello.client_name, asyncio.get_running_loop())
         reader = asyncio.create_task(self._read(request_iterator, session))
         try:
@@ -56,7 +56,7 @@ class SessionServicer(services.SESSIONS.servicer_base):
                 registry.touch(session)   # any message counts as a keep-alive
                 if message.WhichOneof("message") == "rsvp_answer":
                     try:
-                        bounds.check(message)
+                        request_bounds.check(message)
                     except CommandError as error:
                         log.warning("session %s: answer refused: %s", session.id, error)
                         continue

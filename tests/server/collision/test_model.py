@@ -11,7 +11,7 @@ import pytest
 
 from landscape.server.planning.collision import (DEFAULT_MARGIN, CollisionModelError, CollisionScene,
                                         check_motion)
-from landscape.server.planning.collision.bounds import SphereCentres, joint_travel, lower_bounds
+from landscape.server.planning.collision.distance_bounds import SphereCentres, joint_travel, lower_bounds
 from landscape.server.planning.collision.shapes import ARM_LINKS, FLOOR
 from landscape.robot.units import pose_matrix
 from landscape.robot.cell import parse_cell
