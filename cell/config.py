@@ -1,12 +1,12 @@
 """The cell configuration: one TOML file for the deployment of a cell (its device servers,
 the CRCL gateway, the web supervisor, security and the launcher's policy).
 
-Each device's *world* (arm, fixtures, I/O) is a sim cell file (sim/cells/default.toml) named by
+Each device's *world* (arm, fixtures, I/O) is a cell file (robot/cells/default.toml) named by
 `world`; this file says where the device runs and how it is reached. `cells/local.toml` beside
 this module is the reference, every key commented, and the embedded default of `make run`.
 
 Relative paths are relative to the file's folder (for the embedded default: the current
-folder). The file is read into typed tables (pydantic, sim/toml_tables.py, as the world files
+folder). The file is read into typed tables (pydantic, robot/toml_tables.py, as the world files
 are) and made into the frozen dataclasses of config_model.py; unknown keys are errors, and every
 error names the file, the key and what was expected.
 """
@@ -62,7 +62,7 @@ def _path(value, info: ValidationInfo):
 
 
 def _world(value, info: ValidationInfo):
-    """A world file's path, or the name of one shipped with the simulator (sim/cells/)."""
+    """A world file's path, or the name of one shipped with the package (robot/cells/)."""
     if isinstance(value, str) and value and "/" not in value and not value.endswith(".toml"):
         if value not in builtin_worlds():
             raise problem(f"no built-in world is named {value!r} (built-in: "

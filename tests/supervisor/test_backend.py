@@ -289,7 +289,7 @@ def _bodies(frame: dict) -> dict[str, dict]:
 
 def test_each_device_describes_its_own_cell(people):
     first = start_server()
-    second = start_server(cell=str(ROOT / "sim" / "cells" / "press_tending.toml"))
+    second = start_server(cell=str(ROOT / "robot" / "cells" / "press_tending.toml"))
 
     async def body(page, dashboard):
         cells = {}
