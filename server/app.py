@@ -107,6 +107,7 @@ class RunningServer:
         deactivates and releases), end the streams, stop serving and the controller."""
         self.runner.run(self.health.enter_graceful_shutdown())
         self.device.close()
+        self.workcell.close()
         self.bus.close()
         self.runner.run(self.hub.aclose())
         self.runner.run(self.server.stop(grace), timeout=None)
@@ -165,6 +166,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                                             limits))
     except BaseException:
         device.close()
+        workcell.close()
         link.stop()
         runner.run(server.stop(None))
         runner.close()

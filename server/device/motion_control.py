@@ -1,12 +1,14 @@
 """Motion orchestration: from a planned motion to the cycle and back (seed 3.4 to 3.6).
 
-The device's state machine (device.py) says when a motion may start; this module plans it
+The device's state machine (state_machine.py) says when a motion may start; this module plans it
 (moves.py, path_planning.py), hands it to the Executor in the cycle (executor.py) through
 shared memory, follows the Executor's reports (started, marks, paused, done, failed, aborted),
-publishes the command events and moves the state Resting <-> Moving <-> Paused.
+publishes the command events and moves the state Resting <-> Moving <-> Paused (through the
+state machine's compare-and-set). It is given what it uses: the state machine, the link to the
+controller, the bus, the planner, the collision scene, the path store and the settings.
 
 Ordering: a motion is registered, handed over and only then is the state moved and "started"
-published, all under the device's state lock, so a report can never overtake the start and no
+published, all inside the state machine's `atomic()`, so a report can never overtake the start and no
 state is announced before the action it names has happened. Stops are messages to the cycle
 sent at once; `stop_now` waits for nothing at all.
 """
@@ -17,30 +19,30 @@ import itertools
 import logging
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
-from landscape.server.events import alarms
-from landscape.server.planning import aux_commands
-from landscape.server.device import states
-from landscape.server.planning.collision import CheckResult
+from landscape.robot.arm import ArmModel
+from landscape.robot.controller import DoutValue, Status
 from landscape.server.config import PROCESS_CLOCKS
-from landscape.server.errors import ControllerFailure, ManualControlMode, NotFound, WrongState
-from landscape.server.events.bus import Phase, Severity
 from landscape.server.cycle.run_arrays import pack_run
+from landscape.server.cycle.shared_array import SharedArrays
+from landscape.server.device import states
+from landscape.server.device.state_machine import MANUAL_OFF, StateMachine
+from landscape.server.device.states import State
+from landscape.server.device.stored_settings import SettingsKeeper
+from landscape.server.errors import ControllerFailure, ManualControlMode, NotFound, WrongState
+from landscape.server.events import alarms
+from landscape.server.events.bus import EventBus, Phase, Severity
+from landscape.server.link.clock import CycleProcessError
+from landscape.server.link.controller_link import ControllerLink
+from landscape.server.planning import aux_commands
+from landscape.server.planning.collision import CheckResult, CollisionScene
 from landscape.server.planning.moves import Planner
 from landscape.server.planning.paths import PathLibrary, PathStore
 from landscape.server.planning.process import InProcessPlanning, PlanningProcess, check_run
-from landscape.server.device.states import State
 from landscape.server.planning.targets import Frame
-from landscape.server.workcell.world_parts import WorldParts
-from landscape.robot.controller import DoutValue, Status
-from landscape.server.link.clock import CycleProcessError
-from landscape.server.cycle.shared_array import SharedArrays
-
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
 
 log = logging.getLogger(__name__)
 
@@ -65,10 +67,12 @@ class RunningMotion:
 
 
 class MotionControl:
-    def __init__(self, device: "Device", paths: PathStore, outputs: set[str]):
-        self.device = device
-        self.bus = device.bus
-        self.planner = Planner(device.kinematics, device.link.cycle_time)
+    def __init__(self, state: StateMachine, link: ControllerLink, bus: EventBus, arm: ArmModel,
+                 planner: Planner, collisions: CollisionScene, paths: PathStore,
+                 settings: SettingsKeeper, outputs: set[str]):
+        self.state, self.link, self.bus, self.arm = state, link, bus, arm
+        self.collisions, self.settings = collisions, settings
+        self.planner = planner
         self.paths = PathLibrary(paths)
         self.outputs = outputs          # digital outputs aux commands may set
         self.last_tag = ("", "")        # (path name, tag name), for getTagId
@@ -77,12 +81,10 @@ class MotionControl:
         self._changed = threading.Condition()
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
-        self.parts = WorldParts(device)  # the collision scene's parts follow the world
         # Long paths are planned beside a cycle process in a process of their own as well.
-        self.planning = (PlanningProcess(device.collisions, device.link.cycle_time,
-                                         self._planning_lost)
-                         if getattr(device.link, "clock_kind", None) in PROCESS_CLOCKS
-                         else InProcessPlanning(self.planner, device.collisions))
+        self.planning = (PlanningProcess(collisions, link.cycle_time, self._planning_lost)
+                         if link.clock_kind in PROCESS_CLOCKS
+                         else InProcessPlanning(self.planner, collisions))
 
     def _planning_lost(self, why: str) -> None:
         self.bus.alarm(Severity.ERROR, alarms.PLANNING_LOST, why)
@@ -97,7 +99,6 @@ class MotionControl:
         return self._motion
 
     def close(self) -> None:
-        self.parts.close()
         self.planning.close()
         self.paths.close()
 
@@ -105,20 +106,20 @@ class MotionControl:
 
     def planning_start(self) -> np.ndarray:
         """Where the next motion starts: the setpoint the arm holds, rad."""
-        return self.device.feedback().command
+        return self.link.sample().command
 
     def move(self, command: str, point_name: str, frame: Frame, values: np.ndarray,
              relative: bool, straight: bool, speed_percent: float | None) -> str:
         """Seed 3.4.1 moveAbsolute / moveRelative: plan, then start; values in SI (joints rad;
         x, y, z m and roll, pitch, yaw rad). Nothing moves if planning fails."""
-        trajectory = self.planner.move(self.planning_start(), self.device.settings, frame,
+        trajectory = self.planner.move(self.planning_start(), self.settings.current, frame,
                                        values, relative, straight, speed_percent)
         return self.start(command, point_name, [trajectory])
 
     def move_arc(self, point_name: str, frame: Frame, via: np.ndarray, goal: np.ndarray,
                  relative: bool, speed_percent: float | None) -> str:
         """Seed 3.4.1 moveArc: the tool tip on the circle through the arc point to the goal."""
-        trajectory = self.planner.arc(self.planning_start(), self.device.settings, frame, via,
+        trajectory = self.planner.arc(self.planning_start(), self.settings.current, frame, via,
                                       goal, relative, speed_percent)
         return self.start("MoveArc", point_name, [trajectory])
 
@@ -131,7 +132,7 @@ class MotionControl:
         named queue in one transaction; nothing is stored if any point fails. Returns (points
         loaded, path length)."""
         path, loaded = self.planning.run("load_path", self.paths.get(name), name, frame,
-                                         straight, relative, specs, self.device.settings,
+                                         straight, relative, specs, self.settings.current,
                                          self.outputs, self.planning_start(), total)
         self.paths.put(path)
         return loaded, len(path.points)
@@ -148,7 +149,7 @@ class MotionControl:
         if path is None:
             raise NotFound(f"no path named {name!r}")
         trajectories = self.planning.run("plan_path_run", path, self.planning_start(),
-                                         self.device.settings, cycles, f"PathMove {name}")
+                                         self.settings.current, cycles, f"PathMove {name}")
         tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
         aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
                                       if p.aux_commands}
@@ -159,7 +160,7 @@ class MotionControl:
     def check_collisions(self, trajectories: list, what: str = "the motion", *,
                          allow=(), model=None) -> CheckResult:
         """planning_process.check_run against the cell as it is now (or `model`)."""
-        return check_run(self.device.collisions, trajectories, what, allow=allow, model=model)
+        return check_run(self.collisions, trajectories, what, allow=allow, model=model)
 
     def start(self, command: str, point_name: str, trajectories: list,
               tags: dict | None = None, aux: dict | None = None, *, allow=(),
@@ -179,7 +180,7 @@ class MotionControl:
                loops=None, finish=None, checked=False) -> RunningMotion:
         if not checked:
             self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
-        arrays = self.device.link.share(pack_run(trajectories, self.planner.dt))
+        arrays = self.link.share(pack_run(trajectories, self.planner.dt))
         motion = RunningMotion(f"{command}-{next(self._ids)}", command, point_name, tags or {},
                                aux or {}, arrays, finish=finish)
         try:
@@ -204,42 +205,42 @@ class MotionControl:
         return motion
 
     def _ramps(self) -> dict:
-        return {"acceleration": self.device.settings.joint_accelerations,
-                "stop_acceleration": np.asarray(self.device.arm.max_acceleration)}
+        return {"acceleration": self.settings.current.joint_accelerations,
+                "stop_acceleration": np.asarray(self.arm.max_acceleration)}
 
     def _begin(self, motion: RunningMotion, message: dict) -> None:
         """Register the motion, hand it to the cycle, then Moving and "started" (all under the
         state lock, so no report overtakes the start)."""
-        device, command = self.device, motion.command
-        with device._state_lock:
-            device.check_epoch()
-            if device.state is not State.RESTING or self._holds:
+        command = motion.command
+        with self.state.atomic() as state:
+            state.check_epoch()
+            if state.state is not State.RESTING or self._holds:
                 raise WrongState(f"{command} needs the arm at rest, it is "
-                                 f"{device.state.value}", state=device.state.value)
-            if device.manual_control != "off" and command != "Jog":
+                                 f"{state.state.value}", state=state.state.value)
+            if state.manual_control != MANUAL_OFF and command != "Jog":
                 raise ManualControlMode(f"the arm is under manual control "
-                                        f"({device.manual_control}): only Jog moves it; "
+                                        f"({state.manual_control}): only Jog moves it; "
                                         f"ManualControl(off) first")
             self._motion = motion
             try:
-                device.link.send(message)
+                self.link.send(message)
             except CycleProcessError as error:
                 self._motion = None
                 raise ControllerFailure(f"the controller is gone: {error}") from None
             self.motion_state = states.RUNNING_TRAJECTORY
-            device._transition({State.RESTING}, State.MOVING,
-                               f"{command} {motion.point_name}".strip())
+            state.transition({State.RESTING}, State.MOVING,
+                             f"{command} {motion.point_name}".strip())
             self.bus.command(motion.command_id, command, Phase.STARTED, motion.point_name)
 
     @contextlib.contextmanager
     def no_new_motion(self):
         """While in force no motion starts (for powering down)."""
-        with self.device._state_lock:
+        with self.state.atomic():
             self._holds += 1
         try:
             yield
         finally:
-            with self.device._state_lock:
+            with self.state.atomic():
                 self._holds -= 1
 
     # ---- 3.6 interruptions -----------------------------------------------------------------
@@ -251,10 +252,10 @@ class MotionControl:
     def request_stop(self) -> RunningMotion:
         """StopMotion's first half, which waits for nothing: the stop is on its way to the
         cycle when this returns (the running motion, for wait_at_rest)."""
-        with self.device._state_lock:
+        with self.state.atomic() as state:
             motion = self._motion
-            if motion is None or self.device.state is not State.MOVING:
-                raise WrongState("no motion is running", state=self.device.state.value)
+            if motion is None or state.state is not State.MOVING:
+                raise WrongState("no motion is running", state=state.state.value)
             self.send({"op": "stop"})
             return motion
 
@@ -264,15 +265,14 @@ class MotionControl:
 
     def resume_motion(self) -> None:
         """Seed 3.6.2: the stopped motion goes on along its path (Paused -> Moving)."""
-        device = self.device
-        with device._state_lock:
+        with self.state.atomic() as state:
             motion = self._motion
-            if motion is None or motion.phase != "paused" or device.state is not State.PAUSED:
-                raise WrongState("no paused motion to resume", state=device.state.value)
+            if motion is None or motion.phase != "paused" or state.state is not State.PAUSED:
+                raise WrongState("no paused motion to resume", state=state.state.value)
             self.send({"op": "resume"})
             motion.phase = "running"
             self.motion_state = states.RUNNING_TRAJECTORY
-            device._transition({State.PAUSED}, State.MOVING, "resumed")
+            state.transition({State.PAUSED}, State.MOVING, "resumed")
             self.bus.command(motion.command_id, motion.command, Phase.RESUMED, motion.point_name)
 
     def abort_motion(self, timeout: float = 10.0) -> None:
@@ -294,7 +294,7 @@ class MotionControl:
         """Safety: tell the cycle to stop (at the arm's full deceleration); waits for nothing."""
         if self._motion is not None:
             with contextlib.suppress(CycleProcessError):
-                self.device.link.send({"op": "abort"})
+                self.link.send({"op": "abort"})
 
     def stop_for_safety(self, timeout: float) -> bool:
         """Stop and drop any motion; True once the arm is at rest (False: timed out)."""
@@ -313,7 +313,7 @@ class MotionControl:
     def send(self, msg: dict) -> None:
         """A message to the cycle (executor.py); ControllerFailure if it is gone."""
         try:
-            self.device.link.send(msg)
+            self.link.send(msg)
         except CycleProcessError as error:
             raise ControllerFailure(f"the controller is gone: {error}") from None
 
@@ -325,7 +325,6 @@ class MotionControl:
 
     def on_report(self, msg: dict) -> None:
         """The executor's reports on the running motion (executor.py), in order."""
-        device = self.device
         motion = self._motion
         if motion is None or msg.get("id") != motion.command_id:
             log.warning("cycle report for no running motion: %r", msg)
@@ -345,20 +344,20 @@ class MotionControl:
             motion.report = msg
             if motion.finish is not None:
                 msg = {**msg, "message": motion.finish(msg)}
-        with device._state_lock:
+        with self.state.atomic() as state:
             motion.phase = op
             if op == "paused":
                 self.motion_state = states.ROBOT_PAUSED
-                if device.state is State.MOVING:
-                    device._transition({State.MOVING}, State.PAUSED, "stopped on command")
+                if state.state is State.MOVING:
+                    state.transition({State.MOVING}, State.PAUSED, "stopped on command")
             else:
                 self._motion = None
                 self.motion_state = {"done": states.ROBOT_IDLE,
                                      "failed": states.ROBOT_STOPPED_ON_ERROR,
                                      "aborted": states.ROBOT_STOPPED_ON_COMMAND}[op]
-                if device.state in (State.MOVING, State.PAUSED):
-                    device._transition({State.MOVING, State.PAUSED}, State.RESTING,
-                                       f"{motion.command} {op}")
+                if state.state in (State.MOVING, State.PAUSED):
+                    state.transition({State.MOVING, State.PAUSED}, State.RESTING,
+                                     f"{motion.command} {op}")
             self.bus.command(motion.command_id, motion.command, phase, motion.point_name,
                              message=msg.get("message", ""))
         if op == "failed" or warning:  # seed 3.4.1: an error alarm names the command
@@ -381,7 +380,7 @@ class MotionControl:
 
     def _run_aux(self, motion: RunningMotion, command: str) -> None:
         out = aux_commands.parse(command, self.outputs)
-        controller = self.device.controller
+        controller = self.link.proxy
         try:
             io = controller.get_dout_id(out.name)
             ok = controller.write_dout(io, DoutValue.ONE if out.value else DoutValue.ZERO) \

@@ -23,6 +23,7 @@ class _Pending:
 class RsvpBroker:
     def __init__(self, bus: EventBus):
         self.bus = bus
+        self.timeout = 30.0   # s the device's questions wait for their answer
         self._pending: dict[str, _Pending] = {}
         self._lock = threading.Lock()
         self._ids = itertools.count(1)

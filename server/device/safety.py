@@ -1,4 +1,7 @@
-"""The thread that carries out the device's safety actions (DESIGN.md section 5).
+"""The device's safety actions and the thread that carries them out (DESIGN.md section 5).
+
+`SafetyActions` are the device's reactions that keep the cell safe; `SafetyWorker` is the thread
+that carries out the ones that wait.
 
 The disconnect handler and the shutdown stop can take a second of braking and powering down.
 They never run on a gRPC thread or the event loop, where they would hold up other clients'
@@ -15,14 +18,19 @@ import queue
 import threading
 from typing import Callable
 
-from landscape.server.events import alarms
-from landscape.server.device import states
-from landscape.server.errors import ControllerFailure, EstopActive
-from landscape.server.events.bus import Severity
-from landscape.server.device.sessions import Session
-from landscape.server.device.states import State
-from landscape.server.link.clock import CycleProcessError
 from landscape.robot.controller import EnableState, EstopState
+from landscape.server.device import states
+from landscape.server.device.motion_control import MotionControl
+from landscape.server.device.power import Power
+from landscape.server.device.rsvp import RsvpBroker
+from landscape.server.device.sessions import Session
+from landscape.server.device.state_machine import StateMachine
+from landscape.server.device.states import State
+from landscape.server.errors import ControllerFailure, EstopActive
+from landscape.server.events import alarms
+from landscape.server.events.bus import EventBus, Severity
+from landscape.server.link.clock import CycleProcessError
+from landscape.server.link.controller_link import ControllerLink
 
 log = logging.getLogger(__name__)
 
@@ -65,90 +73,65 @@ class SafetyWorker:
 
 
 class SafetyActions:
-    """The device's reactions that keep the cell safe, mixed into Device (device.py): the
-    seed's disconnect handler (2.2), faults into Error, the e-stop and the controller's reports
-    and events, the controller's loss, and the question after an e-stop is released. They act
-    on the controller at once and leave the waiting to the SafetyWorker."""
+    """The device's reactions that keep the cell safe: the seed's disconnect handler (2.2),
+    the e-stop and the controller's reports and events, the controller's loss, and the
+    question after an e-stop is released. They act on the controller at once and leave the
+    waiting to the SafetyWorker; they change the state only through the state machine.
 
-    def _session_ended(self, session: Session, reason: str) -> None:
+    reset(): the device's Reset (after an e-stop is released, if the lock holder says so);
+    on_health(serving): the server's health; report_handlers: the cycle's reports by "op"
+    that the cell's parts take (the motions take the rest)."""
+
+    def __init__(self, state: StateMachine, power: Power, motions: MotionControl,
+                 link: ControllerLink, bus: EventBus, rsvp: RsvpBroker,
+                 reset: Callable[[], State], on_health: Callable[[bool], None],
+                 report_handlers: dict[str, Callable[[dict], None]]):
+        self.state, self.power, self.motions, self.link = state, power, motions, link
+        self.bus, self.rsvp = bus, rsvp
+        self.worker = SafetyWorker()
+        self._reset, self._on_health, self._report_handlers = reset, on_health, report_handlers
+
+    def session_ended(self, session: Session, reason: str) -> None:
         """A session ended (any thread): its questions take their defaults; if it held the
         lock, the seed's disconnect handler (2.2) runs on the safety worker."""
         self.rsvp.abandon(session)
-        with self._state_lock:
-            if self._holder is not session:
-                return
-            self._holder = self._lease = None
-            self._epoch += 1
-            self.manual_control = "off"
+        if not self.state.lose_holder(session):
+            return
         self.bus.alarm(Severity.WARNING, alarms.LOCK_HOLDER_LOST,
                        f"lock holder {session.client_name} disconnected ({reason}): stopping, "
                        f"powering down and releasing")
         self.motions.stop_now()   # reaches the cycle at once; the waiting is the worker's
-        self.safety.submit(lambda: self._disconnect_handler(session, reason),
+        self.worker.submit(lambda: self._disconnect_handler(session, reason),
                            f"disconnect handler for {session.client_name}")
 
     def _disconnect_handler(self, session: Session, reason: str) -> None:
-        if self._state in states.ACTIVE or self._drives_may_be_on():
+        state = self.state
+        if state.state in states.ACTIVE or self.power.drives_may_be_on():
             try:
-                self._power_down(f"lock holder {session.client_name} gone")
+                self.power.power_down(f"lock holder {session.client_name} gone")
             except ControllerFailure as failure:   # in Error now, its alarm raised
                 self.bus.alarm(Severity.ERROR, alarms.LOCK_HOLDER_LOST,
                                f"lock holder {session.client_name} gone: {failure}; lock "
                                f"released")
                 return
-        with self._state_lock:
-            if self._state is State.INACTIVE:
-                self._transition({State.INACTIVE}, State.UNLOCKED,
+        with state.atomic():
+            if state.state is State.INACTIVE:
+                state.transition({State.INACTIVE}, State.UNLOCKED,
                                  f"lock holder {session.client_name} gone: {reason}")
         self.bus.alarm(Severity.WARNING, alarms.LOCK_HOLDER_LOST,
                        f"lock holder {session.client_name} gone: motion stopped, drives off, "
                        f"lock released")
 
-    def _drives_may_be_on(self) -> bool:
-        """The drives are on, or coming on (an Activate that was under way), as far as the
-        controller says (or last reported, if it cannot say)."""
-        try:
-            power = self.controller.state().enable
-        except (CycleProcessError, TimeoutError):
-            power = self._power
-        return power is not EnableState.DISABLED
-
-    def _fault(self, code: int, message: str) -> bool:
-        """Into Error (from any state but Idle) with an alarm; True if it entered it now. In
-        Error already, a new cause (the controller lost during an e-stop) still raises its
-        alarm and becomes the error; the same cause again (an e-stop seen by both the
-        controller's event and its report) is said once."""
-        with self._state_lock:
-            if self._state is State.IDLE:
-                return False
-            entered = self._state is not State.ERROR
-            if not entered and message == self._error:
-                return False
-            self._error = message
-            if entered:
-                self._transition(set(State), State.ERROR, message)
-        self.bus.alarm(Severity.CRITICAL if code in (alarms.ESTOP, alarms.CONTROLLER_LOST)
-                       else Severity.ERROR, code, message)
-        return entered
-
-    def fault(self, code: int, message: str) -> None:
-        """Into Error with an alarm and the drives off (a fault found above the controller,
-        such as a compliance panic that asks for it)."""
-        if self._fault(code, message):
-            with contextlib.suppress(ControllerFailure):
-                self._command_controller("disable")
-
     def controller_lost(self, reason: str) -> None:
         """The link lost the controller (its process died or fell silent): Error, an alarm
         naming the cause, the running command failed, health NOT_SERVING. The lock stays with
         its holder, who resets (which restarts the controller) or releases."""
-        self.on_health(False)
-        self._fault(alarms.CONTROLLER_LOST, f"controller lost: {reason}")
+        self._on_health(False)
+        self.state.enter_error(alarms.CONTROLLER_LOST, f"controller lost: {reason}")
         self.motions.fail_running(f"controller lost: {reason}")
-        with self._controller_changed:
-            self._controller_changed.notify_all()
+        self.state.controller_gone()
 
-    def _controller_event(self, text: str) -> None:
+    def controller_event(self, text: str) -> None:
         """The controller's event function (LLI 5.2.1): its errors fault an active device. It
         comes before the Executor's report of the same cycle, so the e-stop is asked for."""
         log.warning("controller: %s", text)
@@ -156,39 +139,36 @@ class SafetyActions:
             self.bus.alarm(Severity.ERROR, alarms.OVERFLOW, f"controller: {text}")
             return
         try:
-            estop = self.controller.state().estop is EstopState.ESTOP
+            estop = self.link.proxy.state().estop is EstopState.ESTOP
         except (CycleProcessError, TimeoutError):
             return   # the controller is gone: the link reports that
         if estop:
-            self._fault(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
-        elif self._state in states.ACTIVE:
-            self.fault(alarms.CONTROLLER, f"controller error: {text}")
+            self.state.enter_error(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
+        elif self.state.state in states.ACTIVE:
+            self.power.fault(alarms.CONTROLLER, f"controller error: {text}")
         else:
             self.bus.alarm(Severity.WARNING, alarms.CONTROLLER, f"controller: {text}")
 
     def on_cycle_message(self, msg: dict) -> None:
-        """The Executor's reports (executor.py), in order, on the link's dispatch thread."""
+        """The Executor's reports (cycle/executor.py), in order, on the link's dispatch
+        thread."""
         if msg.get("op") != "controller":
-            self.report_handlers.get(msg.get("op"), self.motions.on_report)(msg)
+            self._report_handlers.get(msg.get("op"), self.motions.on_report)(msg)
             return
-        estop, was_estop = bool(msg["estop"]), self._estop
-        with self._controller_changed:
-            self._power, self._estop = EnableState(msg["enable"]), estop
-            self._controller_changed.notify_all()
+        estop = bool(msg["estop"])
+        was_estop = self.state.controller_reported(EnableState(msg["enable"]), estop)
         if estop and not was_estop:
-            self._fault(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
-        elif was_estop and not estop and self._holder is not None:
-            holder = self._holder
+            self.state.enter_error(alarms.ESTOP, "e-stop pressed: motion stopped, drives off")
+        elif was_estop and not estop and (holder := self.state.holder) is not None:
             threading.Thread(target=self._offer_reset, args=(holder,), daemon=True,
                              name="rsvp-estop-released").start()
 
     def _offer_reset(self, holder: Session) -> None:
         """The e-stop was released: ask the lock holder whether to reset now (default: stay)."""
         answer = self.rsvp.ask(holder, ESTOP_RELEASED_QUESTION, ("e-stop released; reset now?",),
-                               (RESET, STAY), STAY, self.rsvp_timeout, alarm=True)
-        if answer.choice == RESET and self._holder is holder:
+                               (RESET, STAY), STAY, self.rsvp.timeout, alarm=True)
+        if answer.choice == RESET and self.state.holder is holder:
             try:
-                self.reset()
+                self._reset()
             except EstopActive as refused:  # pressed again meanwhile
                 self.bus.alarm(Severity.WARNING, alarms.ESTOP, str(refused))
-

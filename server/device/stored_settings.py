@@ -9,13 +9,17 @@ the defaults (and stores them).
 """
 from __future__ import annotations
 
+import contextlib
 import logging
+import threading
+from typing import Callable
 
 import numpy as np
 
-from landscape.server.errors import CommandError
-from landscape.server.device.motion_settings import Kind, MotionSettings
 from landscape.robot.units import AngularUnit, LinearUnit, Units
+from landscape.server.device.motion_settings import Kind, MotionSettings
+from landscape.server.errors import CommandError
+from landscape.server.planning.paths import PathStore
 
 log = logging.getLogger(__name__)
 
@@ -56,3 +60,30 @@ def from_record(defaults: MotionSettings, record: dict | None) -> MotionSettings
             log.warning("stored setting %s=%r does not apply (%s); the default stays",
                         key, value, error)
     return settings
+
+
+class SettingsKeeper:
+    """The settings in force, kept in `store` (a PathStore): read back at start (the defaults
+    if `reset`, stored at once), and each change validated, stored, then in force. One change
+    at a time, under a lock of its own (the file may keep it waiting)."""
+
+    def __init__(self, defaults: MotionSettings, store: PathStore, reset: bool = False):
+        self._store = store
+        self._current = defaults if reset else from_record(defaults, store.load_settings())
+        if reset:
+            with contextlib.suppress(CommandError):   # reported by the store; in force anyway
+                store.save_settings(to_record(defaults))
+        self._lock = threading.Lock()
+
+    @property
+    def current(self) -> MotionSettings:
+        return self._current
+
+    def update(self, change: Callable[[MotionSettings], MotionSettings]) -> MotionSettings:
+        """Apply `change(settings) -> settings`: validated, stored, then in force; a validation
+        or storage error leaves them as they were."""
+        with self._lock:
+            settings = change(self._current)
+            self._store.save_settings(to_record(settings))
+            self._current = settings
+            return settings

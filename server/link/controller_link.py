@@ -31,10 +31,11 @@ from typing import Any, Callable
 
 from landscape.server.config import CLOCKS, PROCESS_CLOCKS
 from landscape.server.cycle.executor import Executor
-from landscape.server.cycle.feedback import FeedbackRing
-from landscape.server.link.clock import RealTimeClock, ThreadedLockStepClock
+from landscape.server.cycle.feedback import FeedbackRing, Sample
 from landscape.server.cycle.process import Mailbox
 from landscape.server.cycle.shared_array import SharedArrays
+from landscape.server.errors import ControllerFailure
+from landscape.server.link.clock import RealTimeClock, ThreadedLockStepClock
 
 log = logging.getLogger(__name__)
 FAST_SILENCE = 0.5   # s without feedback that count as a hung cycle process, fast clock
@@ -125,6 +126,14 @@ class ControllerLink:
 
     def between_cycles(self, func, *args, timeout: float | None = None, urgent: bool = False):
         return self._clock.between_cycles(func, *args, timeout=timeout, urgent=urgent)
+
+    def sample(self) -> Sample:
+        """The newest cycle's feedback (never more than a cycle old); ControllerFailure before
+        the first."""
+        sample = self.feedback.latest()
+        if sample is None:
+            raise ControllerFailure("no feedback from the controller yet")
+        return sample
 
     def share(self, arrays: dict) -> SharedArrays:
         """`arrays` (name -> ndarray) for the cycle: shared memory for a cycle process (the

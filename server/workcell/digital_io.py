@@ -24,16 +24,17 @@ import logging
 import math
 import threading
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-from landscape.server.events import alarms
-from landscape.server.errors import ControllerFailure, OutOfRange, ParamError, ResourceExhausted
-from landscape.server.events.bus import Phase, Severity
 from landscape.robot.controller import IoUnit, Status
+from landscape.server.device.motion_control import MotionControl
+from landscape.server.device.rsvp import RsvpBroker
+from landscape.server.device.state_machine import StateMachine
+from landscape.server.errors import ControllerFailure, OutOfRange, ParamError, ResourceExhausted
+from landscape.server.events import alarms
+from landscape.server.events.bus import EventBus, Phase, Severity
+from landscape.server.link.controller_link import ControllerLink
+from landscape.server.workcell.tooling import Tooling
 
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
-    from landscape.server.workcell.tooling import Tooling
 
 log = logging.getLogger(__name__)
 
@@ -52,15 +53,17 @@ class Watch:
 
 
 class DigitalIO:
-    def __init__(self, device: "Device", tooling: "Tooling"):
-        self.device, self.tooling = device, tooling
+    def __init__(self, link: ControllerLink, motions: MotionControl, state: StateMachine,
+                 bus: EventBus, rsvp: RsvpBroker, tooling: Tooling):
+        self.link, self.motions, self.state = link, motions, state
+        self.bus, self.rsvp, self.tooling = bus, rsvp, tooling
         self.units: dict[int, IoUnit] = {}
         self.watches: dict[str, Watch] = {}
         self._ids = itertools.count(1)
         self._lock = threading.Lock()
 
     def controller_started(self) -> None:
-        self.units = {u.id: u for u in self.device.controller.io_map()}
+        self.units = {u.id: u for u in self.link.proxy.io_map()}
         with self._lock:
             waiting, self.watches = list(self.watches.values()), {}
         for watch in waiting:
@@ -80,14 +83,14 @@ class DigitalIO:
             self.tooling.check_changer(release=bool(bits_off & changer))
         log.info("setDigitalIO unit %d (%s): on %#x off %#x: %s", unit_id, unit.name, bits_on,
                  bits_off, description)
-        if self.device.controller.write_io_unit(unit_id, bits_on, bits_off) is not Status.OK:
+        if self.link.proxy.write_io_unit(unit_id, bits_on, bits_off) is not Status.OK:
             raise ControllerFailure(f"the controller refused to write unit {unit_id}")
         if (bits_on | bits_off) & changer:
             self.tooling.follow_changer()
 
     def get(self, type: str, unit_id: int) -> int:
         self._unit(type, unit_id)
-        return self.device.controller.read_io_unit(unit_id)
+        return self.link.proxy.read_io_unit(unit_id)
 
     # ---- seed 4.1 signalDigitalIO -----------------------------------------------------------
 
@@ -101,17 +104,17 @@ class DigitalIO:
             raise OutOfRange("polling_timeout and polling_cycle_time are 0 or more ms")
         if callback not in CALLBACKS:
             raise ParamError(f"callback type must be one of {', '.join(CALLBACKS)}")
-        cycle_ms = self.device.link.cycle_time * 1000.0
+        cycle_ms = self.link.cycle_time * 1000.0
         watch = Watch(f"SignalDigitalIO-{next(self._ids)}", type, unit_id, bits, callback)
         with self._lock:
             if len(self.watches) >= MAX_WATCHES:
                 raise ResourceExhausted(f"{MAX_WATCHES} signalDigitalIO watches are waiting, "
                                         f"the most this device keeps")
             self.watches[watch.command_id] = watch
-        self.device.bus.command(watch.command_id, "SignalDigitalIO", Phase.STARTED,
+        self.bus.command(watch.command_id, "SignalDigitalIO", Phase.STARTED,
                                 self._where(watch))
         try:
-            self.device.motions.send({
+            self.motions.send({
                 "op": "watch", "id": watch.command_id, "unit": unit_id, "bits": bits,
                 "period": max(1, math.ceil(period_ms / cycle_ms - 1e-9)),
                 "timeout": math.ceil(timeout_ms / cycle_ms - 1e-9)})
@@ -135,27 +138,26 @@ class DigitalIO:
         what = (f"bits {watch.bits:#x} of {self._where(watch)} set in cycle {cycle} (the unit "
                 f"reads {bits:#x})")
         if watch.callback == "event":
-            self.device.bus.digital_io(watch.command_id, watch.type, watch.unit, watch.bits, bits)
+            self.bus.digital_io(watch.command_id, watch.type, watch.unit, watch.bits, bits)
             self._finish(watch, Phase.DONE, what)
         elif watch.callback == "alarm":
-            self.device.bus.alarm(Severity.WARNING, alarms.DIGITAL_IO, what, watch.command_id)
+            self.bus.alarm(Severity.WARNING, alarms.DIGITAL_IO, what, watch.command_id)
             self._finish(watch, Phase.DONE, what)
         else:   # RSVP: the question waits for its answer on a thread of its own
             threading.Thread(target=self._ask, args=(watch, what, bits), daemon=True,
                              name=f"rsvp-{watch.command_id}").start()
 
     def _ask(self, watch: Watch, what: str, bits: int) -> None:
-        device = self.device
-        answer = device.rsvp.ask(device.lock_holder, "digital_io",
+        answer = self.rsvp.ask(self.state.holder, "digital_io",
                                  (watch.command_id, watch.type, str(watch.unit),
                                   str(watch.bits), str(bits)),
-                                 (ACKNOWLEDGE,), ACKNOWLEDGE, device.rsvp_timeout,
+                                 (ACKNOWLEDGE,), ACKNOWLEDGE, self.rsvp.timeout,
                                  alarm=watch.callback == "alarm_rsvp")
         self._finish(watch, Phase.DONE, f"{what}; {'no answer' if answer.timed_out else 'answered'}"
                                         f" {answer.choice}")
 
     def _finish(self, watch: Watch, phase: Phase, message: str) -> None:
-        self.device.bus.command(watch.command_id, "SignalDigitalIO", phase, self._where(watch),
+        self.bus.command(watch.command_id, "SignalDigitalIO", phase, self._where(watch),
                                 message=message)
 
     # ---- checks -----------------------------------------------------------------------------

@@ -49,23 +49,25 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import TYPE_CHECKING
+from typing import Callable
 
 import numpy as np
 
-from landscape.server.events import alarms
-from landscape.server.planning.collision import AllowedContact, check_motion
-from landscape.server.planning.collision.shapes import ARM_LINKS
-from landscape.server.errors import OutOfRange, ParamError, Unreachable, WrongState
+from landscape.robot.arm import ArmModel
+from landscape.robot.kinematics import Kinematics
 from landscape.server.cycle.force_loops import (FORCE, PANIC_DRIVES_OFF, PANIC_HOLD, ComplySpec,
-                                            GuardSpec, vector)
-from landscape.server.planning.motion.trajectory import Trajectory
-from landscape.server.workcell.sensing import Sensors
+                                                GuardSpec, vector)
+from landscape.server.device.motion_control import MotionControl
+from landscape.server.device.state_machine import StateMachine
 from landscape.server.device.states import State
+from landscape.server.device.stored_settings import SettingsKeeper
+from landscape.server.errors import OutOfRange, ParamError, Unreachable, WrongState
+from landscape.server.events import alarms
+from landscape.server.planning.collision import AllowedContact, CollisionScene, check_motion
+from landscape.server.planning.collision.shapes import ARM_LINKS
+from landscape.server.planning.motion.trajectory import Trajectory
 from landscape.server.planning.targets import Frame
-
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
+from landscape.server.workcell.sensing import Sensors
 
 MAX_COMPLY_TIMEOUT = 600.0    # s
 OFFSET_SPEED = 10.0           # %: the offset moves checked (the speed changes nothing there)
@@ -74,8 +76,14 @@ PANIC_CODES = {PANIC_HOLD: "stop and hold", PANIC_DRIVES_OFF: "stop, then drives
 
 
 class GuardedMotion:
-    def __init__(self, device: "Device", sensors: Sensors):
-        self.device, self.sensors = device, sensors
+    """fault(code, message): into Error with the drives off (a compliance panic asks for it)."""
+
+    def __init__(self, motions: MotionControl, state: StateMachine, sensors: Sensors,
+                 kinematics: Kinematics, collisions: CollisionScene, settings: SettingsKeeper,
+                 arm: ArmModel, cycle_time: float, fault: Callable[[int, str], None]):
+        self.motions, self.state, self.sensors = motions, state, sensors
+        self.kinematics, self.collisions, self.settings = kinematics, collisions, settings
+        self.arm, self.cycle_time, self.fault = arm, cycle_time, fault
 
     # ---- seed 3.7.2 moveReact ---------------------------------------------------------------
 
@@ -99,15 +107,15 @@ class GuardedMotion:
         if np.any(envelope_max < 0):
             raise OutOfRange(f"envelope maxima are magnitudes, 0 or more; got {envelope_max}")
         trajectory = self._tool_move(motion, speed)
-        settings = self.device.settings
-        limits = self.device.motions.planner.limits(settings, speed)
+        settings = self.settings.current
+        limits = self.motions.planner.limits(settings, speed)
         guard = GuardSpec(kind, tuple(thresholds), tuple(envelope_max),
                           float(gains[0]) or 1.0, settings.tool_offset, tuple(motion),
                           limits.linear_velocity, limits.linear_acceleration)
         allow = self._meant_to_touch([trajectory])
         if kind == FORCE:
             self.sensors.tare(sensor)
-        return self.device.motions.start(
+        return self.motions.start(
             "MoveReact", sensor, [trajectory], allow=allow, loops={"guard": guard},
             finish=lambda report: self._react_outcome(report, kind))
 
@@ -128,8 +136,8 @@ class GuardedMotion:
         return report.get("message", "")
 
     def _tip_in_world(self, joints) -> np.ndarray:
-        settings = self.device.settings
-        tip = self.device.kinematics.forward(np.asarray(joints)) @ settings.tool_offset
+        settings = self.settings.current
+        tip = self.kinematics.forward(np.asarray(joints)) @ settings.tool_offset
         return (settings.base_in_world @ tip)[:3, 3]
 
     # ---- seed 3.7.2 comply ------------------------------------------------------------------
@@ -170,8 +178,8 @@ class GuardedMotion:
         if panic_code not in PANIC_CODES:
             raise OutOfRange("panic_stop_code is one of " + ", ".join(
                 f"{code} ({what})" for code, what in PANIC_CODES.items()))
-        arm, dt = self.device.arm, self.device.link.cycle_time
-        moving = self.device.state is State.MOVING
+        arm, dt = self.arm, self.cycle_time
+        moving = self.state.state is State.MOVING
         hold_only = not np.any(motion)
         if moving and not hold_only:
             raise ParamError("while moving, Comply adds its compliance to the running motion: "
@@ -184,21 +192,21 @@ class GuardedMotion:
             kp=tuple(kp[:3]), kd=tuple(kd[:3]), reach=tuple(np.abs(compliance)),
             envelope=tuple(envelope_max), travel=tuple(travel[:3]),
             speed=arm.max_linear_velocity * compliance_speed / 100.0,
-            acceleration=arm.max_linear_acceleration * self.device.settings.accel_percent / 100,
+            acceleration=arm.max_linear_acceleration * self.settings.current.accel_percent / 100,
             timeout=math.ceil(max_timeout / dt), hold_only=hold_only and not moving,
-            panic=panic_code, tool_offset=self.device.settings.tool_offset)
+            panic=panic_code, tool_offset=self.settings.current.tool_offset)
         finish = self._comply_outcome
         if moving:
             return self._join_running(spec, finish)
-        start = self.device.motions.planning_start()
+        start = self.motions.planning_start()
         trajectory = (Trajectory(dt, start[None, :].copy(), np.zeros((1, 6))) if hold_only
                       else self._tool_move(motion, speed))
         offsets = self._offset_moves(trajectory, spec)
         allow = self._meant_to_touch([trajectory, *offsets])
         for offset in offsets:
-            self.device.motions.check_collisions([offset], "Comply with its compliance offset",
+            self.motions.check_collisions([offset], "Comply with its compliance offset",
                                                  allow=allow)
-        return self.device.motions.start("Comply", sensor, [trajectory], allow=allow,
+        return self.motions.start("Comply", sensor, [trajectory], allow=allow,
                                          loops={"comply": spec}, finish=finish)
 
     def _offset_moves(self, trajectory, spec: ComplySpec) -> list:
@@ -219,11 +227,11 @@ class GuardedMotion:
 
     def _join_running(self, spec: ComplySpec, finish) -> str:
         """Comply from Moving: compliance for the running motion."""
-        motions = self.device.motions
-        with self.device._state_lock:
+        motions = self.motions
+        with self.state.atomic() as state:
             running = motions.running
-            if running is None or self.device.state is not State.MOVING:
-                raise WrongState("no motion is running", state=self.device.state.value)
+            if running is None or state.state is not State.MOVING:
+                raise WrongState("no motion is running", state=state.state.value)
             if running.command in ("Jog", "Comply"):
                 raise WrongState(f"Comply cannot join a {running.command}")
             if running.finish is None:
@@ -243,8 +251,8 @@ class GuardedMotion:
                 f"(tool frame)")
         why = report.get("message", "")
         if comply.get("panic") == PANIC_DRIVES_OFF and report["op"] == "failed":
-            self.device.fault(alarms.PANIC, f"Comply {why}: panic stop code "
-                                            f"{PANIC_DRIVES_OFF}, drives off")
+            self.fault(alarms.PANIC, f"Comply {why}: panic stop code {PANIC_DRIVES_OFF}, "
+                                     f"drives off")
         return f"{why}; {held}" if why else held
 
     # ---- helpers ----------------------------------------------------------------------------
@@ -254,7 +262,7 @@ class GuardedMotion:
         check: the tool, or the part it holds, with each body it would come within the margin
         of, in the order met (at most MAX_CONTACTS). Nothing else: the arm's links stay checked
         against everything, and the tool and the part against every other body."""
-        scene = self.device.collisions
+        scene = self.collisions
         carried = {scene.mounted, scene.held} - {None}
         model, allowed = scene.model(), []
         for trajectory in trajectories:
@@ -277,9 +285,9 @@ class GuardedMotion:
 
     def _tool_move(self, motion: np.ndarray, speed: float, start: np.ndarray | None = None):
         values = np.concatenate([motion, np.zeros(3)])
-        motions = self.device.motions
+        motions = self.motions
         return motions.planner.move(motions.planning_start() if start is None else start,
-                                    self.device.settings, Frame.TOOL, values, True, True, speed)
+                                    self.settings.current, Frame.TOOL, values, True, True, speed)
 
 
 def _finite(what: str, *arrays) -> None:

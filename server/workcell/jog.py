@@ -19,18 +19,19 @@ replies say so.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from landscape.server.errors import ManualControlMode, OutOfRange, ParamError
+from landscape.robot.arm import ArmModel
 from landscape.server.cycle.jog_integrator import MANUAL_TIP_SPEED, JogLimits
-from landscape.server.workcell.jog_guard import JogGuard
-from landscape.server.device.motion_control import ENDED, RunningMotion
+from landscape.server.device.motion_control import ENDED, MotionControl, RunningMotion
+from landscape.server.device.state_machine import MANUAL_OFF, StateMachine
+from landscape.server.device.stored_settings import SettingsKeeper
+from landscape.server.errors import ManualControlMode, OutOfRange, ParamError
+from landscape.server.link.controller_link import ControllerLink
+from landscape.server.planning.collision import CollisionScene
 from landscape.server.planning.targets import Frame
-
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
+from landscape.server.workcell.jog_guard import JogGuard
 
 MODES = ("teachpendant", "spaceball", "off")
 DEADMAN_TIMEOUT = 0.2          # s
@@ -38,39 +39,41 @@ DEADMAN_RANGE = (0.02, 1.0)    # s: the timeouts a client may choose
 
 
 class ManualControl:
-    def __init__(self, device: "Device"):
-        self.device = device
+    def __init__(self, state: StateMachine, motions: MotionControl, link: ControllerLink,
+                 collisions: CollisionScene, settings: SettingsKeeper, arm: ArmModel):
+        self.state, self.motions, self.link = state, motions, link
+        self.collisions, self.settings, self.arm = collisions, settings, arm
 
     def set_mode(self, mode: str) -> None:
         if mode not in MODES:
             raise ParamError(f"manual control is one of {', '.join(MODES)}, got {mode!r}")
-        self.device.manual_control = mode
+        self.state.set_manual_control(mode)
 
     def start(self, deadman_timeout: float | None) -> "JogSession":
         """A jog session from rest; the deadman timeout (s) or the default."""
-        device = self.device
-        if device.manual_control == "off":
+        if self.state.manual_control == MANUAL_OFF:
             raise ManualControlMode("jogging needs manual control: ManualControl(teachpendant "
                                     "or spaceball) first")
         timeout = DEADMAN_TIMEOUT if not deadman_timeout else deadman_timeout
         if not DEADMAN_RANGE[0] <= timeout <= DEADMAN_RANGE[1]:
             raise OutOfRange(f"the deadman timeout must be {DEADMAN_RANGE[0] * 1000:g} to "
                              f"{DEADMAN_RANGE[1] * 1000:g} ms")
-        settings, arm = device.settings, device.arm
+        settings, arm = self.settings.current, self.arm
         cartesian = np.array([arm.max_linear_acceleration, arm.max_angular_acceleration])
         limits = JogLimits(settings.joint_velocities, settings.joint_accelerations,
                            np.asarray(arm.max_acceleration), arm.lower, arm.upper,
                            cartesian * settings.accel_percent / 100.0, cartesian,
-                           MANUAL_TIP_SPEED, math.ceil(timeout / device.link.cycle_time))
-        motion = device.motions.start_jog({"limits": limits, "tool_offset": settings.tool_offset,
+                           MANUAL_TIP_SPEED, math.ceil(timeout / self.link.cycle_time))
+        motion = self.motions.start_jog({"limits": limits, "tool_offset": settings.tool_offset,
                                            "guarded": True})   # JogSession starts the guard
-        return JogSession(device, motion)
+        guard = JogGuard(self.link, self.motions, self.collisions, motion)
+        return JogSession(self.motions, self.settings, motion, guard)
 
 
 class JogSession:
-    def __init__(self, device: "Device", motion: RunningMotion):
-        self.device, self.motion = device, motion
-        self.guard = JogGuard(device, motion)
+    def __init__(self, motions: MotionControl, settings: SettingsKeeper, motion: RunningMotion,
+                 guard: JogGuard):
+        self.motions, self.settings, self.motion, self.guard = motions, settings, motion, guard
 
     @property
     def ended(self) -> bool:
@@ -89,14 +92,14 @@ class JogSession:
             raise ParamError("a jog request needs 6 finite velocities (percent)")
         if np.any(np.abs(percent) > 100.0):
             raise OutOfRange("jog velocities are -100 to 100 % of the axis's jog speed")
-        settings = self.device.settings
+        settings = self.settings.current
         if frame is Frame.JOINT:
             velocity = percent / 100.0 * settings.joint_velocities
         else:
             scale = settings.speed_percent / 100.0 / 100.0
             velocity = percent * scale * np.repeat([settings.linear_speed,
                                                     settings.angular_speed], 3)
-        self.device.motions.send({"op": "jog_velocity", "frame": frame.value,
+        self.motions.send({"op": "jog_velocity", "frame": frame.value,
                                   "velocity": velocity, "deadman": bool(deadman),
                                   "world_rotation": settings.world_frame[:3, :3]})
 
@@ -104,4 +107,4 @@ class JogSession:
         """The client is done: the arm brakes to rest and the session ends."""
         self.guard.close()
         if not self.ended:
-            self.device.motions.send({"op": "jog_end"})
+            self.motions.send({"op": "jog_end"})

@@ -17,16 +17,12 @@ from __future__ import annotations
 
 import math
 import threading
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from landscape.server.planning.collision import clearance
 from landscape.server.cycle.feedback import CMD
-
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
-    from landscape.server.device.motion_control import RunningMotion
+from landscape.server.device.motion_control import ENDED, MotionControl, RunningMotion
+from landscape.server.link.controller_link import ControllerLink
+from landscape.server.planning.collision import CollisionScene, clearance
 
 SLOW_ZONE = 0.15       # m beyond the margin where the guard starts to act
 TAU = 0.1              # s: the approach allowed is the room left over TAU
@@ -36,8 +32,9 @@ HELD_WITHIN = 0.001    # m over the margin at which the reply says the arm is he
 
 
 class JogGuard:
-    def __init__(self, device: "Device", motion: "RunningMotion"):
-        self.device, self.motion = device, motion
+    def __init__(self, link: ControllerLink, motions: MotionControl, collisions: CollisionScene,
+                 motion: RunningMotion):
+        self.link, self.motions, self.collisions, self.motion = link, motions, collisions, motion
         self.held = ""         # why the arm does not go on, for the Jog stream's reply
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True, name="jog-guard")
@@ -48,19 +45,18 @@ class JogGuard:
         self._stop.set()
 
     def _run(self) -> None:
-        from landscape.server.device.motion_control import ENDED
-        device, ring = self.device, self.device.link.feedback
-        period = PERIOD_CYCLES * device.link.cycle_time
+        ring = self.link.feedback
+        period = PERIOD_CYCLES * self.link.cycle_time
         while not self._stop.wait(period) and self.motion.phase not in ENDED:
             row = ring.row(ring.head)
             if row is None:
                 continue
             gradient, rate = self._figures(np.array(row[CMD], dtype=float)) or (None, 0.0)
-            device.motions.send({"op": "jog_clearance", "gradient": gradient, "rate": rate})
+            self.motions.send({"op": "jog_clearance", "gradient": gradient, "rate": rate})
 
     def _figures(self, q: np.ndarray) -> tuple[np.ndarray, float] | None:
         """(gradient (6,) m/rad, approach rate allowed m/s) at joints q, or None out of reach."""
-        scene = self.device.collisions
+        scene = self.collisions
         model, margin = scene.model(), scene.margin
         limit = margin + SLOW_ZONE
         near = clearance(model, q, limit=limit)

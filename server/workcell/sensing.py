@@ -16,27 +16,23 @@ What a reading is, in SI (convert.py gives it in the client's units):
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from landscape.server.errors import ControllerFailure, ParamError
+from landscape.robot.controller import SensorInfo, Status
 from landscape.server.cycle.feedback import ring_sensors
 from landscape.server.cycle.tip_model import wrench_at_tip
-from landscape.robot.controller import SensorInfo, Status
-
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
-
+from landscape.server.device.stored_settings import SettingsKeeper
+from landscape.server.errors import ControllerFailure, ParamError
+from landscape.server.link.controller_link import ControllerLink
 
 class Sensors:
-    def __init__(self, device: "Device"):
-        self.device = device
+    def __init__(self, link: ControllerLink, settings: SettingsKeeper):
+        self.link, self.settings = link, settings
         self._known: dict[str, SensorInfo] = {}
         self._ring: dict[str, slice | int] = {}
 
     def controller_started(self) -> None:
-        sensors = self.device.controller.sensor_map()
+        sensors = self.link.proxy.sensor_map()
         self._known = {s.name: s for s in sensors}
         self._ring = ring_sensors(sensors)
 
@@ -59,8 +55,8 @@ class Sensors:
         at most a cycle old, the others are asked of the controller (blocking)."""
         info = self.info(name)
         if name in self._ring:
-            return self.from_row(name, self.device.feedback().sensors)
-        return self._tool_frame(info, np.asarray(self.device.controller.read_sensor(name)))
+            return self.from_row(name, self.link.sample().sensors)
+        return self._tool_frame(info, np.asarray(self.link.proxy.read_sensor(name)))
 
     def from_row(self, name: str, sensors: np.ndarray) -> np.ndarray:
         """A ring sensor's reading from a feedback row's sensor columns (7,)."""
@@ -69,10 +65,10 @@ class Sensors:
 
     def tare(self, name: str) -> None:
         self.info(name)
-        if self.device.controller.tare_sensor(name) is not Status.OK:
+        if self.link.proxy.tare_sensor(name) is not Status.OK:
             raise ControllerFailure(f"the controller did not tare {name}")
 
     def _tool_frame(self, info: SensorInfo, raw: np.ndarray) -> np.ndarray:
         if info.kind == "force_torque":
-            return wrench_at_tip(raw, self.device.settings.tool_offset)
+            return wrench_at_tip(raw, self.settings.current.tool_offset)
         return raw.astype(float)

@@ -37,18 +37,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from landscape.server.cycle.arm_dynamics import NO_PAYLOAD, part_payload, tool_payload
-from landscape.server.errors import ControllerFailure, OutOfRange, ParamError, WrongState
-from landscape.robot.units import pose_matrix
 from landscape.robot.cell import Pose, ToolSpec
 from landscape.robot.controller import IoUnit, Status
-
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
+from landscape.robot.kinematics import Kinematics
+from landscape.robot.units import pose_matrix
+from landscape.server.cycle.arm_dynamics import NO_PAYLOAD, part_payload, tool_payload
+from landscape.server.device.motion_control import MotionControl
+from landscape.server.device.stored_settings import SettingsKeeper
+from landscape.server.errors import ControllerFailure, OutOfRange, ParamError, WrongState
+from landscape.server.link.controller_link import ControllerLink
+from landscape.server.planning.collision import CollisionScene
+from landscape.server.workcell.world_parts import WorldParts
 
 LOCK, ID_PREFIX = "toolchanger_lock", "tool_id_"
 APPROACH = 0.1             # m above the plate in its slot, where a tool change starts and ends
@@ -77,8 +78,14 @@ FUNCTIONS = {
 
 
 class Tooling:
-    def __init__(self, device: "Device", tools: tuple[ToolSpec, ...], parts, base: Pose):
-        self.device = device
+    """The rack's `tools`, the cell's `parts` (BoxSpec) and the arm's `base` in the world, from
+    the cell file; `world` follows the loose parts (None: the backend does not track them)."""
+
+    def __init__(self, link: ControllerLink, motions: MotionControl, kinematics: Kinematics,
+                 collisions: CollisionScene, settings: SettingsKeeper, world: WorldParts | None,
+                 tools: tuple[ToolSpec, ...], parts, base: Pose):
+        self.link, self.motions, self.kinematics = link, motions, kinematics
+        self.collisions, self.settings, self.world = collisions, settings, world
         self._parts = {p.name: p for p in parts}     # BoxSpec of the cell's parts
         self.tools = {t.name: t for t in tools}
         self._by_id = {t.id: t for t in tools}
@@ -95,7 +102,7 @@ class Tooling:
 
     def controller_started(self) -> None:
         """Learn the I/O map and have the cycle mirror the end effector's signals."""
-        self._signals = {name: (unit.id, bit) for unit in self.device.controller.io_map()
+        self._signals = {name: (unit.id, bit) for unit in self.link.proxy.io_map()
                          for bit, name in unit.bits}
         masks: dict[int, int] = {}
         for name, (unit, bit) in self._signals.items():
@@ -103,7 +110,7 @@ class Tooling:
                     name in (f.output, f.confirm) for f in FUNCTIONS.values()):
                 masks[unit] = masks.get(unit, 0) | 1 << bit
         self._image = sorted(masks.items())
-        self.device.link.send({"op": "io_image", "units": self._image})
+        self.link.send({"op": "io_image", "units": self._image})
         self._carry(*self._carried)   # a fresh cycle knows no payload
 
     def changer_bits(self, unit: IoUnit) -> int:
@@ -133,7 +140,7 @@ class Tooling:
     def state(self, image: np.ndarray | None = None) -> tuple[str, str]:
         """(tool on the flange or "", its state) from an I/O image (default: the newest)."""
         if image is None:
-            image = self.device.feedback().io
+            image = self.link.sample().io
         tool_id = self._mounted_id(image)
         if tool_id == 0:
             return "", "none"
@@ -145,7 +152,7 @@ class Tooling:
         return tool.name, functions.states[0 if not on else 2 if confirmed else 1]
 
     def mounted(self) -> ToolSpec | None:
-        return self._by_id.get(self._mounted_id(self.device.feedback().io))
+        return self._by_id.get(self._mounted_id(self.link.sample().io))
 
     # ---- seed 3.8.1 getTool / putTool -------------------------------------------------------
 
@@ -204,7 +211,7 @@ class Tooling:
         mounted = self.mounted()
         if not release or mounted is None:
             return
-        flange = self.device.kinematics.forward(self.device.feedback().position)
+        flange = self.kinematics.forward(self.link.sample().position)
         if np.linalg.norm(flange[:3, 3] - self._slots[mounted.name][:3, 3]) > SLOT_REACH:
             raise WrongState(f"the tool changer opens only with the {mounted.name} in its rack "
                              f"slot (PutTool takes it there)", tool=mounted.name)
@@ -213,9 +220,9 @@ class Tooling:
         """After the changer's lock was written: the tool offset and the collision scene
         follow the tool the changer reports (the tool's tip, or the flange)."""
         self._wait_cycles(2)
-        mounted, scene = self.mounted(), self.device.collisions
+        mounted, scene = self.mounted(), self.collisions
         if scene.mounted is not None and (mounted is None or mounted.name != scene.mounted):
-            _let_go(scene, self.device.feedback().position, unmount=True)
+            _let_go(scene, self.link.sample().position, unmount=True)
             self._set_tool_offset(np.eye(4))
         if mounted is not None and scene.mounted is None:
             scene.mount_tool(mounted.name)
@@ -242,7 +249,7 @@ class Tooling:
             raise ControllerFailure(f"the {tool.name} did not report closed within "
                                     f"{CLOSE_TIMEOUT:g} s")
         # A gripper opens in its rated time (no input says it is open); suction acts at once.
-        self._wait_cycles(tool.stroke / 2 / tool.finger_speed / self.device.link.cycle_time
+        self._wait_cycles(tool.stroke / 2 / tool.finger_speed / self.link.cycle_time
                           if gripper and not on else 2)
         held = self._follow_in_scene(tool, on)
         if gripper:
@@ -253,13 +260,14 @@ class Tooling:
 
     def _follow_in_scene(self, tool: ToolSpec, on: bool) -> str | None:
         """Tell the collision scene what the tool took or let go; the part taken, if any."""
-        scene = self.device.collisions
-        q = self.device.feedback().position
+        scene = self.collisions
+        q = self.link.sample().position
         if not on:
             if scene.held is not None:
                 _let_go(scene, q)
                 self._carry(tool)
-                self.device.motions.parts.settle()   # where it lands, not where it was let go
+                if self.world is not None:   # where it lands, not where it was let go
+                    self.world.settle()
             if tool.kind == "parallel_gripper":
                 scene.set_finger_gap(tool.stroke)
             return None
@@ -268,8 +276,8 @@ class Tooling:
         if tool.kind == "parallel_gripper":   # closed on the part, or all the way
             scene.set_finger_gap(min(self._parts[part].size[:2]) if part else 0.0)
         if part is not None and scene.held is None:
-            flange = self._world_base @ self.device.kinematics.forward(q)
-            in_flange = np.linalg.inv(flange) @ self.device.collisions.part_pose(part)
+            flange = self._world_base @ self.kinematics.forward(q)
+            in_flange = np.linalg.inv(flange) @ self.collisions.part_pose(part)
             scene.allow(scene.grasp(part))
             scene.attach_part(part, q)
             self._carry(tool, part_payload(self._parts[part], in_flange))
@@ -282,15 +290,15 @@ class Tooling:
         payload = np.array(NO_PAYLOAD) if tool is None else self._payloads[tool.name]
         if part is not None:
             payload = payload + part
-        self.device.link.send({"op": "payload", "parameters": tuple(payload.tolist())})
+        self.link.send({"op": "payload", "parameters": tuple(payload.tolist())})
 
     def _part_at_tip(self, q: np.ndarray, tool: ToolSpec) -> str | None:
         """The part of the collision scene whose centre is nearest the tool's tip, within
         GRASP_REACH of it (what the tool just took), if any."""
-        tip = (self._world_base @ self.device.kinematics.forward(q) @ _along_z(tool.length))
+        tip = (self._world_base @ self.kinematics.forward(q) @ _along_z(tool.length))
         nearest, best = None, GRASP_REACH
         for name in self._parts:
-            pose = self.device.collisions.part_pose(name)
+            pose = self.collisions.part_pose(name)
             if pose is not None and (d := float(np.linalg.norm(pose[:3, 3] - tip[:3, 3]))) < best:
                 nearest, best = name, d
         return nearest
@@ -317,7 +325,7 @@ class Tooling:
         if where is None:
             raise ControllerFailure(f"the cell has no I/O signal {signal!r}")
         unit, bit = where
-        status = self.device.controller.write_io_unit(unit, 1 << bit if on else 0,
+        status = self.link.proxy.write_io_unit(unit, 1 << bit if on else 0,
                                                       0 if on else 1 << bit)
         if status is not Status.OK:
             raise ControllerFailure(f"the controller refused to set {signal} to {int(on)}")
@@ -329,13 +337,13 @@ class Tooling:
         coupling or uncoupling made, from the joints q it starts at). The fine moves into and
         out of the slot stay in the tool's docking corridor, where the flange may meet the
         tool and the tool its rack (collision/docking.py). Returns (step, trajectory)."""
-        motions = self.device.motions
-        planner, settings = motions.planner, self.device.settings
-        model = self.device.collisions.model()
+        motions = self.motions
+        planner, settings = motions.planner, self.settings.current
+        model = self.collisions.model()
         q, out = motions.planning_start(), []
         for k, (step, flange_goal, joint) in enumerate(steps):
             if k == len(steps) - 1:
-                changed = self.device.collisions.copy()
+                changed = self.collisions.copy()
                 after(changed, q)
                 model = changed.model()
             if joint:
@@ -352,7 +360,7 @@ class Tooling:
 
     def _play(self, command: str, step: str, trajectory) -> None:
         """One step of a tool change, planned by _steps."""
-        motion = self.device.motions.play(command, step, trajectory, trajectory.duration + 10.0)
+        motion = self.motions.play(command, step, trajectory, trajectory.duration + 10.0)
         if motion.phase != "done":
             why = motion.report.get("message", "")
             raise ControllerFailure(f"{command} stopped at the step '{step}' ({motion.phase}"
@@ -360,12 +368,12 @@ class Tooling:
                                     step=step)
 
     def _set_tool_offset(self, offset: np.ndarray) -> None:
-        self.device.update_settings(lambda s: s.with_tool_offset(offset))
+        self.settings.update(lambda s: s.with_tool_offset(offset))
 
     def _wait(self, done, timeout: float) -> bool:
         """Until done(), for at most `timeout` s of controller time (and a little more of wall
         time, should the controller stop)."""
-        link = self.device.link
+        link = self.link
         end = link.feedback.head + timeout / link.cycle_time
         give_up = time.monotonic() + timeout + 5.0
         while not done():
@@ -375,7 +383,7 @@ class Tooling:
         return True
 
     def _wait_cycles(self, cycles: float) -> None:
-        self._wait(lambda: False, cycles * self.device.link.cycle_time)
+        self._wait(lambda: False, cycles * self.link.cycle_time)
 
 
 def _along_z(length: float) -> np.ndarray:

@@ -8,14 +8,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from importlib import metadata
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
-from landscape.server.errors import ControllerFailure, ParamError, WrongState
 from landscape.robot.controller import IoctrlCode, Status
+from landscape.server.device.state_machine import StateMachine
+from landscape.server.errors import ControllerFailure, ParamError, WrongState
+from landscape.server.link.controller_link import ControllerLink
+from landscape.server.workcell.sensing import Sensors
 
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
-    from landscape.server.workcell.sensing import Sensors
 
 
 @dataclass(frozen=True)
@@ -27,8 +27,9 @@ class VendorCommand:
 
 
 class VendorCommands:
-    def __init__(self, device: "Device", sensors: "Sensors", record_path: str):
-        self.device, self.sensors, self.record_path = device, sensors, record_path
+    def __init__(self, link: ControllerLink, state: StateMachine, sensors: Sensors,
+                 record_path: str):
+        self.link, self.state, self.sensors, self.record_path = link, state, sensors, record_path
         self.commands = [
             VendorCommand("help", "this list", False, lambda _: self.help()),
             VendorCommand("version", "server, controller and robot versions", False,
@@ -58,7 +59,7 @@ class VendorCommands:
     def run(self, text: str, lease: str | None) -> str:
         command, args = self.find(text)
         if command.mutating:
-            self.device.check_holder(f"SendCommand {command.words!r}", lease)
+            self.state.check_holder(f"SendCommand {command.words!r}", lease)
         return command.run(args)
 
     def help(self) -> str:
@@ -66,21 +67,21 @@ class VendorCommands:
                          for c in self.commands)
 
     def _version(self) -> str:
-        controller = self.device.controller
+        controller = self.link.proxy
         return (f"landscape-grpc {metadata.version('landscape-grpc')}; controller "
                 f"{controller.ioctrl(IoctrlCode.GET_SOFTWARE_VERSION)}; robot "
                 f"{controller.ioctrl(IoctrlCode.GET_ROBOT_TYPE)}")
 
     def _stats(self) -> str:
-        stats = self.device.link.stats()
+        stats = self.link.stats()
         if stats is None:
             return (f"lock-step clock (simulated time, no wall-clock deadlines): cycle "
-                    f"{self.device.link.cycle_time * 1000:g} ms, "
-                    f"{self.device.link.feedback.head + 1} cycles")
+                    f"{self.link.cycle_time * 1000:g} ms, "
+                    f"{self.link.feedback.head + 1} cycles")
         return stats.summary()
 
     def _recorder(self, action: str) -> str:
-        controller = self.device.controller
+        controller = self.link.proxy
         if action == "start":
             self._check(controller.rec_init(), "rec_init")   # a fresh recording
             self._recorder_ready = True

@@ -16,16 +16,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING
-
 import numpy as np
 import pinocchio as pin
 
 from landscape.server.link.clock import CycleProcessError
+from landscape.server.link.controller_link import ControllerLink
+from landscape.server.planning.collision import CollisionScene
 from landscape.sim.world_reads import read_part_states
-
-if TYPE_CHECKING:
-    from landscape.server.device.device import Device
 
 log = logging.getLogger(__name__)
 
@@ -35,8 +32,8 @@ SETTLE_TIMEOUT = 1.0    # s of controller time a part let go may take to land
 
 
 class WorldParts:
-    def __init__(self, device: "Device"):
-        self.device = device
+    def __init__(self, link: ControllerLink, collisions: CollisionScene):
+        self.link, self.collisions = link, collisions
         self._unread = False    # the last read failed (said once, not every PERIOD)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True, name="world-parts")
@@ -55,10 +52,10 @@ class WorldParts:
         """The scene's loose parts where the world has them now; the states read (name: (xyz,
         quaternion xyzw, speed m/s, held)), None if the world could not be read or the scene
         changed meanwhile (nothing taken)."""
-        scene = self.device.collisions
+        scene = self.collisions
         version = scene.version
         try:
-            states = self.device.link.between_cycles(read_part_states)
+            states = self.link.between_cycles(read_part_states)
         except (CycleProcessError, TimeoutError) as error:
             if not self._unread:
                 log.warning("the part poses cannot be read (%s): the collision scene keeps "
@@ -77,7 +74,7 @@ class WorldParts:
     def settle(self) -> None:
         """Wait until no loose part moves (a part let go lands; at most SETTLE_TIMEOUT of
         controller time), the scene taking their poses."""
-        link = self.device.link
+        link = self.link
         end = link.feedback.head + SETTLE_TIMEOUT / link.cycle_time
         give_up = time.monotonic() + SETTLE_TIMEOUT + 5.0
         while True:

@@ -199,7 +199,7 @@ def test_a_resume_queued_behind_an_estop_changes_nothing(arm):
     _moving(arm)
     arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=5)
     device = arm.server.device
-    with device._command_lock:   # the resume is admitted, then waits for its turn
+    with device.state_machine.turn:   # the resume is admitted, then waits for its turn
         resuming = arm.device.ResumeMotion.future(motion_pb2.ResumeMotionRequest(), timeout=10)
         time.sleep(0.1)
         arm.server.link.between_cycles(lambda c: c.panel.press_estop())
@@ -333,7 +333,7 @@ def test_a_sessions_outbox_is_bounded_and_overflow_is_refused():
 
 
 def test_an_outbox_high_water_mark_raises_an_alarm(arm):
-    arm.server.device._controller_event("the cycle's outbox holds over 10000 reports")
+    arm.server.device.controller_event("the cycle's outbox holds over 10000 reports")
     alarm = next(e for e in reversed(_history(arm)) if e.event_id == "alarm")
     assert alarm.detail.code == 106
 
