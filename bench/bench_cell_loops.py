@@ -71,9 +71,8 @@ class _Nothing:
 def _controller(bare: bool):
     cell = load_cell()
     mailbox = Mailbox()
-    executor = Executor(mailbox, cell.controller.cycle_time, FeedbackRing(), cell.arm)
-    if bare:
-        executor._sensors, executor._io, executor._dynamics = _Nothing(), _Nothing(), None
+    parts = {"sensors": _Nothing(), "io": _Nothing(), "model_torques": False} if bare else {}
+    executor = Executor(mailbox, cell.controller.cycle_time, FeedbackRing(), cell.arm, **parts)
     timed = []
 
     def cyclic(ctrl):
@@ -125,13 +124,13 @@ def _figures(label: str, executor_us: np.ndarray, step_us: np.ndarray) -> None:
 def _model_torques(cycles: int) -> np.ndarray:
     cell = load_cell()
     executor = Executor(Mailbox(), cell.controller.cycle_time, None, cell.arm)
-    executor._dynamics.set_payload(tool_payload(cell.world.tools[0]))
+    executor.set_payload(tool_payload(cell.world.tools[0]))
     q = np.array(cell.controller.initial_position)
     fbk = JointFbk(q, np.full(6, 0.5), np.zeros(6), np.zeros(6))
     out = []
     for k in range(cycles):
         start = time.perf_counter()
-        executor._model_torques(fbk, q + 1e-3 * (k % 7))
+        executor.model_torques(fbk, q + 1e-3 * (k % 7))
         out.append(time.perf_counter() - start)
     return np.array(out) * 1e6
 

@@ -41,6 +41,7 @@ pinocchio, for cross-checks, Jacobians and dynamics, is pinocchio_model.py.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -53,7 +54,7 @@ __all__ = ["Shoulder", "PosNeg", "Config", "ReversingResult", "BRANCHES", "Kinem
 _TWO_PI = 2.0 * math.pi
 ORTHONORMAL_TOL = 1e-6   # max |R^T R - I| element accepted as a rotation
 SINGULAR_EPS = 1e-10     # below this sin(q5) (or distance, m) a joint is free and taken from q_near
-_REACH_TOL = 1e-12       # rounding slack on the reach tests: poses on the workspace boundary solve
+REACH_TOL = 1e-12       # rounding slack on the reach tests: poses on the workspace boundary solve
 _RANGE_TOL = 1e-10       # rad: a joint this far past its limit is clipped onto it, not rejected
 
 
@@ -128,6 +129,22 @@ def _is_rigid(pose: list[list[float]]) -> bool:
     return zx * (xy * yz - xz * yy) + zy * (xz * yx - xx * yz) + zz * (xx * yy - xy * yx) > 0.0
 
 
+class ClosedForm(NamedTuple):
+    """The arm's constants in the closed form (m, rad), for its batch half (kinematics_batch.py):
+    the J1 origin, J2 in link 1 (x, z), the arm plane's lateral offset from J1, the upper arm's
+    and the forearm's lengths and their angles from z, and the wrist centre to the flange."""
+
+    base: np.ndarray
+    shoulder_x: float
+    shoulder_z: float
+    lateral: float
+    upper: float
+    upper_angle: float
+    fore: float
+    fore_angle: float
+    flange: float
+
+
 class Kinematics:
     """Forward and closed-form inverse kinematics of one arm.
 
@@ -171,6 +188,9 @@ class Kinematics:
         self._rot_index = (np.arange(6), (axis + 1) % 3, (axis + 2) % 3)
         self._lower = [float(v) for v in arm.joint_min]
         self._upper = [float(v) for v in arm.joint_max]
+        self.closed_form = ClosedForm(self._base, self._shoulder_x, self._shoulder_z,
+                                      self._lateral, self._lu, self._au, self._lf, self._af,
+                                      self._flange)
 
     # ---- forward ------------------------------------------------------------------------------
 
@@ -233,7 +253,7 @@ class Kinematics:
         cx, cy, cz = x0 - f * r02 - bx, y0 - f * r12 - by, z0 - f * r22 - bz   # wrist centre
         r2 = cx * cx + cy * cy
         x2 = r2 - lat * lat
-        if x2 < -_REACH_TOL:
+        if x2 < -REACH_TOL:
             return []
         x = math.sqrt(max(x2, 0.0))
         rem, pi, two_pi = math.remainder, math.pi, _TWO_PI
@@ -253,7 +273,7 @@ class Kinematics:
         px, pz = wx - self._shoulder_x, cz - self._shoulder_z
         d2 = px * px + pz * pz
         cos_bend = (d2 - lu * lu - lf * lf) / (2.0 * lu * lf)
-        if abs(cos_bend) > 1.0 + _REACH_TOL:
+        if abs(cos_bend) > 1.0 + REACH_TOL:
             return []
         bend = math.acos(min(1.0, max(-1.0, cos_bend)))
         rem, pi, two_pi, shift = math.remainder, math.pi, _TWO_PI, self._au - self._af

@@ -11,15 +11,15 @@ import math
 
 import numpy as np
 
-from landscape.robot.kinematics import ORTHONORMAL_TOL, SINGULAR_EPS, _REACH_TOL, _TWO_PI, Kinematics
+from landscape.robot.kinematics import ORTHONORMAL_TOL, REACH_TOL, SINGULAR_EPS, Kinematics
 
 __all__ = ["solve_batch"]
 
 
 def _wrap_array(a: np.ndarray) -> np.ndarray:
     """wrap_angle for float arrays, in place of a copy: (-pi, pi]."""
-    w = a - _TWO_PI * np.round(a / _TWO_PI)
-    w[w <= -math.pi] += _TWO_PI
+    w = a - math.tau * np.round(a / math.tau)
+    w[w <= -math.pi] += math.tau
     return w
 
 
@@ -51,20 +51,21 @@ def solve_batch(kin: Kinematics, poses, q_near=None) -> np.ndarray:
     P = np.where(ok[:, None, None], P, np.eye(4))   # keep bad rows from raising warnings
     R, p = P[:, :3, :3], P[:, :3, 3]
     # The arm's constants as Kinematics derives them (this module is its batch half).
-    lat, lu, lf, au, af = kin._lateral, kin._lu, kin._lf, kin._au, kin._af
+    form = kin.closed_form
+    lat, lu, lf, au, af = form.lateral, form.upper, form.fore, form.upper_angle, form.fore_angle
 
     # Shoulder: axis 1 of the (N, 2) arrays is RIGHTY, LEFTY.
-    c = p - kin._flange * R[:, :, 2] - kin._base
+    c = p - form.flange * R[:, :, 2] - form.base
     r2 = c[:, 0] ** 2 + c[:, 1] ** 2
     x = np.sqrt(np.maximum(r2 - lat * lat, 0.0))
     wx = np.stack([x, -x], axis=1)
     q1 = np.arctan2(c[:, 1], c[:, 0])[:, None] - np.arctan2(lat, wx)
     q1 = np.where((r2 < SINGULAR_EPS**2)[:, None], near[:, :1], q1)
-    px, pz = wx - kin._shoulder_x, (c[:, 2] - kin._shoulder_z)[:, None]
+    px, pz = wx - form.shoulder_x, (c[:, 2] - form.shoulder_z)[:, None]
     d2 = px**2 + pz**2
     cos_bend = (d2 - lu * lu - lf * lf) / (2.0 * lu * lf)
-    reach = ((ok & (r2 - lat * lat >= -_REACH_TOL))[:, None]
-             & (np.abs(cos_bend) <= 1.0 + _REACH_TOL))
+    reach = ((ok & (r2 - lat * lat >= -REACH_TOL))[:, None]
+             & (np.abs(cos_bend) <= 1.0 + REACH_TOL))
 
     # Elbow: (N, 2, 2), last axis POSITIVE, NEGATIVE.
     bend = np.arccos(np.clip(cos_bend, -1.0, 1.0))

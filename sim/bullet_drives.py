@@ -53,6 +53,11 @@ class _BoundClient(BulletClient):
             self.__dict__[name] = attribute
         return attribute
 
+    @property
+    def client_id(self) -> int:
+        """pybullet's id of this client, for its functions called directly."""
+        return self._client
+
 
 def connect(cycle_time: float, substeps: int) -> _BoundClient:
     """A pybullet client of its own (DIRECT mode) whose step is one of a cycle's substeps."""
@@ -85,7 +90,7 @@ class Drives:
         self._brake_list = (spec.brake_factor * np.array(arm.max_effort)).tolist()
 
         # The per-cycle pybullet calls, bound once to this client, arm and joints.
-        cid, body, joints = bc._client, world.arm, world.joints
+        cid, body, joints = bc.client_id, world.arm, world.joints
         self._physics_step = functools.partial(pb.stepSimulation, physicsClientId=cid)
         self._motors = functools.partial(pb.setJointMotorControlArray, body, joints,
                                          physicsClientId=cid)

@@ -80,7 +80,8 @@ class StreamLimits:
     def open(self, kind: str, client: str | None = None) -> int:
         return self._open[kind, client]
 
-    def _release(self, kind: str, client: str) -> None:
+    def release(self, kind: str, client: str) -> None:
+        """A stream of `kind` that `client` held ended (Slot.release)."""
         with self._lock:
             self._open[kind, client] -= 1
             self._open[kind, None] -= 1
@@ -96,4 +97,4 @@ class Slot:
     def release(self) -> None:
         if self._held:
             self._held = False
-            self._limits._release(self._kind, self._client)
+            self._limits.release(self._kind, self._client)

@@ -142,7 +142,7 @@ class _Server:
 
     def between(self, deadline: float) -> bool:
         self.cycles += 1
-        self._flush()
+        self.flush()
         done = self.async_task.take()
         if done is not None:
             self._reply(*done)
@@ -214,7 +214,8 @@ class _Server:
         else:
             self._reply(call_id, True, value)
 
-    def _flush(self) -> None:
+    def flush(self) -> None:
+        """Send what the cycle posted, as far as the pipe takes it now."""
         outbox = self.mailbox.outbox
         while outbox:
             # A full pipe (parent not reading) would block send(): keep the rest for later.
@@ -348,7 +349,7 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
             print(f"landscape cycle process: {unasked}: "
                   f"{'drives disabled' if disabled else 'disabling the drives FAILED'}",
                   file=sys.stderr, flush=True)
-        server._flush()
+        server.flush()
         conn.close()
     raise SystemExit(code)
 

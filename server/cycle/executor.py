@@ -70,10 +70,13 @@ class Executor:
     """The cyclic function. `ring` receives every cycle's feedback (feedback.py); reports go to
     the server through `mailbox`, in order, after that cycle's row. `arm`: the arm model for
     the loops that need its Jacobian (jog, comply), refused without it, and for the model
-    torques (`gravity`: m/s^2 in the arm's base frame)."""
+    torques (`gravity`: m/s^2 in the arm's base frame). `sensors`, `io` and `model_torques`
+    replace or leave out those parts of the cycle (bench_cell_loops times it without them)."""
 
     def __init__(self, mailbox, cycle_time: float, ring: FeedbackRing | None = None,
-                 arm: ArmModel | None = None, gravity=(0.0, 0.0, -9.81)):
+                 arm: ArmModel | None = None, gravity=(0.0, 0.0, -9.81), *,
+                 sensors: CycleSensors | None = None, io: IoMonitor | None = None,
+                 model_torques: bool = True):
         self.mailbox = mailbox
         self.cycle_time = cycle_time
         self.ring = ring
@@ -86,8 +89,8 @@ class Executor:
         self._last_state = None
         self._reports: list[dict] = []   # reports of this cycle, posted after its row
         self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
-        self._sensors = CycleSensors()
-        self._io = IoMonitor()
+        self._sensors = sensors or CycleSensors()
+        self._io = io or IoMonitor()
         self._wall = 0.0   # this cycle's time stamp (unix s)
         self._tip = self._dynamics = None
         self._setpoints: np.ndarray | None = None   # (3, 6): the last three cycles', newest first
@@ -96,7 +99,7 @@ class Executor:
             from landscape.server.cycle.arm_dynamics import ArmDynamics
             from landscape.server.cycle.tip_model import TipModel
             self._tip = TipModel(arm)
-            self._dynamics = ArmDynamics(arm, gravity)
+            self._dynamics = ArmDynamics(arm, gravity) if model_torques else None
 
     @property
     def sequence(self) -> int:
@@ -130,7 +133,7 @@ class Executor:
         else:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
-        model = self._model_torques(fbk, pos)
+        model = self.model_torques(fbk, pos)
 
         key = (state.enable, state.estop)
         if key != self._last_state:   # first, so the server knows the power before the rest
@@ -144,7 +147,7 @@ class Executor:
         self._reports.clear()
         return True
 
-    def _model_torques(self, fbk, pos: np.ndarray) -> np.ndarray | float:
+    def model_torques(self, fbk, pos: np.ndarray) -> np.ndarray | float:
         """The arm model's torques for the cycle the drives just played: they went from the
         setpoint of two cycles ago to last cycle's (linearly, LLI 5.3.12), so the commanded
         acceleration is the second difference of the last three setpoints. Then `pos` (this
@@ -159,6 +162,11 @@ class Executor:
         past[1:] = past[:2].copy()
         past[0] = pos
         return model
+
+    def set_payload(self, parameters) -> None:
+        """What the flange carries now (10 dynamic parameters, arm_dynamics.py)."""
+        if self._dynamics is not None:
+            self._dynamics.set_payload(parameters)
 
     def _write_row(self, ctrl, fbk, pos, state, model) -> None:
         row = self._row
@@ -296,8 +304,7 @@ class Executor:
         if op in ("io_image", "watch", "unwatch"):
             self._io.handle(msg)
         elif op == "payload":
-            if self._dynamics is not None:
-                self._dynamics.set_payload(msg["parameters"])
+            self.set_payload(msg["parameters"])
         elif op in ("jog", "jog_velocity", "jog_clearance", "jog_end"):
             self._handle_jog(msg, fbk)
         elif op == "run":

@@ -103,8 +103,8 @@ class Subscription:
 
     def close(self) -> None:
         """Stop receiving; pending events are discarded. Idempotent."""
-        self._bus._unsubscribe(self)
-        self._end()
+        self._bus.unsubscribe(self)
+        self.end()
 
     def __enter__(self) -> Subscription:
         return self
@@ -114,7 +114,7 @@ class Subscription:
 
     # Called by the bus with its lock held (lock order: bus, then subscription).
 
-    def _offer(self, event: Event, clock: Callable[[], float]) -> None:
+    def offer(self, event: Event, clock: Callable[[], float]) -> None:
         with self._cond:
             live = self._live
             if len(live) >= self._capacity:
@@ -128,7 +128,7 @@ class Subscription:
             self._cond.notify()
             self._wake()
 
-    def _end(self, drain: bool = False) -> None:
+    def end(self, drain: bool = False) -> None:
         """No more events; with `drain`, the pending ones are still delivered first."""
         with self._cond:
             if drain:
@@ -281,7 +281,7 @@ class EventBus:
             event = Event(self._last_sequence, self._clock(), event_id, data, detail)
             self._history.append(event)
             for subscriber in self._subscribers:
-                subscriber._offer(event, self._clock)
+                subscriber.offer(event, self._clock)
         return event
 
     # Subscribing.
@@ -296,7 +296,7 @@ class EventBus:
             replay = [] if after_sequence is None else self._replay_after(after_sequence)
             subscription = Subscription(self, self.buffer_size, replay)
             if self._closed:
-                subscription._end()
+                subscription.end()
             else:
                 self._subscribers.add(subscription)
             return subscription
@@ -311,7 +311,7 @@ class EventBus:
             self._closed = True
             subscribers, self._subscribers = self._subscribers, set()
             for subscription in subscribers:
-                subscription._end(drain=True)
+                subscription.end(drain=True)
 
     def _replay_after(self, after: int) -> list[Event]:
         # Called with the lock held; kept sequences are contiguous, oldest first.
@@ -327,6 +327,7 @@ class EventBus:
         replay.extend(itertools.islice(self._history, start, None))
         return replay
 
-    def _unsubscribe(self, subscription: Subscription) -> None:
+    def unsubscribe(self, subscription: Subscription) -> None:
+        """The subscription leaves the bus (Subscription.close)."""
         with self._lock:
             self._subscribers.discard(subscription)

@@ -95,11 +95,15 @@ class CollisionScene:
         """A scene in the same state, to change without changing this one (to check what a
         tool change will make of it before it starts)."""
         with self._lock:
-            other = copy.copy(self)
-            other._lock = threading.Lock()
-            other._gap, other._tool_at = dict(self._gap), dict(self._tool_at)
-            other._part_at, other._allowed = dict(self._part_at), list(self._allowed)
-            return other
+            return copy.copy(self)
+
+    def __copy__(self) -> "CollisionScene":
+        """copy.copy: a lock of its own, and its own copies of what changes."""
+        other = object.__new__(type(self))
+        vars(other).update(vars(self), _lock=threading.Lock(), _gap=dict(self._gap),
+                           _tool_at=dict(self._tool_at), _part_at=dict(self._part_at),
+                           _allowed=list(self._allowed))
+        return other
 
     def state(self) -> tuple:
         """What has changed in this scene since it was built from its cell: for `restore` on
