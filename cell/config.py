@@ -67,7 +67,7 @@ def _world(value, info: ValidationInfo):
         if value not in builtin_worlds():
             raise problem(f"no built-in world is named {value!r} (built-in: "
                           f"{', '.join(builtin_worlds())}; or give a file's path)")
-        with resources.as_file(resources.files("landscape.sim").joinpath(
+        with resources.as_file(resources.files("landscape.robot").joinpath(
                 f"cells/{value}.toml")) as path:
             return Path(path)
     path = _path(value, info)
