@@ -41,21 +41,18 @@ pinocchio, for cross-checks, Jacobians and dynamics, is pinocchio_model.py.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 
 from landscape.robot.arm import JOINT_AXES, ArmModel
+from landscape.robot.closed_form import (ORTHONORMAL_TOL, REACH_TOL, SINGULAR_EPS, ClosedForm,
+                                         by_bound, fit_range, is_rigid, pose_rows, vector6)
 from landscape.robot.configurations import BRANCHES, Config, PosNeg, ReversingResult, Shoulder
 
 __all__ = ["Shoulder", "PosNeg", "Config", "ReversingResult", "BRANCHES", "Kinematics",
            "wrap_angle", "ORTHONORMAL_TOL", "SINGULAR_EPS"]
 
 _TWO_PI = 2.0 * math.pi
-ORTHONORMAL_TOL = 1e-6   # max |R^T R - I| element accepted as a rotation
-SINGULAR_EPS = 1e-10     # below this sin(q5) (or distance, m) a joint is free and taken from q_near
-REACH_TOL = 1e-12       # rounding slack on the reach tests: poses on the workspace boundary solve
-_RANGE_TOL = 1e-10       # rad: a joint this far past its limit is clipped onto it, not rejected
 
 
 def _allowed(request: Config) -> frozenset[int]:
@@ -93,58 +90,6 @@ def _wrap(a: float) -> float:
     return w + _TWO_PI if w <= -math.pi else w
 
 
-def _vector6(v, name: str) -> list[float]:
-    a = v if type(v) is np.ndarray and v.dtype == np.float64 else np.asarray(v, dtype=float)
-    values = a.tolist() if a.shape == (6,) else None
-    if values is None or not all(map(math.isfinite, values)):
-        raise ValueError(f"{name} must be 6 finite values (rad), got {v!r}")
-    return values
-
-
-def _pose_rows(pose) -> list[list[float]]:
-    a = pose if type(pose) is np.ndarray and pose.dtype == np.float64 else np.asarray(
-        pose, dtype=float)
-    if a.shape != (4, 4):
-        raise ValueError(f"a pose is a (4, 4) matrix, got shape {a.shape}")
-    return a.tolist()
-
-
-def _is_rigid(pose: list[list[float]]) -> bool:
-    """kinematics_batch._pose_ok for one pose as rows: plain floats are ~10x faster than numpy."""
-    (xx, yx, zx, px), (xy, yy, zy, py), (xz, yz, zz, pz), last = pose
-    # One sum is NaN or inf if any rotation or last-row entry is (or if they are too large to
-    # be a rotation); the translation is checked apart, where large is still finite.
-    if not (math.isfinite(xx + yx + zx + xy + yy + zy + xz + yz + zz + sum(last))
-            and math.isfinite(px) and math.isfinite(py) and math.isfinite(pz)):
-        return False
-    tol = ORTHONORMAL_TOL
-    if abs(last[0]) > tol or abs(last[1]) > tol or abs(last[2]) > tol or abs(last[3] - 1.0) > tol:
-        return False
-    # Columns x, y, z of R: unit length, mutually orthogonal, right-handed (z . (x cross y) > 0).
-    for d in (xx * xx + xy * xy + xz * xz - 1.0, yx * yx + yy * yy + yz * yz - 1.0,
-              zx * zx + zy * zy + zz * zz - 1.0, xx * yx + xy * yy + xz * yz,
-              xx * zx + xy * zy + xz * zz, yx * zx + yy * zy + yz * zz):
-        if abs(d) > tol:
-            return False
-    return zx * (xy * yz - xz * yy) + zy * (xz * yx - xx * yz) + zz * (xx * yy - xy * yx) > 0.0
-
-
-class ClosedForm(NamedTuple):
-    """The arm's constants in the closed form (m, rad), for its batch half (kinematics_batch.py):
-    the J1 origin, J2 in link 1 (x, z), the arm plane's lateral offset from J1, the upper arm's
-    and the forearm's lengths and their angles from z, and the wrist centre to the flange."""
-
-    base: np.ndarray
-    shoulder_x: float
-    shoulder_z: float
-    lateral: float
-    upper: float
-    upper_angle: float
-    fore: float
-    fore_angle: float
-    flange: float
-
-
 class Kinematics:
     """Forward and closed-form inverse kinematics of one arm.
 
@@ -158,25 +103,15 @@ class Kinematics:
     """
 
     def __init__(self, arm: ArmModel):
-        if tuple(JOINT_AXES) != ("z", "y", "y", "z", "y", "z"):
-            raise ValueError(f"unsupported joint axes {JOINT_AXES}: need z y y z y z")
-        o = np.array(arm.joint_origins, dtype=float)
-        # A spherical wrist: J5 on the J4 axis and J6 on the J5 origin's z line.
-        if np.any(o[4, :2] != 0.0) or np.any(o[5, :2] != 0.0):
-            raise ValueError("unsupported kinematics: the wrist axes do not meet in one point")
+        form = self.closed_form = ClosedForm.of(arm)
         self.arm = arm
-        g = o.tolist()   # plain floats: numpy scalars would slow the one-pose solver down
-        self._base = o[0]                                   # the J1 axis passes through it
-        self._base_xyz = tuple(g[0])
-        self._shoulder_x, self._shoulder_z = g[1][0], g[1][2]   # J2 in link 1
-        self._lateral = g[1][1] + g[2][1] + g[3][1]         # arm plane's offset from J1 (b)
-        ux, uz = g[2][0], g[2][2]                           # J2 -> J3, in link 2
-        fx, fz = g[3][0], g[3][2] + g[4][2]                 # J3 -> wrist centre, in link 3
-        self._lu, self._au = math.hypot(ux, uz), math.atan2(ux, uz)
-        self._lf, self._af = math.hypot(fx, fz), math.atan2(fx, fz)
-        if self._lu <= 0.0 or self._lf <= 0.0:
-            raise ValueError("unsupported kinematics: zero-length upper arm or forearm")
-        self._flange = g[5][2]                              # wrist centre -> flange, along z6
+        self._base, self._base_xyz = form.base, tuple(form.base.tolist())
+        self._shoulder_x, self._shoulder_z, self._lateral = (form.shoulder_x, form.shoulder_z,
+                                                             form.lateral)
+        self._lu, self._au = form.upper, form.upper_angle
+        self._lf, self._af = form.fore, form.fore_angle
+        self._flange = form.flange
+        o = np.array(arm.joint_origins, dtype=float)
         # Per joint, the constant part of its transform (origin, 1 on the axis) and the indices
         # of the 2x2 rotation block about that axis, for `forward`.
         self._fixed = np.zeros((6, 4, 4))
@@ -188,9 +123,6 @@ class Kinematics:
         self._rot_index = (np.arange(6), (axis + 1) % 3, (axis + 2) % 3)
         self._lower = [float(v) for v in arm.joint_min]
         self._upper = [float(v) for v in arm.joint_max]
-        self.closed_form = ClosedForm(self._base, self._shoulder_x, self._shoulder_z,
-                                      self._lateral, self._lu, self._au, self._lf, self._af,
-                                      self._flange)
 
     # ---- forward ------------------------------------------------------------------------------
 
@@ -232,7 +164,7 @@ class Kinematics:
 
     def configuration(self, q) -> Config:
         """Concrete labels (LEFTY/RIGHTY, POSITIVE/NEGATIVE) of a joint vector (6,)."""
-        q = _vector6(q, "q")
+        q = vector6(q, "q")
         # x of the wrist centre in link 1, measured from the J1 axis.
         x = (self._shoulder_x + self._lu * math.sin(q[1] + self._au)
              + self._lf * math.sin(q[1] + q[2] + self._af))
@@ -344,10 +276,10 @@ class Kinematics:
         the pose is out of reach. q_near (6,) only picks the free joints at singularities
         (default zeros). Raises ValueError for a pose that is not a proper rigid transform.
         """
-        rows = _pose_rows(pose)
-        if not _is_rigid(rows):
+        rows = pose_rows(pose)
+        if not is_rigid(rows):
             raise ValueError("pose is not a rigid transform (rotation not proper, or not finite)")
-        near = [0.0] * 6 if q_near is None else _vector6(q_near, "q_near")
+        near = [0.0] * 6 if q_near is None else vector6(q_near, "q_near")
         return [(np.array(q), BRANCHES[b]) for q, b in self._branches(rows, near)]
 
     def reverse(self, pose, q_near, config: Config = _ANY, joint_min=None, joint_max=None
@@ -362,14 +294,14 @@ class Kinematics:
         configurations), INVALID_ORIENTATION (not a proper rigid transform, NaN or inf).
         Raises ValueError for wrong shapes, non-finite q_near or range, or an unknown config.
         """
-        near = _vector6(q_near, "q_near")
-        lower = self._lower if joint_min is None else _vector6(joint_min, "joint_min")
-        upper = self._upper if joint_max is None else _vector6(joint_max, "joint_max")
+        near = vector6(q_near, "q_near")
+        lower = self._lower if joint_min is None else vector6(joint_min, "joint_min")
+        upper = self._upper if joint_max is None else vector6(joint_max, "joint_max")
         if (joint_min is not None or joint_max is not None) and any(
                 lo > hi for lo, hi in zip(lower, upper)):
             raise ValueError("every joint_min must be at most its joint_max")
-        rows = _pose_rows(pose)
-        if not _is_rigid(rows):
+        rows = pose_rows(pose)
+        if not is_rigid(rows):
             return None, ReversingResult.INVALID_ORIENTATION
         allowed = self._allowed_for(config, near)
         # Complete the likeliest branches first and stop once a bound shows the rest are
@@ -381,12 +313,12 @@ class Kinematics:
         shoulders = [(rem(s[0] - n1, two_pi) ** 2, s) for s in self._shoulders(rows, near)
                      if not allowed.isdisjoint(_OF_SHOULDER[s[1]])]
         best, best_dist = None, math.inf
-        for d1, shoulder in _by_bound(shoulders):
+        for d1, shoulder in by_bound(shoulders):
             if d1 >= best_dist:
                 break
             elbows = [(d1 + rem(e[0] - n3, two_pi) ** 2, e) for e in self._elbows_at(shoulder)
                       if e[1] in allowed or e[1] + 1 in allowed]
-            for d13, elbow in _by_bound(elbows):
+            for d13, elbow in by_bound(elbows):
                 b = elbow[1]
                 if d13 >= best_dist:
                     break
@@ -399,7 +331,7 @@ class Kinematics:
                     if bound >= best_dist:
                         break
                     q = [q1, q2, q3, *self._wrist(terms, q5, wi == 1, near)]
-                    fitted = _fit_range(q, near, lower, upper)
+                    fitted = fit_range(q, near, lower, upper)
                     if fitted is not None and fitted[1] < best_dist:
                         best, best_dist = fitted
         if best is not None:
@@ -407,7 +339,7 @@ class Kinematics:
         branches = self._branches(rows, near)
         if not branches:
             return None, ReversingResult.OUT_OF_WORKSPACE
-        if any(_fit_range(q, near, lower, upper) for q, _ in branches):
+        if any(fit_range(q, near, lower, upper) for q, _ in branches):
             return None, ReversingResult.INVALID_CONFIG
         return None, ReversingResult.OUT_OF_JNT_RANGE
 
@@ -433,33 +365,3 @@ class Kinematics:
         from landscape.robot.kinematics_batch import solve_batch   # it imports this module
         return solve_batch(self, poses, q_near)
 
-
-def _by_bound(items: list[tuple]) -> list[tuple]:
-    """Two (bound, ...) items (or fewer), the smaller bound first (the first on a tie)."""
-    if len(items) == 2 and items[1][0] < items[0][0]:
-        return [items[1], items[0]]
-    return items
-
-
-def _fit_range(q, near, lower, upper) -> tuple[list[float], float] | None:
-    """Each joint moved by whole turns to the value closest to near within [lower, upper].
-
-    Returns (joints, squared distance to near), or None if a joint has no value in range.
-    """
-    out, dist, pi = list(q), 0.0, math.pi
-    for j, (a, n, lo, hi) in enumerate(zip(q, near, lower, upper)):
-        if not (lo <= a <= hi and -pi <= a - n <= pi):   # else: in range and nearest already
-            turned = a + _TWO_PI * round((n - a) / _TWO_PI)  # the turn nearest n, if in range
-            if lo <= turned <= hi:
-                out[j] = a = turned
-                dist += (a - n) * (a - n)
-                continue
-            k_min = math.ceil((lo - _RANGE_TOL - a) / _TWO_PI)
-            k_max = math.floor((hi + _RANGE_TOL - a) / _TWO_PI)
-            if k_min > k_max:
-                return None
-            # |a + 2 pi k - n| is convex in k: clamp the unconstrained best turn into the range.
-            k = min(max(round((n - a) / _TWO_PI), k_min), k_max)
-            a = out[j] = min(max(a + _TWO_PI * k, lo), hi)
-        dist += (a - n) * (a - n)
-    return out, dist

@@ -24,14 +24,11 @@ already on the flange is not fetched again; another one must be put away first.
 ActivateTool closes the gripper (blocking until `gripper_closed` reads 1, on a part or empty)
 or switches the cup's suction on (blocking for two cycles; `vacuum_ok` then says whether a part
 is held). DeactivateTool opens the gripper (blocking for its rated opening time: there is no
-"open" input) or switches the suction off.
-
-Whenever the flange's load changes (a tool coupled or released, a part taken or let go) the
-cycle is told its mass properties (arm_dynamics.py), for the model torques it reports.
-
-The state (GetEndEffectorState, state streams) is read from the ring's I/O image, at most a
-cycle old: the tool from its id inputs, and per kind: gripper "open", "closing" or "closed";
-cup "off", "suction_on" or "holding" (a part held).
+"open" input) or switches the suction off. Whenever the flange's load changes (a tool coupled or released, a part taken or let go) the
+cycle is told its mass properties (arm_dynamics.py), for the model torques it reports. The
+state (GetEndEffectorState, state streams) is read from the ring's I/O image, at most a cycle
+old: the tool from its id inputs, and per kind: gripper "open", "closing" or "closed"; cup
+"off", "suction_on" or "holding" (a part held).
 """
 from __future__ import annotations
 
@@ -63,8 +60,8 @@ GRASP_REACH = 0.03         # m: a part whose centre is this close to the tip is 
 
 @dataclass(frozen=True)
 class Functions:
-    """A tool kind's main function: the output that switches it and the input confirming it,
-    and the state names: off, on but not confirmed, on and confirmed."""
+    """A tool kind's main function: its output, its confirming input, and the states named
+    off, on but not confirmed, on and confirmed."""
 
     output: str
     confirm: str
@@ -78,23 +75,20 @@ FUNCTIONS = {
 
 
 class Tooling:
-    """The rack's `tools`, the cell's `parts` (BoxSpec) and the arm's `base` in the world, from
-    the cell file; `world` follows the loose parts (None: the backend does not track them)."""
-
+    """`tools`, `parts` (BoxSpec), `base`: the cell file's; `world`: None if not tracked."""
     def __init__(self, link: ControllerLink, motions: MotionControl, kinematics: Kinematics,
                  collisions: CollisionScene, settings: SettingsKeeper, world: WorldParts | None,
                  tools: tuple[ToolSpec, ...], parts, base: Pose):
         self.link, self.motions, self.kinematics = link, motions, kinematics
         self.collisions, self.settings, self.world = collisions, settings, world
-        self._parts = {p.name: p for p in parts}     # BoxSpec of the cell's parts
-        self.tools = {t.name: t for t in tools}
+        self._parts, self.tools = {p.name: p for p in parts}, {t.name: t for t in tools}
         self._by_id = {t.id: t for t in tools}
-        world_base = pose_matrix(base.xyz, base.rpy)        # base_link in the cell's world
-        self._world_base = world_base
-        self._slots = {t.name: np.linalg.inv(world_base) @ pose_matrix(t.slot.xyz, t.slot.rpy)
+        self._world_base = pose_matrix(base.xyz, base.rpy)   # base_link in the cell's world
+        self._slots = {t.name: np.linalg.inv(self._world_base) @ pose_matrix(t.slot.xyz,
+                                                                          t.slot.rpy)
                        for t in tools}
         self._signals: dict[str, tuple[int, int]] = {}   # name -> (unit, bit)
-        self._image: list[tuple[int, int]] = []          # (unit, mask) per ring I/O column
+        self._image: list[tuple[int, int]] = []   # (unit, mask) per ring I/O column
         self._payloads = {t.name: tool_payload(t) for t in tools}
         self._carried: tuple = (None, None)   # the tool on the flange, its part's payload
 
@@ -387,9 +381,7 @@ class Tooling:
 
 
 def _along_z(length: float) -> np.ndarray:
-    offset = np.eye(4)
-    offset[2, 3] = length
-    return offset
+    return pose_matrix((0.0, 0.0, length), (0.0, 0.0, 0.0))
 
 
 def _above(slot: np.ndarray, height: float) -> np.ndarray:
