@@ -22,6 +22,7 @@ from pathlib import Path
 from pydantic import model_validator
 
 from landscape.robot.arm import VARIANTS, ArmModel, arm_model
+from landscape.robot.backends import BACKENDS
 from landscape.robot.cell_model import (  # noqa: F401  (the parsed cell, named here too)
     BoxSpec, Cell, ControllerSpec, INPUT_WIRES, IoSignalSpec, IoSpec, IoUnitSpec, MAX_BITS,
     MAX_TOOL_ID_BITS, OUTPUT_WIRES, PANEL_WIRES, Pose, RecorderSpec, SENSOR_KINDS, SensorSpec,
@@ -87,6 +88,7 @@ class ArmTable(Table):
 
 
 class ControllerTable(Table):
+    backend: string(tuple(BACKENDS)) = ControllerSpec.backend
     cycle_time: number(above=0.0, then=check_cycle_time) = ControllerSpec.cycle_time
     physics_step: Positive = ControllerSpec.physics_step
     enable_time: number(0.0, 10.0) = ControllerSpec.enable_time
@@ -101,7 +103,7 @@ class ControllerTable(Table):
         return ControllerSpec(self.cycle_time, self.physics_step, self.enable_time,
                               self.disable_time, self.acceleration_factor, self.effort_factor,
                               self.brake_factor, _radians(self.initial_position_deg),
-                              _radians(self.user_marks_deg))
+                              _radians(self.user_marks_deg), self.backend)
 
 
 class FixtureTable(Table):

@@ -46,7 +46,8 @@ class ControllerSpec:
     reject a command whose velocity changes by more than acceleration_factor * max_acceleration
     * cycle_time. effort_factor: drive peak torque / the published max effort. brake_factor:
     brake holding torque / the published max effort. initial_position: rad (6,), where the arm
-    stands at construction. user_marks: rad (6,), LLI user mark positions.
+    stands at construction. user_marks: rad (6,), LLI user mark positions. backend: the
+    controller's (robot/backends.py): "pybullet", or "kinematic" (no physics).
     """
 
     cycle_time: float = 0.004
@@ -58,6 +59,7 @@ class ControllerSpec:
     brake_factor: float = 2.0
     initial_position: tuple[float, ...] = (0.0, 0.0, math.pi / 2, 0.0, math.pi / 2, 0.0)
     user_marks: tuple[float, ...] = (0.0,) * 6
+    backend: str = "pybullet"
 
     @property
     def substeps(self) -> int:

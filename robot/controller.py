@@ -16,6 +16,14 @@ seed 4), and the cell's sensors by name (F/T, range) with tare. These read the l
 never wait, and may be called from either context (the cyclic function reads sensors every
 cycle); writing outputs belongs to the asynchronous side, as LLI_writeDout does.
 
+Beyond both, optional capabilities a backend may offer and declares (`capabilities()`): the
+server asks before it uses one (`Capability`): an operator panel (the e-stop button and the
+door, as a person at the cell works them), part tracking (where the cell's loose parts are),
+and sensors that measure the world (without: a force reads zero, a range nothing).
+`operate_panel` and `read_part_states` below are how the server reaches the first two of a
+controller in a cycle process (run between two cycles, pickled by name; this module is loaded
+there before the loop starts).
+
 Units: joint positions in rad, velocities in rad/s, torques in N*m, Cartesian positions in m,
 forces in N. Joint arrays have shape (n_joints,), joint 1 first.
 """
@@ -37,6 +45,18 @@ def check_cycle_time(cycle_time: float) -> float:
     if ticks < 1 or abs(ticks * 0.0002 - cycle_time) > 1e-9:
         raise ValueError(f"cycle time {cycle_time!r} s is not a positive multiple of 0.2 ms")
     return float(cycle_time)
+
+
+class Capability(enum.Enum):
+    """What a backend offers beyond the LLI, each optional."""
+
+    PANEL = "panel"       # operate_panel: the e-stop button and the door
+    WORLD = "world"       # part_states: where the loose parts are (and parts moved by hand)
+    SENSING = "sensing"   # the sensors measure the world
+
+
+# What a person at the cell does at the panel (Capability.PANEL).
+PANEL_ACTIONS = ("press_estop", "release_estop", "open_door", "close_door")
 
 
 class Status(enum.IntEnum):
@@ -301,3 +321,28 @@ class Controller(abc.ABC):
 
     @abc.abstractmethod
     def rec_store(self) -> Status: ...
+
+    # -- beyond the LLI: optional capabilities (see the module docstring)
+    def capabilities(self) -> frozenset[Capability]:
+        """The capabilities this backend offers; none unless it says so."""
+        return frozenset()
+
+    def operate_panel(self, action: str) -> tuple[bool, bool]:
+        """PANEL: one of PANEL_ACTIONS, as a person at the cell would; returns (e-stop pressed,
+        door open)."""
+        raise NotImplementedError(f"{type(self).__name__} has no operator panel")
+
+    def part_states(self) -> dict[str, tuple]:
+        """WORLD: the cell's parts, name -> (position (3,) m, quaternion xyzw, speed m/s, held
+        by the mounted tool)."""
+        raise NotImplementedError(f"{type(self).__name__} does not track parts")
+
+
+def operate_panel(controller: Controller, action: str) -> tuple[bool, bool]:
+    """Controller.operate_panel, run between two cycles (ControllerLink.between_cycles)."""
+    return controller.operate_panel(action)
+
+
+def read_part_states(controller: Controller) -> dict[str, tuple]:
+    """Controller.part_states, run between two cycles (ControllerLink.between_cycles)."""
+    return controller.part_states()

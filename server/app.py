@@ -149,7 +149,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     link = ControllerLink(config.clock, config.cell,
                           on_message=lambda msg: device and device.on_cycle_message(msg),
                           on_lost=lambda why: device and device.controller_lost(why),
-                          pace=config.lockstep_pace)
+                          pace=config.lockstep_pace, backend=config.backend)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
     paths = PathStore(config.paths_file, report=lambda severity, message: bus.alarm(
         severity, alarms.STORAGE, message))

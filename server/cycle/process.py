@@ -49,6 +49,7 @@ CONTROLLER_CALLS = frozenset({
     "get_din_id", "get_dout_id", "read_dio", "write_dout",
     "io_map", "read_io_unit", "write_io_unit", "sensor_map", "read_sensor", "tare_sensor",
     "forward_kin", "reverse_kin", "rec_init", "rec_start", "rec_stop", "rec_store",
+    "capabilities",
 })
 # Calls that may take long (they write files): served on the cycle process's asynchronous
 # thread. They must be safe while step() runs: rec_store only reads samples already recorded.

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from landscape.robot.arm import ArmModel
-from landscape.robot.controller import EnableState, InitState, Status
+from landscape.robot.controller import Capability, EnableState, InitState, Status, operate_panel
 from landscape.robot.kinematics import Kinematics
 from landscape.server.cycle.feedback import Sample
 from landscape.server.device import states
@@ -40,7 +40,7 @@ from landscape.server.device.sessions import Session, SessionRegistry
 from landscape.server.device.state_machine import StateMachine
 from landscape.server.device.states import State
 from landscape.server.device.stored_settings import SettingsKeeper
-from landscape.server.errors import ControllerFailure, EstopActive, ParamError
+from landscape.server.errors import ControllerFailure, EstopActive, NotOffered, ParamError
 from landscape.server.events import alarms
 from landscape.server.events.bus import EventBus, Severity
 from landscape.server.link.clock import CycleProcessError
@@ -48,7 +48,6 @@ from landscape.server.link.controller_link import ControllerLink
 from landscape.server.planning.collision import CollisionScene
 from landscape.server.planning.moves import Planner
 from landscape.server.planning.paths import PathStore
-from landscape.sim import panel
 
 log = logging.getLogger(__name__)
 
@@ -228,9 +227,11 @@ class Device:
     def operate_panel(self, action: str) -> tuple[bool, bool]:
         """Press or release the e-stop, open or close the door, as a person at the cell would
         (`action` names a Panel method); returns (e-stop pressed, door open)."""
+        if Capability.PANEL not in self.link.capabilities:
+            raise NotOffered("this cell's controller has no operator panel")
         log.warning("operator panel: %s", action)
         try:
-            estop, door_open = self.link.between_cycles(panel.operate, action, urgent=True)
+            estop, door_open = self.link.between_cycles(operate_panel, action, urgent=True)
         except (CycleProcessError, TimeoutError) as error:
             raise ControllerFailure(f"the operator panel did not answer: {error}") from None
         # Returns once the device has seen the e-stop as it is now (the next cycle's report).

@@ -12,7 +12,6 @@ happens here.
 """
 from __future__ import annotations
 
-import contextlib
 import logging
 import queue
 import threading

@@ -1,12 +1,12 @@
 """The device server's line to its controller, on any of three clocks (DESIGN.md section 7).
 
 - "realtime": the controller and the Executor run in a cycle process of their own, stepped
-  every cycle on wall-clock deadlines (landscape.sim.clock.RealTimeClock).
+  every cycle on wall-clock deadlines (clock.RealTimeClock).
 - "fast": the same cycle process with no deadlines, cycle after cycle as fast as it goes:
   simulated time far ahead of the wall clock, for running long programs quickly; the server
   shares no interpreter with it, so both cores work.
 - "lockstep": they run in this process on a thread that steps cycle after cycle as fast as it
-  can (landscape.sim.clock.ThreadedLockStepClock): deterministic physics, simulated time far
+  can (clock.ThreadedLockStepClock): deterministic physics, simulated time far
   ahead of the wall clock, a clock a test can hold and step. For tests.
 
 `ControllerLink` offers the same surface on all three: `proxy` (the asynchronous LLI calls, served
@@ -29,35 +29,16 @@ import threading
 import time
 from typing import Any, Callable
 
+from landscape.robot.controller import Capability
 from landscape.server.config import CLOCKS, PROCESS_CLOCKS
-from landscape.server.cycle.executor import Executor
+from landscape.server.cycle.factory import build_controller
 from landscape.server.cycle.feedback import FeedbackRing, Sample
-from landscape.server.cycle.process import Mailbox
 from landscape.server.cycle.shared_array import SharedArrays
 from landscape.server.errors import ControllerFailure
 from landscape.server.link.clock import RealTimeClock, ThreadedLockStepClock
 
 log = logging.getLogger(__name__)
 FAST_SILENCE = 0.5   # s without feedback that count as a hung cycle process, fast clock
-
-
-def build_controller(cell_path: str | None, ring: FeedbackRing, mailbox: Mailbox,
-                     estop_pressed: bool = False):
-    """Factory run where the cycle runs: the simulated CS8 with the Executor as cyclic function.
-    `estop_pressed`: the cell's e-stop button is down (a latch outside the controller: a
-    controller started afresh finds it as it was left)."""
-    from landscape.sim.bullet_controller import BulletController  # pybullet: only here
-    from landscape.server.cycle.arm_dynamics import base_gravity
-    from landscape.robot.cell import load_cell
-    # What the server runs between cycles, loaded before the loop starts: an import on the
-    # loop's thread would hold a cycle up (the panel's helpers come with BulletController).
-    import landscape.sim.world_reads  # noqa: F401
-    cell = load_cell(cell_path)
-    controller = BulletController(cell, cyclic=Executor(mailbox, cell.controller.cycle_time,
-                                                        ring, cell.arm, base_gravity(cell)))
-    if estop_pressed:
-        controller.panel.press_estop()
-    return controller
 
 
 class ControllerLink:
@@ -67,15 +48,18 @@ class ControllerLink:
     on_lost(reason): once per loss, on a thread of the link's (never a gRPC thread).
     pace: lock-step only, at most this many simulated seconds per wall second (None: flat out).
     silence_cycles: cycles without feedback that count as a hung cycle process (real time).
+    backend: the controller backend (robot/backends.py) if not the cell file's.
     """
 
     def __init__(self, clock: str, cell_path: str | None, on_message: Callable[[Any], None],
                  on_lost: Callable[[str], None], pace: float | None = None,
-                 silence_cycles: int = 10):
+                 silence_cycles: int = 10, backend: str | None = None):
         if clock not in CLOCKS:
             raise ValueError(f"unknown clock {clock!r}; choose one of {', '.join(CLOCKS)}")
         self.clock_kind = clock
         self._cell_path = cell_path
+        self._backend = backend
+        self._capabilities: frozenset[Capability] | None = None
         self._on_message = on_message
         self._on_lost = on_lost
         self._pace = pace
@@ -94,7 +78,8 @@ class ControllerLink:
     def _start_clock(self):
         last = self.feedback.latest()   # the e-stop as the controller before this one left it
         factory = functools.partial(build_controller, self._cell_path, self.feedback,
-                                    estop_pressed=last is not None and last.estop)
+                                    estop_pressed=last is not None and last.estop,
+                                    backend_name=self._backend)
         if self.clock_kind in PROCESS_CLOCKS:
             return RealTimeClock(factory, on_message=self._on_message,
                                  free=self.clock_kind == "fast",
@@ -111,6 +96,13 @@ class ControllerLink:
     @property
     def proxy(self):
         return self._clock.proxy
+
+    @property
+    def capabilities(self) -> frozenset[Capability]:
+        """What the backend offers beyond the LLI (robot/controller.py), asked once."""
+        if self._capabilities is None:
+            self._capabilities = self.proxy.capabilities()
+        return self._capabilities
 
     @property
     def cycle_time(self) -> float:

@@ -12,9 +12,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from landscape.robot.controller import (Controller, DioStatus, DoutValue, EventFunc, IoctrlCode, IoId,
-                                      IoUnit, JointCmd, JointFbk, SensorInfo, State, Status)
 from landscape.robot.configurations import Config, ReversingResult
+from landscape.robot.controller import (Capability, Controller, DioStatus, DoutValue, EventFunc,
+                                        IoctrlCode, IoId, IoUnit, JointCmd, JointFbk, SensorInfo,
+                                        State, Status)
 
 if TYPE_CHECKING:
     from landscape.server.link.clock import RealTimeClock
@@ -104,6 +105,11 @@ class ControllerProxy(Controller):
                     ) -> tuple[np.ndarray | None, ReversingResult]:
         return self._call("reverse_kin", np.asarray(joints_in, dtype=float),
                           np.asarray(target, dtype=float), config, joint_range)
+
+    # -- beyond the LLI: what the backend offers (its panel and world are reached between
+    # cycles: robot/controller.py's operate_panel, read_part_states)
+    def capabilities(self) -> frozenset[Capability]:
+        return self._call("capabilities")
 
     # -- recorder
     def rec_init(self) -> Status:

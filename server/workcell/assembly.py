@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from landscape.robot.cell import Cell
+from landscape.robot.controller import Capability
 from landscape.server.device.device import Device
 from landscape.server.workcell.digital_io import DigitalIO
 from landscape.server.workcell.guarded import GuardedMotion
@@ -38,7 +39,7 @@ class Workcell:
 def build_workcell(device: Device, cell: Cell) -> Workcell:
     link, motions, state = device.link, device.motions, device.state_machine
     settings, collisions = device.settings_keeper, device.collisions
-    world = WorldParts(link, collisions)
+    world = WorldParts(link, collisions) if Capability.WORLD in link.capabilities else None
     sensors = Sensors(link, settings)
     tools = Tooling(link, motions, device.kinematics, collisions, settings, world,
                     cell.world.tools, cell.world.parts, cell.base)

@@ -19,10 +19,10 @@ import time
 import numpy as np
 import pinocchio as pin
 
+from landscape.robot.controller import read_part_states
 from landscape.server.link.clock import CycleProcessError
 from landscape.server.link.controller_link import ControllerLink
 from landscape.server.planning.collision import CollisionScene
-from landscape.sim.world_reads import read_part_states
 
 log = logging.getLogger(__name__)
 

@@ -28,8 +28,8 @@ PERIOD = 0.02       # s between two jog requests, as a pendant sends them
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path, pace=1.0)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, pace=1.0, backend=backend)
     yield a
     a.close()
 

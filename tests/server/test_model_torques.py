@@ -18,6 +18,9 @@ from landscape.v1 import (end_effector_pb2, motion_pb2, state_service_pb2, state
 
 from support import Arm
 
+# Weights, contacts and readings of the world: the pybullet backend's (tests/conftest.py).
+pytestmark = pytest.mark.physics
+
 # At rest the measured torques are the drives' static load: the model's within rounding and
 # the physics engine's constraint slack. Moving, the drives' torque is averaged over the cycle
 # (the simulated drives change speed at its start) while the model is evaluated where the cycle

@@ -21,8 +21,8 @@ STRAIGHT = types_pb2.MOTION_TYPE_STRAIGHT_MOTION
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     yield a
     a.close()
 

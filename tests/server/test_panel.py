@@ -23,8 +23,8 @@ from support import Arm, error_info, stubs, wait_until
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path, pace=1.0)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, pace=1.0, backend=backend)
     yield a
     a.close()
 

@@ -21,8 +21,8 @@ ABSOLUTE = types_pb2.OFFSET_TYPE_ABSOLUTE_DATA
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     yield a
     a.close()
 

@@ -29,8 +29,8 @@ SLOW = motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=[2.5, 0, 1.5708, 0, 1.
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path, pace=1.0)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, pace=1.0, backend=backend)
     yield a
     a.close()
 

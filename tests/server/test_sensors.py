@@ -20,6 +20,9 @@ from landscape.v1 import (control_pb2, motion_pb2, sensing_pb2, settings_pb2, st
 from support import (Arm, cell_file, error_info, locked_session, start_server, stubs,
                      wait_until)
 
+# Weights, contacts and readings of the world: the pybullet backend's (tests/conftest.py).
+pytestmark = pytest.mark.physics
+
 TABLE_TOP = 0.2
 FREE_SPOT = (0.65, 0.3)          # on the table, away from the parts and zones
 CUP_MASS = 0.6

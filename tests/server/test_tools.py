@@ -14,6 +14,9 @@ from landscape.v1 import control_pb2, motion_pb2, sensing_pb2, types_pb2
 
 from support import Arm, error_info, stubs, wait_until
 
+# Weights, contacts and readings of the world: the pybullet backend's (tests/conftest.py).
+pytestmark = pytest.mark.physics
+
 TABLE_TOP = 0.2
 PLACE_X = 0.73                      # the place zone's centre line
 PICK_BIT, PLACE_BIT = 1 << 3, 1 << 4   # part_at_pick, part_at_place (unit 1)
