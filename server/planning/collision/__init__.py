@@ -5,7 +5,8 @@
 - CollisionModel (model.py): an immutable compiled snapshot: shapes, pairs, pinocchio/coal.
 - check_motion, clearance (check.py): a sampled joint trajectory, or one configuration.
 
-Nothing here imports pybullet.
+Owns: what may touch what. Runs in: the device server and the planning process.
+May import: the robot, motion/, numpy, pinocchio and coal. Nothing here imports pybullet.
 """
 from .check import LEAVE_TOLERANCE, CheckResult, Clearance, Contact, check_motion, clearance
 from .model import DEFAULT_MARGIN, AllowedContact, CollisionModel, CollisionModelError

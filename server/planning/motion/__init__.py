@@ -8,6 +8,9 @@
   reference.
 - cartesian: straight lines and arcs of the tool tip as dense joint paths (closed-form IK).
 
+Owns: timing a joint path. Runs in: the device server and the planning process.
+May import: the robot's kinematics, numpy; toppra only as a reference, lazily.
+
 Nothing here imports toppra or scipy (toppra alone costs ~2 s to import): topp_ra carries its
 own TOPP-RA stage solver and uses the toppra library only as a test/benchmark reference.
 """
