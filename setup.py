@@ -1,21 +1,18 @@
 """Generates the landscape.v1 stubs from proto/ before packaging (stubs are never committed)."""
 from pathlib import Path
 
-from setuptools import setup
+from setuptools import find_packages, setup
 
 ROOT = Path(__file__).parent
 
 # The top-level folders of the repository are sub-packages of one import name, `landscape`.
 PACKAGE_DIR = {"landscape.v1": "gen/landscape/v1", "landscape.server": "server",
-               "landscape.client": "client", "landscape.sim": "sim", "landscape.gateway": "gateway",
+               "landscape.robot": "robot", "landscape.sim": "sim",
+               "landscape.client": "client", "landscape.gateway": "gateway",
                "landscape.supervisor": "supervisor_gui_web", "landscape.cell": "cell"}
-PACKAGES = ["landscape.v1", "landscape.server", "landscape.server.motion",
-            "landscape.server.servicers", "landscape.server.collision", "landscape.client",
-            "landscape.client.cli", "landscape.sim", "landscape.sim.cells", "landscape.gateway",
-            "landscape.supervisor", "landscape.cell", "landscape.cell.cells"]
 # Every folder holding data files is a package of its own, or setuptools warns (at length) that
 # it "would be ignored".
-PACKAGE_DATA = {"landscape.sim.cells": ["*.toml"], "landscape.cell.cells": ["*.toml"]}
+PACKAGE_DATA = {"landscape.robot.cells": ["*.toml"], "landscape.cell.cells": ["*.toml"]}
 PAGE = ROOT / "supervisor_gui_web" / "frontend" / "dist"   # the web supervisor's built page
 
 
@@ -27,6 +24,15 @@ def page_packages() -> dict[str, list[str]]:
     folders = [PAGE, *(p for p in sorted(PAGE.rglob("*")) if p.is_dir())]
     return {".".join(["landscape.supervisor", *f.relative_to(PAGE.parents[1]).parts]): ["*"]
             for f in folders}
+
+
+def packages() -> list[str]:
+    """Every folder with an __init__.py under a top-level folder, found (setuptools looks only
+    inside packages, so the page's node_modules is never walked), and the data folders."""
+    found = []
+    for name, folder in PACKAGE_DIR.items():
+        found += [name, *(f"{name}.{sub}" for sub in find_packages(where=ROOT / folder))]
+    return sorted({*found, *PACKAGE_DATA})
 
 
 def generate_stubs() -> None:
@@ -50,5 +56,5 @@ if __name__ == "__main__":
     # gen/landscape/v1 must exist before setuptools looks for it.
     generate_stubs()
     page = page_packages()
-    setup(packages=PACKAGES + list(page), package_dir=PACKAGE_DIR,
+    setup(packages=packages() + list(page), package_dir=PACKAGE_DIR,
           package_data=PACKAGE_DATA | page)

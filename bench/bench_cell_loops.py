@@ -30,22 +30,22 @@ import time
 import numpy as np
 from common import record
 
-from landscape.server.arm_dynamics import tool_payload
-from landscape.server.cycle_inputs import CycleSensors, IoMonitor
-from landscape.server.executor import Executor
-from landscape.server.run_arrays import pack_run
-from landscape.server.feedback import FeedbackRing
-from landscape.server.force_control import ComplySpec, GuardSpec
-from landscape.server.jog_control import MANUAL_TIP_SPEED, JogLimits
-from landscape.server.moves import Planner
-from landscape.server.settings import MotionSettings
-from landscape.server.targets import Frame
+from landscape.server.cycle.arm_dynamics import tool_payload
+from landscape.server.cycle.inputs import CycleSensors, IoMonitor
+from landscape.server.cycle.executor import Executor
+from landscape.server.cycle.run_arrays import pack_run
+from landscape.server.cycle.feedback import FeedbackRing
+from landscape.server.cycle.force_loops import ComplySpec, GuardSpec
+from landscape.server.cycle.jog_integrator import MANUAL_TIP_SPEED, JogLimits
+from landscape.server.planning.moves import Planner
+from landscape.server.device.motion_settings import MotionSettings
+from landscape.server.planning.targets import Frame
 from landscape.sim.bullet_controller import BulletController
-from landscape.sim.cell import load_cell
-from landscape.sim.controller import EnableState, JointFbk
-from landscape.sim.cycle_process import Mailbox
-from landscape.sim.kinematics import Kinematics
-from landscape.sim.shared_array import SharedArrays
+from landscape.robot.cell import load_cell
+from landscape.robot.controller import EnableState, JointFbk
+from landscape.server.cycle.process import Mailbox
+from landscape.robot.kinematics import Kinematics
+from landscape.server.cycle.shared_array import SharedArrays
 
 CUP = np.eye(4)
 CUP[2, 3] = 0.12
@@ -71,9 +71,8 @@ class _Nothing:
 def _controller(bare: bool):
     cell = load_cell()
     mailbox = Mailbox()
-    executor = Executor(mailbox, cell.controller.cycle_time, FeedbackRing(), cell.arm)
-    if bare:
-        executor._sensors, executor._io, executor._dynamics = _Nothing(), _Nothing(), None
+    parts = {"sensors": _Nothing(), "io": _Nothing(), "model_torques": False} if bare else {}
+    executor = Executor(mailbox, cell.controller.cycle_time, FeedbackRing(), cell.arm, **parts)
     timed = []
 
     def cyclic(ctrl):
@@ -125,13 +124,13 @@ def _figures(label: str, executor_us: np.ndarray, step_us: np.ndarray) -> None:
 def _model_torques(cycles: int) -> np.ndarray:
     cell = load_cell()
     executor = Executor(Mailbox(), cell.controller.cycle_time, None, cell.arm)
-    executor._dynamics.set_payload(tool_payload(cell.world.tools[0]))
+    executor.set_payload(tool_payload(cell.world.tools[0]))
     q = np.array(cell.controller.initial_position)
     fbk = JointFbk(q, np.full(6, 0.5), np.zeros(6), np.zeros(6))
     out = []
     for k in range(cycles):
         start = time.perf_counter()
-        executor._model_torques(fbk, q + 1e-3 * (k % 7))
+        executor.model_torques(fbk, q + 1e-3 * (k % 7))
         out.append(time.perf_counter() - start)
     return np.array(out) * 1e6
 

@@ -41,15 +41,15 @@ import pinocchio as pin
 
 from bench_planning import timed   # bench/ is on the path when a benchmark runs
 from landscape.client import Session
-from landscape.server import path_planning
+from landscape.server.planning import path_planning
 from landscape.server.app import serve
-from landscape.server.collision import CollisionScene, check_motion, clearance
+from landscape.server.planning.collision import CollisionScene, check_motion, clearance
 from landscape.server.config import ServerConfig
-from landscape.server.motion.timing import time_path
-from landscape.server.motion.trajectory import Limits
-from landscape.server.units import pose_matrix
-from landscape.sim.cell import load_cell
-from landscape.sim.kinematics import Kinematics
+from landscape.server.planning.motion.timing import time_path
+from landscape.server.planning.motion.trajectory import Limits
+from landscape.robot.units import pose_matrix
+from landscape.robot.cell import load_cell
+from landscape.robot.kinematics import Kinematics
 from landscape.v1 import control_pb2, device_service_pb2_grpc, motion_pb2, types_pb2
 
 DT = 0.004

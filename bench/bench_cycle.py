@@ -29,11 +29,11 @@ import time
 import numpy as np
 from common import record
 
-from landscape.sim.cell import load_cell
-from landscape.sim.clock import LockStepClock, RealTimeClock
-from landscape.sim.controller import EnableState
-from landscape.sim.cycle_process import CycleLoop
-from landscape.sim.cycle_stats import CycleStats, StatsRing
+from landscape.robot.cell import load_cell
+from landscape.server.link.clock import LockStepClock, RealTimeClock
+from landscape.robot.controller import EnableState
+from landscape.server.cycle.process import CycleLoop
+from landscape.server.cycle.stats import CycleStats, StatsRing
 from landscape.sim.movegen import JointMove
 
 # Joint offsets (rad) from the start pose between which the arm shuttles, and the time per move.

@@ -29,10 +29,10 @@ import grpc
 from common import BareServer, record
 from google.protobuf import wrappers_pb2
 
-from landscape.server import events
+from landscape.server.events import bus as events
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
-from landscape.server.convert import event_to_proto
+from landscape.server.api.convert import event_to_proto
 from landscape.v1 import event_service_pb2 as pb
 from landscape.v1 import event_service_pb2_grpc
 

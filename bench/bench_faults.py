@@ -39,10 +39,10 @@ from support import (HOLDER_SCRIPT, activate, locked_session, stubs,  # noqa: E4
 
 from landscape.server.app import serve  # noqa: E402
 from landscape.server.config import ServerConfig  # noqa: E402
-from landscape.server.feedback import QD, WALL  # noqa: E402
-from landscape.server.jogging import DEADMAN_TIMEOUT  # noqa: E402
-from landscape.server.states import State  # noqa: E402
-from landscape.sim.controller import EnableState  # noqa: E402
+from landscape.server.cycle.feedback import QD, WALL  # noqa: E402
+from landscape.server.workcell.jog import DEADMAN_TIMEOUT  # noqa: E402
+from landscape.server.device.states import State  # noqa: E402
+from landscape.robot.controller import EnableState  # noqa: E402
 from landscape.v1 import control_pb2, motion_pb2, sensing_pb2, types_pb2  # noqa: E402
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME

@@ -15,9 +15,9 @@ import time
 import numpy as np
 from common import record
 
-from landscape.sim.arm import VARIANTS, arm_model
-from landscape.sim.kinematics import Kinematics, ReversingResult, wrap_angle
-from landscape.sim.pinocchio_model import PinocchioModel
+from landscape.robot.arm import VARIANTS, arm_model
+from landscape.robot.kinematics import Kinematics, ReversingResult, wrap_angle
+from landscape.robot.pinocchio_model import PinocchioModel
 
 
 def best_time(fn, repeat: int = 3) -> float:

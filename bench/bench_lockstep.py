@@ -18,12 +18,14 @@ Run: .venv/bin/python bench/bench_lockstep.py [--quick]
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import sys
 import time
 from pathlib import Path
 
 import grpc
+import pybullet
 from common import record
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -34,7 +36,7 @@ from landscape.server.app import serve  # noqa: E402
 from landscape.server.config import ServerConfig  # noqa: E402
 
 from landscape.sim.bullet_controller import BulletController  # noqa: E402
-from landscape.sim.cell import load_cell  # noqa: E402
+from landscape.robot.cell import load_cell  # noqa: E402
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,  # noqa: E402
                           event_service_pb2_grpc, motion_pb2, types_pb2)
 
@@ -95,7 +97,8 @@ def pybullet_alone(cycles: int) -> tuple[float, float]:
     cell = load_cell(None)
     ctrl = BulletController(cell)
     steps = cycles * cell.controller.substeps
-    step = ctrl._drives._physics_step   # the same bound stepSimulation the drives' cycle calls
+    # the same bound stepSimulation the drives' cycle calls (sim/bullet_drives.py)
+    step = functools.partial(pybullet.stepSimulation, physicsClientId=ctrl.world.bc.client_id)
     began = time.perf_counter()
     for _ in range(steps):
         step()

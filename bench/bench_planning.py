@@ -34,13 +34,13 @@ import time
 import numpy as np
 from common import record
 
-from landscape.server.motion.cartesian import arc, straight_line, tool_pose
-from landscape.server.motion.timing import (ConstAccelProfile, chord_parameters, gridpoints,
+from landscape.server.planning.motion.cartesian import arc, straight_line, tool_pose
+from landscape.server.planning.motion.timing import (ConstAccelProfile, chord_parameters, gridpoints,
                                             time_path, tool_constraints, topp_ra, toppra_reference)
-from landscape.server.motion.trajectory import JointPath, Limits, PlanningError
-from landscape.server.units import pose_matrix
-from landscape.sim.arm import arm_model
-from landscape.sim.kinematics import Config, Kinematics, PosNeg, Shoulder
+from landscape.server.planning.motion.trajectory import JointPath, Limits, PlanningError
+from landscape.robot.units import pose_matrix
+from landscape.robot.arm import arm_model
+from landscape.robot.kinematics import Config, Kinematics, PosNeg, Shoulder
 
 DT = 0.004
 HOME = np.array([0.0, 0.3, 1.4, 0.0, 0.9, 0.0])

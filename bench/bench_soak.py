@@ -36,8 +36,8 @@ import numpy as np
 from common import in_child, record
 
 from landscape.client import AsyncSession
-from landscape.server.events import DEFAULT_HISTORY
-from landscape.server.planning_process import PROCESS_NAME
+from landscape.server.events.bus import DEFAULT_HISTORY
+from landscape.server.planning.process import PROCESS_NAME
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
                           event_service_pb2_grpc, motion_pb2, settings_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)

@@ -34,8 +34,8 @@ from google.protobuf import wrappers_pb2
 from landscape.client import AsyncSession
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
-from landscape.server.limits import DEFAULT_CAPS, Cap
-from landscape.server.states import State
+from landscape.server.api.stream_caps import DEFAULT_CAPS, Cap
+from landscape.server.device.states import State
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
                           event_service_pb2_grpc, motion_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)

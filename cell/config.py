@@ -1,12 +1,12 @@
 """The cell configuration: one TOML file for the deployment of a cell (its device servers,
 the CRCL gateway, the web supervisor, security and the launcher's policy).
 
-Each device's *world* (arm, fixtures, I/O) is a sim cell file (sim/cells/default.toml) named by
+Each device's *world* (arm, fixtures, I/O) is a cell file (robot/cells/default.toml) named by
 `world`; this file says where the device runs and how it is reached. `cells/local.toml` beside
 this module is the reference, every key commented, and the embedded default of `make run`.
 
 Relative paths are relative to the file's folder (for the embedded default: the current
-folder). The file is read into typed tables (pydantic, sim/toml_tables.py, as the world files
+folder). The file is read into typed tables (pydantic, robot/toml_tables.py, as the world files
 are) and made into the frozen dataclasses of config_model.py; unknown keys are errors, and every
 error names the file, the key and what was expected.
 """
@@ -24,8 +24,8 @@ from landscape.cell.config_model import (  # noqa: F401  (the parsed configurati
     FRONT_END_RATES, CellConfig, DeviceSpec, GatewaySpec, LauncherSpec, SecuritySpec,
     SupervisorSpec)
 from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
-from landscape.sim.cell import CellError, load_cell
-from landscape.sim.toml_tables import Table, flag, integer, number, problem, read_toml, string
+from landscape.robot.cell import CellError, load_cell
+from landscape.robot.toml_tables import Table, flag, integer, number, problem, read_toml, string
 
 DEFAULT_FILE = "cells/local.toml"
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
@@ -62,12 +62,12 @@ def _path(value, info: ValidationInfo):
 
 
 def _world(value, info: ValidationInfo):
-    """A world file's path, or the name of one shipped with the simulator (sim/cells/)."""
+    """A world file's path, or the name of one shipped with the package (robot/cells/)."""
     if isinstance(value, str) and value and "/" not in value and not value.endswith(".toml"):
         if value not in builtin_worlds():
             raise problem(f"no built-in world is named {value!r} (built-in: "
                           f"{', '.join(builtin_worlds())}; or give a file's path)")
-        with resources.as_file(resources.files("landscape.sim").joinpath(
+        with resources.as_file(resources.files("landscape.robot").joinpath(
                 f"cells/{value}.toml")) as path:
             return Path(path)
     path = _path(value, info)
@@ -166,7 +166,7 @@ class SecurityTable(Table):
             if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not rate > 0:
                 raise problem(f"expected a number above 0, got {rate!r}", f"rate_limits.{name}")
         if self.tokens is not None:
-            from landscape.server.auth import TokenFileError, TokenStore
+            from landscape.server.security.auth import TokenFileError, TokenStore
             try:
                 TokenStore.load(self.tokens)
             except TokenFileError as error:
@@ -283,7 +283,7 @@ def _client_token(token: Path | None, security: SecuritySpec, key: str,
 
 def _check_exposure(config: CellConfig) -> None:
     """The device servers' rule (server/tls.py), said here first, naming the key."""
-    from landscape.server.tls import is_loopback
+    from landscape.server.security.tls import is_loopback
     security = config.security
     for index, device in enumerate(config.devices):
         if is_loopback(device.address) or security.insecure:
@@ -323,7 +323,7 @@ def _is_wildcard(address: str) -> bool:
 
 
 def builtin_worlds() -> list[str]:
-    cells = resources.files("landscape.sim").joinpath("cells")
+    cells = resources.files("landscape.robot").joinpath("cells")
     return sorted(item.name[:-5] for item in cells.iterdir() if item.name.endswith(".toml"))
 
 

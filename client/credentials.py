@@ -160,7 +160,7 @@ class _AioBearer:
     def __init__(self, token: str):
         self._header, = bearer(token)
 
-    async def _intercept(self, continuation, details, request):
+    async def intercept(self, continuation, details, request):
         metadata = grpc.aio.Metadata(*(details.metadata or ()), self._header)
         return await continuation(details._replace(metadata=metadata), request)
 
@@ -173,19 +173,19 @@ class _AioBearer:
 
 
 class _AioBearerUnaryUnary(_AioBearer, grpc.aio.UnaryUnaryClientInterceptor):
-    intercept_unary_unary = _AioBearer._intercept
+    intercept_unary_unary = _AioBearer.intercept
 
 
 class _AioBearerUnaryStream(_AioBearer, grpc.aio.UnaryStreamClientInterceptor):
-    intercept_unary_stream = _AioBearer._intercept
+    intercept_unary_stream = _AioBearer.intercept
 
 
 class _AioBearerStreamUnary(_AioBearer, grpc.aio.StreamUnaryClientInterceptor):
-    intercept_stream_unary = _AioBearer._intercept
+    intercept_stream_unary = _AioBearer.intercept
 
 
 class _AioBearerStreamStream(_AioBearer, grpc.aio.StreamStreamClientInterceptor):
-    intercept_stream_stream = _AioBearer._intercept
+    intercept_stream_stream = _AioBearer.intercept
 
 
 class CallDetails(grpc.ClientCallDetails):

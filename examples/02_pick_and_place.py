@@ -13,7 +13,7 @@ import sys
 
 from landscape.client import Frame, Motion, NotImplementedByServer, Pose, Robot
 
-# Where things are in the default cell (sim/cells/default.toml), world frame, meters.
+# Where things are in the default cell (robot/cells/default.toml), world frame, meters.
 BLOCK = (0.5, -0.15, 0.24)       # top face of block_1 (4 cm cube on the table, top at 0.24)
 PLACE = (0.73, -0.15, 0.24)      # the same height in the place zone
 GRIPPER_LENGTH = 0.16            # mounting plate to finger tips

@@ -26,7 +26,7 @@ from landscape.gateway.server import DEFAULT_PORT, Gateway
 from landscape.gateway.session import GatewayOptions
 from landscape.gateway.status import DEFAULT_GRIPPER_STROKE
 from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
-from landscape.server.tls import is_loopback
+from landscape.server.security.tls import is_loopback
 
 
 def arguments(argv=None) -> argparse.Namespace:

@@ -16,29 +16,31 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from landscape.server import alarms, services, tls
-from landscape.server.audit import AuditLog
-from landscape.server.auth import TokenFileError, TokenStore
-from landscape.server.collision import CollisionScene
+from landscape.server.events import alarms
+from landscape.server.api import services
+from landscape.server.security import tls
+from landscape.server.security.audit import AuditLog
+from landscape.server.security.auth import TokenFileError, TokenStore
+from landscape.server.planning.collision import CollisionScene
 from landscape.server.config import SecurityConfig, ServerConfig
-from landscape.server.controller_link import ControllerLink
-from landscape.server.device import Device
-from landscape.server.events import EventBus
-from landscape.server.limits import StreamLimits
+from landscape.server.link.controller_link import ControllerLink
+from landscape.server.device.device import Device
+from landscape.server.events.bus import EventBus
+from landscape.server.api.stream_caps import StreamLimits
 from landscape.server.listen import listen_address, listen_problem
-from landscape.server.paths import PathStore
-from landscape.server.rate_limit import RateLimiter
-from landscape.server.reflection_pool import MethodResolvingPool
-from landscape.server.security import SecurityInterceptor
-from landscape.server.servicers.device import DeviceServicer
-from landscape.server.servicers.digital_io import DigitalIOServicer
-from landscape.server.servicers.events import EventServicer
-from landscape.server.servicers.guard import Dispatch
-from landscape.server.servicers.session import SessionServicer
-from landscape.server.servicers.state import StateServicer
-from landscape.server.state_stream import StateHub
-from landscape.server.workcell import Workcell, build_workcell
-from landscape.sim.cell import load_cell
+from landscape.server.planning.paths import PathStore
+from landscape.server.security.rate_limit import RateLimiter
+from landscape.server.api.reflection_pool import MethodResolvingPool
+from landscape.server.security.interceptor import SecurityInterceptor
+from landscape.server.api.servicers.device import DeviceServicer
+from landscape.server.api.servicers.digital_io import DigitalIOServicer
+from landscape.server.api.servicers.events import EventServicer
+from landscape.server.api.guard import Dispatch
+from landscape.server.api.servicers.session import SessionServicer
+from landscape.server.api.servicers.state import StateServicer
+from landscape.server.api.state_stream import StateHub
+from landscape.server.workcell.assembly import Workcell, build_workcell
+from landscape.robot.cell import load_cell
 
 log = logging.getLogger(__name__)
 
@@ -105,6 +107,7 @@ class RunningServer:
         deactivates and releases), end the streams, stop serving and the controller."""
         self.runner.run(self.health.enter_graceful_shutdown())
         self.device.close()
+        self.workcell.close()
         self.bus.close()
         self.runner.run(self.hub.aclose())
         self.runner.run(self.server.stop(grace), timeout=None)
@@ -146,7 +149,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     link = ControllerLink(config.clock, config.cell,
                           on_message=lambda msg: device and device.on_cycle_message(msg),
                           on_lost=lambda why: device and device.controller_lost(why),
-                          pace=config.lockstep_pace)
+                          pace=config.lockstep_pace, backend=config.backend)
     outputs = {signal.name for signal in cell.io.signals if signal.direction == "output"}
     paths = PathStore(config.paths_file, report=lambda severity, message: bus.alarm(
         severity, alarms.STORAGE, message))
@@ -163,6 +166,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
                                             limits))
     except BaseException:
         device.close()
+        workcell.close()
         link.stop()
         runner.run(server.stop(None))
         runner.close()

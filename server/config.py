@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from landscape.server.limits import Cap
+from landscape.server.api.stream_caps import Cap
 
 CLOCKS = ("realtime", "fast", "lockstep")   # the controller's: controller_link.py
 PROCESS_CLOCKS = ("realtime", "fast")       # those that run the cycle in a process of its own
@@ -59,6 +59,9 @@ class ServerConfig:
     # it goes, which tests can hold and step; for tests).
     cell: str | None = None
     clock: str = "realtime"
+    # The controller backend (robot/backends.py: "pybullet", "kinematic") if not the cell
+    # file's (tests run the device's contract on both).
+    backend: str | None = None
     # Lock-step only: at most this many simulated seconds per wall second (None: flat out).
     lockstep_pace: float | None = None
     # SQLite file of the named paths and the settings (None: in memory only, lost at exit).

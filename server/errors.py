@@ -83,6 +83,13 @@ def to_status(error: CommandError) -> grpc.Status:
         code=error.status.value[0], message=error.message, details=[detail]))
 
 
+class NotOffered(CommandError):
+    """What this cell's controller does not offer (an optional capability of its backend,
+    robot/controller.py: an operator panel, say)."""
+
+    status, reason = grpc.StatusCode.FAILED_PRECONDITION, "NOT_OFFERED"
+
+
 class Unimplemented(CommandError):
     """A command of the contract that this device server does not carry out yet."""
 

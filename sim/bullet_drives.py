@@ -35,7 +35,7 @@ with silenced():   # pybullet's banner
     import pybullet as pb
     from pybullet_utils.bullet_client import BulletClient
 
-from landscape.sim.controller import JointFbk, SettleState
+from landscape.robot.controller import JointFbk, SettleState
 
 SETTLE_SPEED = 1e-3            # rad/s: slower than this on every joint ...
 SETTLE_ERROR = 1e-4            # rad: ... and this close to the command is SETTLED
@@ -52,6 +52,11 @@ class _BoundClient(BulletClient):
         if name != "disconnect":   # (which also marks the client gone)
             self.__dict__[name] = attribute
         return attribute
+
+    @property
+    def client_id(self) -> int:
+        """pybullet's id of this client, for its functions called directly."""
+        return self._client
 
 
 def connect(cycle_time: float, substeps: int) -> _BoundClient:
@@ -85,7 +90,7 @@ class Drives:
         self._brake_list = (spec.brake_factor * np.array(arm.max_effort)).tolist()
 
         # The per-cycle pybullet calls, bound once to this client, arm and joints.
-        cid, body, joints = bc._client, world.arm, world.joints
+        cid, body, joints = bc.client_id, world.arm, world.joints
         self._physics_step = functools.partial(pb.stepSimulation, physicsClientId=cid)
         self._motors = functools.partial(pb.setJointMotorControlArray, body, joints,
                                          physicsClientId=cid)

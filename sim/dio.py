@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from landscape.sim.cell import IoSpec
+from landscape.robot.cell import IoSpec
 
 
 @dataclass(frozen=True)

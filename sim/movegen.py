@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from landscape.sim.controller import Controller, JointCmd
+from landscape.robot.controller import Controller, JointCmd
 
 
 def quintic(tau: float) -> tuple[float, float]:
@@ -109,7 +109,7 @@ def sample_controller(mailbox: Any = None, cell_path: str | None = None):
     None), initialised, with a `JointMove` taking its moves from `mailbox` as cyclic function.
     pybullet is imported and created where this runs (in the cycle process)."""
     from landscape.sim.bullet_controller import BulletController
-    from landscape.sim.cell import load_cell
+    from landscape.robot.cell import load_cell
 
     cell = load_cell(cell_path)
     ctrl = BulletController(cell, JointMove(cell.controller.cycle_time, mailbox))

@@ -1,24 +1,22 @@
 """What a person does in the cell: the e-stop button, the door, parts moved by hand.
 
 These inputs are not outputs anyone could write; tests and the dashboard operate them here
-(`BulletController.panel`). The e-stop acts at once: `on_estop(pressed)` lets the controller
-cut the drives in the same call, not a cycle later. The door is only an input (door_closed):
-what an open door means is the supervisor's policy.
-
-`operate` is how the device server reaches the panel of a controller in a cycle process: it
-lives here, in a module the cycle process has loaded already, so unpickling it there imports
-nothing on the loop thread.
+(`SimulatedCS8.panel`, and its operate_panel: the controller interface's PANEL capability).
+The e-stop acts at once: `on_estop(pressed)` lets the controller cut the drives in the same
+call, not a cycle later. The door is only an input (door_closed): what an open door means is
+the supervisor's policy. Parts are put down and taken away in `world` (a pybullet World; a
+cell without one has no parts to move).
 """
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Callable
 
-if TYPE_CHECKING:   # the device server imports this module (operate), never pybullet
+if TYPE_CHECKING:   # pybullet only where a world is simulated
     from landscape.sim.world import World
 
 
 class Panel:
-    def __init__(self, world: World, on_estop: Callable[[bool], None]):
+    def __init__(self, world: World | None, on_estop: Callable[[bool], None]):
         self._world = world
         self._on_estop = on_estop
         self.estop_pressed = False
@@ -46,16 +44,14 @@ class Panel:
 
     def place_part(self, name: str, xyz, rpy=(0.0, 0.0, 0.0)) -> None:
         """Put part `name` down at xyz (m), fixed-axis angles rpy (rad)."""
-        self._world.place_part(name, xyz, rpy)
+        self._in_world().place_part(name, xyz, rpy)
 
     def remove_part(self, name: str) -> None:
         """Take part `name` out of the cell (down on the floor, out of reach)."""
-        self._world.remove_part(name)
+        self._in_world().remove_part(name)
 
+    def _in_world(self) -> World:
+        if self._world is None:
+            raise RuntimeError("this cell's controller has no world to move parts in")
+        return self._world
 
-def operate(controller, action: str) -> tuple[bool, bool]:
-    """Run between two cycles: `action` names a Panel method (press_estop, open_door, ...);
-    returns (e-stop pressed, door open)."""
-    panel = controller.panel
-    getattr(panel, action)()
-    return panel.estop_pressed, not panel.door_closed

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from landscape.sim.cell import SensorSpec
+from landscape.robot.cell import SensorSpec
 from landscape.sim.tools import rotation
 from landscape.sim.world import World
 

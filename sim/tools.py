@@ -16,8 +16,8 @@ import numpy as np
 import pinocchio as pin
 import pybullet as pb
 
-from landscape.sim.cell import ToolSpec
-from landscape.sim.tool_shapes import FINGER, FINGER_FORCE, GRIPPER_BODY, PLATE_T
+from landscape.robot.cell import ToolSpec
+from landscape.robot.tool_shapes import FINGER, FINGER_FORCE, GRIPPER_BODY, PLATE_T
 
 _ARRIVED = 5e-4           # m, a finger this close to its target has arrived
 _SUCTION_REACH = 0.002    # m, a part this close to the cup face is sucked on

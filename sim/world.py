@@ -18,9 +18,9 @@ import tempfile
 import numpy as np
 import pybullet as pb
 
-from landscape.sim.arm import urdf
-from landscape.sim.cell import BoxSpec, Cell, Pose
-from landscape.sim.tool_shapes import tool_urdf
+from landscape.robot.arm import urdf
+from landscape.robot.cell import BoxSpec, Cell, Pose
+from landscape.robot.tool_shapes import tool_urdf
 from landscape.sim.tools import TOOL_CLASSES, Part, Tool, angle_between, set_sleeping
 
 _OFF_TABLE = (-1.5, 1.5)   # m, where `remove_part` puts parts down on the floor (x, y)

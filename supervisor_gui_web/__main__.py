@@ -9,7 +9,7 @@ import signal
 import socket
 
 from landscape.client import credentials
-from landscape.server.auth import TokenStore
+from landscape.server.security.auth import TokenStore
 from landscape.supervisor import app
 from landscape.supervisor.config import (DEFAULT_DISPLAY_RATE_HZ, DEFAULT_HOST, DEFAULT_PORT,
                                          DashboardConfig, parse_device)

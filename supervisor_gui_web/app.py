@@ -19,7 +19,7 @@ from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
-from landscape.server.auth import TokenStore
+from landscape.server.security.auth import TokenStore
 from landscape.supervisor import sign_in_routes
 from landscape.supervisor.config import DashboardConfig
 from landscape.supervisor.connections import HEADER_TIMEOUT_S, ConnectionGuard

@@ -61,6 +61,9 @@ class CallerChannel:
     def stream_stream(self, method: str, **options):
         return _Calls(self, method, self._channel.stream_stream(method, **options))
 
+    def remember(self, method: str, call) -> None:
+        self._last[method] = call
+
     def last_call(self, method: str):
         """The newest call of `method` ("/landscape.v1.SessionService/Connect") made through
         this view, or None."""
@@ -74,5 +77,5 @@ class _Calls:
     def __call__(self, request, *, metadata=None, **options):
         call = self._multi_callable(request, metadata=(*self._owner.metadata, *(metadata or ())),
                                     **options)
-        self._owner._last[self._method] = call
+        self._owner.remember(self._method, call)
         return call

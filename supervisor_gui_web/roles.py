@@ -9,7 +9,7 @@ rule with the person's own token; where they do not (loopback), this is the only
 """
 from __future__ import annotations
 
-from landscape.server.auth import Role, required_role
+from landscape.server.security.auth import Role, required_role
 from landscape.v1 import control_pb2
 
 OPERATE_PANEL = "landscape.v1.DeviceService/OperatePanel"

@@ -19,7 +19,7 @@ import secrets
 import time
 from dataclasses import dataclass, field
 
-from landscape.server.auth import Identity, Role, TokenStore, Unauthenticated
+from landscape.server.security.auth import Identity, Role, TokenStore, Unauthenticated
 
 log = logging.getLogger(__name__)
 

@@ -9,8 +9,15 @@ from support import make_keys, start_secured_server, start_server
 
 
 @pytest.fixture
-def server():
-    running = start_server()
+def backend() -> str:
+    """The controller backend the device servers of a test run on (tests/server runs its tests
+    on each, where physics does not matter: tests/server/conftest.py)."""
+    return "pybullet"
+
+
+@pytest.fixture
+def server(backend):
+    running = start_server(backend=backend)
     yield running
     running.stop(grace=None)
 
@@ -29,9 +36,9 @@ def keys(tmp_path_factory):
 
 
 @pytest.fixture
-def secured(keys):
+def secured(keys, backend):
     """A device server with TLS and the keys' role tokens."""
-    running = start_secured_server(keys)
+    running = start_secured_server(keys, backend=backend)
     yield running
     running.stop(grace=None)
 
@@ -40,9 +47,11 @@ def secured(keys):
 # Slow, by module: browsers; other languages and the tools `make tools` / `make clients` build;
 # cells of processes (device servers, gateways, clients of their own); the real-time cycle
 # process; physics-heavy runs (force loops, pick and place, jogs paced at real time, long
-# trajectories); fuzzing. The device contract tests run on the pybullet backend today: the
-# kinematic backend (issue 26 item 4, no physics) plugs in here, as a backend the fast lane
-# starts its servers on, and takes the physics-heavy modules off this list.
+# trajectories); fuzzing.
+# The device's contract runs on both controller backends (tests/server/conftest.py): the fast
+# lane runs it on the kinematic one (no physics: the arm follows its setpoints exactly), the
+# full one on both. A test whose assertions need physics (a weight, a contact, a settling arm)
+# is marked `physics` and runs on pybullet only, in both lanes.
 SLOW_MODULES = {
     "tests/supervisor/test_page.py", "tests/supervisor/test_page_panels.py",          # browser
     "tests/clients/test_other_languages.py", "tests/server/test_grpcurl.py",         # languages
@@ -71,8 +80,19 @@ SLOW_FIXTURES = {"realtime"}    # a real-time cycle process of the test's own
 
 
 def pytest_collection_modifyitems(config, items):
+    kept, physics_only = [], []
     for item in items:
         module, _, name = item.nodeid.partition("::")
+        backend = getattr(item, "callspec", None) and item.callspec.params.get("backend")
+        physics = item.get_closest_marker("physics") is not None
+        if backend == "kinematic" and physics:
+            physics_only.append(item)
+            continue
+        kept.append(item)
         if (module in SLOW_MODULES or f"{module}::{name.split('[')[0]}" in SLOW_TESTS
-                or SLOW_FIXTURES & set(item.fixturenames)):
+                or SLOW_FIXTURES & set(item.fixturenames)
+                or (backend == "pybullet" and not physics)):
             item.add_marker(pytest.mark.slow)
+    if physics_only:
+        config.hook.pytest_deselected(items=physics_only)
+        items[:] = kept

@@ -22,7 +22,7 @@ import pytest
 from landscape.cell.certs import CertFiles, make_certificates
 from landscape.cell.tokens import make_tokens
 from landscape.client import ClientTLS, Session, read_token
-from landscape.sim.kinematics import Kinematics
+from landscape.robot.kinematics import Kinematics
 from landscape.sim.recorder import read_recording
 from landscape.server.app import RunningServer, serve
 from landscape.server.config import SecurityConfig, ServerConfig
@@ -150,7 +150,7 @@ def assert_serving(channel) -> None:
 def cell_file(directory, replacements: dict[str, str]) -> str:
     """A copy of the default cell file with some of its text replaced; returns its path."""
     from importlib import resources
-    text = resources.files("landscape.sim").joinpath("cells/default.toml").read_text()
+    text = resources.files("landscape.robot").joinpath("cells/default.toml").read_text()
     for old, new in replacements.items():
         assert old in text, old
         text = text.replace(old, new)

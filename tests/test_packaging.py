@@ -42,7 +42,7 @@ def test_the_build_warns_of_nothing_and_packages_the_data(tmp_path):
     result = json.loads(done.stdout.strip().splitlines()[-1])
     assert result["warnings"] == [], "\n\n".join(result["warnings"])
     names = set(zipfile.ZipFile(out / result["wheel"]).namelist())
-    for folder in ("sim/cells", "cell/cells"):
+    for folder in ("robot/cells", "cell/cells"):
         for toml in (ROOT / folder).glob("*.toml"):
             assert f"landscape/{folder}/{toml.name}" in names
     if (ROOT / "supervisor_gui_web/frontend/dist/index.html").is_file():

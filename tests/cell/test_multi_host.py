@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from landscape.server.sessions import SessionRegistry
+from landscape.server.device.sessions import SessionRegistry
 
 from cell_support import make_keys
 

@@ -6,7 +6,7 @@ import asyncio
 import pytest
 
 from landscape.client import AsyncRobot, CommandTimeout, DeviceState, Frame, WrongState
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.v1 import sensing_pb2
 
 from support import start_server

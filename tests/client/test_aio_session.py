@@ -6,7 +6,7 @@ import asyncio
 import grpc
 
 from landscape.client import AsyncSession
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.v1 import control_pb2, device_service_pb2_grpc
 
 from support import wait_until

@@ -9,7 +9,7 @@ import pytest
 from landscape.client import (CommandAborted, DeviceState, Frame, NotLockHolder, Robot,
                               TagPoint, WrongState)
 from landscape.client import errors
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.v1 import control_pb2, sensing_pb2
 
 from support import start_server, wait_until

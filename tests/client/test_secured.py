@@ -9,7 +9,7 @@ import pytest
 from landscape.client import (AsyncRobot, ClientTLS, DeviceLink, Endpoint, Frame, Identity,
                               NotAllowed, Robot, open_aio_channel)
 from landscape.client.errors import TransportError
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from support import make_keys
 

@@ -11,7 +11,7 @@ import grpc
 import pytest
 
 from landscape.client import AsyncRobot, Frame, Robot, SessionEnded
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from support import start_server, wait_until
 

@@ -7,7 +7,7 @@ import subprocess
 
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from support import ROOT, installed
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from landscape.client import Robot
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from support import start_server
 

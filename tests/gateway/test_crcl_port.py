@@ -10,7 +10,7 @@ import socket
 import numpy as np
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from crcl_support import RawClient, RunningGateway, command, field, pose
 

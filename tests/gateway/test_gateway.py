@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from crcl_support import EXAMPLES, RawClient, command, field, pose, needs_examples
 

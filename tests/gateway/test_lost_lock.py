@@ -17,7 +17,7 @@ import urllib.parse
 
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from support import start_server, wait_until
 

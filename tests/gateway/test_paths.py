@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from landscape.sim.kinematics import Kinematics
+from landscape.robot.kinematics import Kinematics
 from landscape.sim.recorder import read_recording
 
 from support import cell_file, start_server

@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from support import wait_until
 

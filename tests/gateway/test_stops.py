@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 from support import bus_history, distance_to_line, wait_until
 

@@ -5,7 +5,7 @@ import threading
 
 import numpy as np
 
-from landscape.server.feedback import CMD, ENABLE, QD, SEQ, TIME, Q, FeedbackRing
+from landscape.server.cycle.feedback import CMD, ENABLE, QD, SEQ, TIME, Q, FeedbackRing
 
 
 class RowLog:

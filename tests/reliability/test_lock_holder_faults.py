@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from landscape.server.feedback import WALL
-from landscape.server.states import State
-from landscape.sim.controller import EnableState
-from landscape.sim.kinematics import Kinematics
+from landscape.server.cycle.feedback import WALL
+from landscape.server.device.states import State
+from landscape.robot.controller import EnableState
+from landscape.robot.kinematics import Kinematics
 
 from holder_child import A, B
 from reliability_support import RowLog, columns

@@ -15,7 +15,7 @@ import grpc
 import pytest
 
 from landscape.client import Session
-from landscape.server.planning_process import PROCESS_NAME
+from landscape.server.planning.process import PROCESS_NAME
 from landscape.v1 import motion_pb2, types_pb2
 
 from support import child_pids, stubs, wait_until
@@ -123,7 +123,7 @@ def _cpu_seconds(pid: int) -> float:
 
 CHILD_OF_A_THREAD = """
 import multiprocessing, os, signal, threading, time
-from landscape.sim import lifeline
+from landscape.server import lifeline
 
 def sleeper(parent):
     lifeline.bind_to_parent(parent, signal.SIGKILL)

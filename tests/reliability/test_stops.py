@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from landscape.server.states import State
-from landscape.sim import panel
-from landscape.sim.controller import EnableState
+from landscape.server.device.states import State
+from landscape.robot.controller import operate_panel
+from landscape.robot.controller import EnableState
 from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
 from reliability_support import RowLog, columns
@@ -60,7 +60,7 @@ def _stop(arm, how: str):
     if how in ("stop", "abort"):
         calls.append(arm.device.StopMotion.future(motion_pb2.StopMotionRequest(), timeout=10))
     elif how == "estop":
-        arm.link.between_cycles(panel.operate, "press_estop")
+        arm.link.between_cycles(operate_panel, "press_estop")
     else:
         arm.session.close()
     if how != "estop":
@@ -110,7 +110,7 @@ def _check_first_setpoints(arm, how, rows):
         arm.device.AbortMotion(motion_pb2.AbortMotionRequest(), timeout=10)
     log = RowLog(arm.server.link.feedback)
     if how == "estop":
-        arm.link.between_cycles(panel.operate, "release_estop")
+        arm.link.between_cycles(operate_panel, "release_estop")
         wait_until(lambda: not device.status().estop)
         arm.device.Reset(control_pb2.ResetRequest(), timeout=10)
         activate(arm.session)

@@ -9,11 +9,20 @@ import pytest
 
 from support import Arm, memory_cap
 
+BACKENDS = ("pybullet", "kinematic")
+
+
+@pytest.fixture(params=BACKENDS)
+def backend(request) -> str:
+    """The device's contract holds on every controller backend: each test of a server or an
+    arm runs on both, except those marked `physics` (pybullet only; tests/conftest.py)."""
+    return request.param
+
 
 @pytest.fixture
-def arm(tmp_path):
+def arm(tmp_path, backend):
     """An active arm on the lock-step clock (support.Arm), closed after the test."""
-    a = Arm(tmp_path)
+    a = Arm(tmp_path, backend=backend)
     yield a
     a.close()
 

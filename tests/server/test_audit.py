@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from landscape.client import Session, open_channel
-from landscape.server import alarms
+from landscape.server.events import alarms
 from landscape.server.config import SecurityConfig
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
 from support import bus_history, error_info, start_server, stubs

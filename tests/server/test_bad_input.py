@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from landscape.client import Session
-from landscape.server.path_planning import MAX_POINTS
-from landscape.server.states import State
+from landscape.server.planning.path_planning import MAX_POINTS
+from landscape.server.device.states import State
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, session_service_pb2,
                           session_service_pb2_grpc)
 from landscape.v1 import settings_pb2, types_pb2
@@ -20,8 +20,8 @@ JOINT, BASE = types_pb2.REFERENCE_FRAME_JOINT_FRAME, types_pb2.REFERENCE_FRAME_B
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     yield a
     a.close()
 
@@ -176,7 +176,7 @@ def test_strings_and_lists_beyond_their_bounds_are_refused_before_anything_happe
 
 
 def test_no_event_string_exceeds_its_bound():
-    from landscape.server.events import MAX_TEXT, EventBus, Severity
+    from landscape.server.events.bus import MAX_TEXT, EventBus, Severity
     bus = EventBus()
     event = bus.alarm(Severity.INFO, 1, "x" * 100_000, "id" * 1000)
     assert len(event.detail.message) == MAX_TEXT and event.detail.message.endswith("…")

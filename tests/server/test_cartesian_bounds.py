@@ -12,11 +12,11 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server.motion.cartesian import MAX_SAMPLES, straight_line
-from landscape.server.motion.trajectory import PlanningError
-from landscape.server.states import State
-from landscape.server.targets import MAX_ANGLE, MAX_POSITION, reach
-from landscape.server.units import pose_vector
+from landscape.server.planning.motion.cartesian import MAX_SAMPLES, straight_line
+from landscape.server.planning.motion.trajectory import PlanningError
+from landscape.server.device.states import State
+from landscape.server.planning.targets import MAX_ANGLE, MAX_POSITION, reach
+from landscape.robot.units import pose_vector
 from landscape.v1 import motion_pb2, types_pb2
 
 from support import Arm, assert_serving, error_info, memory_cap

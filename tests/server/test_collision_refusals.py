@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import grpc
-from landscape.server import path_planning
-from landscape.server.states import State
-from landscape.server.units import pose_matrix
+from landscape.server.planning import path_planning
+from landscape.server.device.states import State
+from landscape.robot.units import pose_matrix
 from landscape.v1 import digital_io_service_pb2 as io_pb
 from landscape.v1 import end_effector_pb2 as ee
 from landscape.v1 import motion_pb2, types_pb2
@@ -20,8 +20,8 @@ DOWN = (np.pi, 0.0, 0.0)
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     yield a
     a.close()
 
@@ -148,6 +148,7 @@ def _straight_to(arm, xyz):
     return arm.wait_command(reply.ret_val.command_id)
 
 
+@pytest.mark.physics   # the world: tools, parts, wired inputs, sensor readings
 def test_a_client_driving_the_arm_docks_a_rack_tool_along_its_axis_and_puts_it_back(arm):
     """Issue 11, a tool coupling at the changer: a client driving the arm itself (CRCL: MoveTo
     above the slot, MoveTo onto it, CloseToolChanger; and back) couples a tool in the rack

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from landscape.server import services
+from landscape.server.api import services
 from landscape.v1 import types_pb2
 
 # The seed's server commands (sections 3.1 to 3.8) in UpperCamelCase, the extensions a real

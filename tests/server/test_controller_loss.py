@@ -21,8 +21,8 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
-from landscape.server.controller_link import FAST_SILENCE
-from landscape.server.states import State
+from landscape.server.link.controller_link import FAST_SILENCE
+from landscape.server.device.states import State
 from landscape.v1 import control_pb2, event_service_pb2, motion_pb2, sensing_pb2, types_pb2
 
 from support import activate, bus_history, error_info, locked_session, stubs, wait_until

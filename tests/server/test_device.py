@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from landscape.client import Session
-from landscape.server.states import State
-from landscape.sim.controller import EnableState
+from landscape.server.device.states import State
+from landscape.robot.controller import EnableState
 from landscape.v1 import control_pb2, event_service_pb2, settings_pb2, types_pb2
 
 from support import (HOLDER_SCRIPT, activate, bus_history, error_info, locked_session, stubs,

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from landscape.client import Session
-from landscape.server import alarms
-from landscape.server.states import State
+from landscape.server.events import alarms
+from landscape.server.device.states import State
 from landscape.v1 import digital_io_service_pb2 as pb
 from landscape.v1 import end_effector_pb2 as ee
 
@@ -23,8 +23,8 @@ CHANGER_LOCK, GRIPPER_CLOSE, LAMP_GREEN, LAMP_RED = 1, 1 << 1, 1 << 3, 1 << 4   
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     a.io = stubs(a.session.channel)[1]
     yield a
     a.close()
@@ -88,6 +88,7 @@ def test_only_the_lock_holder_sets_and_anyone_reads(arm):
     other.close()
 
 
+@pytest.mark.physics   # the world: tools, parts, wired inputs, sensor readings
 def test_a_wired_output_acts_on_the_world_and_its_input_follows(arm):
     arm.get_tool("gripper")
     assert _get(arm, INPUTS, "input") & GRIPPER_CLOSED == 0
@@ -98,6 +99,7 @@ def test_a_wired_output_acts_on_the_world_and_its_input_follows(arm):
     assert (reply.current_ee, reply.ee_state) == ("gripper", "closed")
 
 
+@pytest.mark.physics   # the world: tools, parts, wired inputs, sensor readings
 def test_the_changer_closes_on_nothing_and_opens_only_with_its_tool_in_the_rack(arm):
     arm.io.SetDigitalIO(pb.SetDigitalIORequest(type="output", unit_id=OUTPUTS,
                                                bits_on=CHANGER_LOCK))
@@ -162,6 +164,7 @@ def _watch_from_the_next_cycle(arm, **fields) -> tuple[str, int]:
         clock.release()
 
 
+@pytest.mark.physics   # the world: tools, parts, wired inputs, sensor readings
 def test_a_watch_delivers_its_event_within_two_cycles_of_its_bits_being_set(arm):
     """Seen in the cycle after the bits were set, and delivered to the client with the
     controller at most two cycles further: the clock stands still after those cycles (the
@@ -212,6 +215,7 @@ def test_a_watch_not_satisfied_in_time_fails_with_a_timeout(arm):
     assert _cycle_of(events[-1]) - first == 25 - 1   # 100 ms of 4 ms cycles, the first counts
 
 
+@pytest.mark.physics   # the world: tools, parts, wired inputs, sensor readings
 def test_the_alarm_callback_raises_an_alarm(arm):
     command_id = _watch(arm, callback_type=pb.CALLBACK_TYPE_CLIENT_ALARM)
     _place_part_in_the_zone(arm)

@@ -14,8 +14,8 @@ import time
 import grpc
 import pytest
 
-from landscape.server import events
-from landscape.server.events import EventBus, Phase, Severity
+from landscape.server.events import bus as events
+from landscape.server.events.bus import EventBus, Phase, Severity
 from landscape.v1 import event_service_pb2 as pb
 from landscape.v1 import event_service_pb2_grpc
 

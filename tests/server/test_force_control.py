@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.force_control import (SETTLE_BAND, SETTLE_REACH, SETTLE_TIME, Admittance,
+from landscape.server.cycle.force_loops import (SETTLE_BAND, SETTLE_REACH, SETTLE_TIME, Admittance,
                                             ComplySpec, ForceSettle, GuardSpec, ThresholdMonitor)
-from landscape.server.tip_model import TipModel
-from landscape.sim.arm import arm_model
+from landscape.server.cycle.tip_model import TipModel
+from landscape.robot.arm import arm_model
 
 CUP = np.eye(4)
 CUP[2, 3] = 0.12

@@ -21,8 +21,9 @@ from google.protobuf.descriptor import FieldDescriptor as F
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from landscape.server import services, stored_settings
-from landscape.server.states import RULES, Lease, State
+from landscape.server.api import services
+from landscape.server.device import stored_settings
+from landscape.server.device.states import RULES, Lease, State
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, sensing_pb2,
                           settings_pb2, types_pb2)
 

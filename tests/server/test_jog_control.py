@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.jog_control import (MANUAL_TIP_SPEED, STALE_CYCLES, JogIntegrator,
+from landscape.server.cycle.jog_integrator import (MANUAL_TIP_SPEED, STALE_CYCLES, JogIntegrator,
                                           JogLimits)
-from landscape.server.tip_model import TipModel
-from landscape.sim.arm import arm_model
+from landscape.server.cycle.tip_model import TipModel
+from landscape.robot.arm import arm_model
 
 DT = 0.004
 ARM = arm_model()

@@ -10,13 +10,16 @@ import threading
 import numpy as np
 import pytest
 
-from landscape.server.arm_dynamics import ArmDynamics, base_gravity
-from landscape.server.feedback import Sample
-from landscape.sim.cell import load_cell
+from landscape.server.cycle.arm_dynamics import ArmDynamics, base_gravity
+from landscape.server.cycle.feedback import Sample
+from landscape.robot.cell import load_cell
 from landscape.v1 import (end_effector_pb2, motion_pb2, state_service_pb2, state_service_pb2_grpc,
                           types_pb2)
 
 from support import Arm
+
+# Weights, contacts and readings of the world: the pybullet backend's (tests/conftest.py).
+pytestmark = pytest.mark.physics
 
 # At rest the measured torques are the drives' static load: the model's within rounding and
 # the physics engine's constraint slack. Moving, the drives' torque is averaged over the cycle

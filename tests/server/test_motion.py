@@ -11,7 +11,7 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
 from support import Arm, distance_to_line, error_info, wait_until
@@ -21,8 +21,8 @@ STRAIGHT = types_pb2.MOTION_TYPE_STRAIGHT_MOTION
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     yield a
     a.close()
 

@@ -9,12 +9,12 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server.moves import Planner
-from landscape.server.settings import MAX_MOTION_SECONDS, MotionSettings
-from landscape.server.states import State
-from landscape.server.targets import Frame
-from landscape.sim.arm import arm_model
-from landscape.sim.kinematics import Kinematics
+from landscape.server.planning.moves import Planner
+from landscape.server.device.motion_settings import MAX_MOTION_SECONDS, MotionSettings
+from landscape.server.device.states import State
+from landscape.server.planning.targets import Frame
+from landscape.robot.arm import arm_model
+from landscape.robot.kinematics import Kinematics
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
 from support import error_info

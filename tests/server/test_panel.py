@@ -12,10 +12,10 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server import alarms
-from landscape.server.feedback import ENABLE, ESTOP, SEQ
-from landscape.server.states import State
-from landscape.sim.controller import EnableState
+from landscape.server.events import alarms
+from landscape.server.cycle.feedback import ENABLE, ESTOP, SEQ
+from landscape.server.device.states import State
+from landscape.robot.controller import EnableState
 from landscape.v1 import control_pb2, motion_pb2, types_pb2
 from landscape.v1 import digital_io_service_pb2 as pb
 
@@ -23,8 +23,8 @@ from support import Arm, error_info, stubs, wait_until
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path, pace=1.0)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, pace=1.0, backend=backend)
     yield a
     a.close()
 

@@ -9,9 +9,9 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server.paths import PathPoint, StoredPath
-from landscape.server.states import State
-from landscape.sim.controller import DioStatus
+from landscape.server.planning.paths import PathPoint, StoredPath
+from landscape.server.device.states import State
+from landscape.robot.controller import DioStatus
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
 from support import Arm, distance_to_line, error_info, start_server, wait_until
@@ -21,8 +21,8 @@ ABSOLUTE = types_pb2.OFFSET_TYPE_ABSOLUTE_DATA
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     yield a
     a.close()
 
@@ -171,8 +171,8 @@ def test_paths_survive_a_restart(tmp_path):
     server.device.motions.paths  # loaded (empty) at start
     try:
         arm_points = [np.array([0.2 * i, 0.1, 1.4, 0.0, 1.2, 0.0]) for i in range(4)]
-        from landscape.server.path_planning import PointSpec
-        from landscape.server.targets import Frame
+        from landscape.server.planning.path_planning import PointSpec
+        from landscape.server.planning.targets import Frame
         server.device.motions.path_load("kept", Frame.JOINT, False, False,
                                 [PointSpec(q, tag_name=f"k{i}") for i, q in enumerate(arm_points)])
     finally:

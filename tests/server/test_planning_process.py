@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 
 from landscape.server.app import serve
-from landscape.server.collision import CollisionScene
+from landscape.server.planning.collision import CollisionScene
 from landscape.server.config import ServerConfig
-from landscape.server.convert import point_specs
+from landscape.server.api.convert import point_specs
 from landscape.server.errors import Collision, Internal, ParamError
-from landscape.server.moves import Planner
-from landscape.server.planning_process import InProcessPlanning, PlanningProcess, StreamRef
-from landscape.server.settings import MotionSettings, Units
-from landscape.server.targets import Frame
-from landscape.sim.cell import load_cell
-from landscape.sim.kinematics import Kinematics
+from landscape.server.planning.moves import Planner
+from landscape.server.planning.process import InProcessPlanning, PlanningProcess, StreamRef
+from landscape.server.device.motion_settings import MotionSettings, Units
+from landscape.server.planning.targets import Frame
+from landscape.robot.cell import load_cell
+from landscape.robot.kinematics import Kinematics
 from landscape.v1 import motion_pb2, types_pb2
 
 from support import locked_session, stubs

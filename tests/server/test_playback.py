@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from landscape.server.playback import Motion
-from landscape.server.motion.timing import time_path
-from landscape.server.motion.trajectory import Limits
-from landscape.sim.arm import arm_model
+from landscape.server.cycle.playback import Motion
+from landscape.server.planning.motion.timing import time_path
+from landscape.server.planning.motion.trajectory import Limits
+from landscape.robot.arm import arm_model
 
 DT = 0.004
 TOL = 1e-6   # relative: the acceleration limits hold to rounding

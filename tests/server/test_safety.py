@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from landscape.client import Session
-from landscape.server import convert
-from landscape.server.feedback import CMD, ENABLE
-from landscape.server.sessions import Outbox
-from landscape.server.states import State
-from landscape.sim.controller import EnableState
-from landscape.sim.cycle_process import EVENT, MSG, Mailbox
+from landscape.server.api import convert
+from landscape.server.cycle.feedback import CMD, ENABLE
+from landscape.server.device.sessions import Outbox
+from landscape.server.device.states import State
+from landscape.robot.controller import EnableState
+from landscape.server.cycle.process import EVENT, MSG, Mailbox
 from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
 from support import Arm, error_info, stubs, wait_until
@@ -29,8 +29,8 @@ SLOW = motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=[2.5, 0, 1.5708, 0, 1.
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path, pace=1.0)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, pace=1.0, backend=backend)
     yield a
     a.close()
 
@@ -199,7 +199,7 @@ def test_a_resume_queued_behind_an_estop_changes_nothing(arm):
     _moving(arm)
     arm.device.StopMotion(motion_pb2.StopMotionRequest(), timeout=5)
     device = arm.server.device
-    with device._command_lock:   # the resume is admitted, then waits for its turn
+    with device.state_machine.turn:   # the resume is admitted, then waits for its turn
         resuming = arm.device.ResumeMotion.future(motion_pb2.ResumeMotionRequest(), timeout=10)
         time.sleep(0.1)
         arm.server.link.between_cycles(lambda c: c.panel.press_estop())
@@ -333,7 +333,7 @@ def test_a_sessions_outbox_is_bounded_and_overflow_is_refused():
 
 
 def test_an_outbox_high_water_mark_raises_an_alarm(arm):
-    arm.server.device._controller_event("the cycle's outbox holds over 10000 reports")
+    arm.server.device.controller_event("the cycle's outbox holds over 10000 reports")
     alarm = next(e for e in reversed(_history(arm)) if e.event_id == "alarm")
     assert alarm.detail.code == 106
 

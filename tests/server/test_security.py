@@ -18,13 +18,13 @@ from landscape.cell.certs import make_certificates
 from landscape.cell.tokens import make_tokens
 from landscape.client import (AsyncSession, ClientTLS, Session, open_aio_channel, open_channel,
                               read_token)
-from landscape.server import services
+from landscape.server.api import services
 from landscape.server.app import StartupError
-from landscape.server.auth import Role, required_role
+from landscape.server.security.auth import Role, required_role
 from landscape.server.config import SecurityConfig
-from landscape.server.limits import Cap
-from landscape.server.states import State
-from landscape.server.tls import exposure_problem
+from landscape.server.api.stream_caps import Cap
+from landscape.server.device.states import State
+from landscape.server.security.tls import exposure_problem
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, motion_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
 

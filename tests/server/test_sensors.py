@@ -11,14 +11,17 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server import alarms
-from landscape.server.feedback import SENSORS, SEQ, WALL
-from landscape.server.states import State
+from landscape.server.events import alarms
+from landscape.server.cycle.feedback import SENSORS, SEQ, WALL
+from landscape.server.device.states import State
 from landscape.v1 import (control_pb2, motion_pb2, sensing_pb2, settings_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
 
 from support import (Arm, cell_file, error_info, locked_session, start_server, stubs,
                      wait_until)
+
+# Weights, contacts and readings of the world: the pybullet backend's (tests/conftest.py).
+pytestmark = pytest.mark.physics
 
 TABLE_TOP = 0.2
 FREE_SPOT = (0.65, 0.3)          # on the table, away from the parts and zones

@@ -9,7 +9,7 @@ import pytest
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection_pb2, reflection_pb2_grpc
 
-from landscape.server import services
+from landscape.server.api import services
 from landscape.v1 import control_pb2, device_service_pb2_grpc, motion_pb2, types_pb2
 
 
@@ -63,7 +63,7 @@ def test_an_oversized_message_is_refused_and_the_server_keeps_serving(channel, s
 
 
 def test_a_client_is_its_address_not_its_connection():
-    from landscape.server.limits import client_of, peer_address
+    from landscape.server.api.stream_caps import client_of, peer_address
     assert peer_address("ipv4:10.0.0.5:51234") == "ipv4:10.0.0.5"
     assert peer_address("ipv6:[::1]:51234") == "ipv6:[::1]"
     assert peer_address("ipv6:%5B::ffff:127.0.0.1%5D:51234") == "ipv6:%5B::ffff:127.0.0.1%5D"
@@ -87,7 +87,7 @@ def test_stream_caps_are_per_client_and_never_cost_a_session():
     127.0.0.1 and ::1 are two clients."""
     from support import start_server
     from landscape.client import Session
-    from landscape.server.limits import Cap
+    from landscape.server.api.stream_caps import Cap
     if not socket.has_ipv6:
         pytest.skip("this machine has no IPv6: no second loopback address")
     server = start_server(address="localhost",

@@ -13,9 +13,9 @@ import pytest
 
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
-from landscape.server.controller_link import build_controller
-from landscape.server.feedback import FeedbackRing
-from landscape.sim.cycle_process import Mailbox
+from landscape.server.link.controller_link import build_controller
+from landscape.server.cycle.feedback import FeedbackRing
+from landscape.server.cycle.process import Mailbox
 from landscape.v1 import (settings_pb2, state_service_pb2, state_service_pb2_grpc, types_pb2)
 
 from support import locked_session, stubs
@@ -167,7 +167,7 @@ def test_a_motion_ending_while_its_sample_is_made_leaves_the_stream_alone(server
     """Found from outside: the running motion can end between two reads of it, and a stream
     whose sample read it twice ended with INTERNAL. Here every read alternates between a
     running motion and none."""
-    from landscape.server.motion_control import MotionControl, RunningMotion
+    from landscape.server.device.motion_control import MotionControl, RunningMotion
     reads = itertools.cycle([RunningMotion("PathMove-1", "PathMove", "ring", {}), None])
     monkeypatch.setattr(MotionControl, "running", property(lambda self: next(reads)))
     with grpc.insecure_channel(server.target) as channel:

@@ -6,8 +6,8 @@ import grpc
 import pytest
 from google.protobuf import message_factory
 
-from landscape.server import services
-from landscape.server.states import State
+from landscape.server.api import services
+from landscape.server.device.states import State
 from landscape.v1 import device_service_pb2_grpc, motion_pb2, settings_pb2, types_pb2
 
 from support import activate, error_info, locked_session, start_server, wait_until

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
 from support import Arm, wait_until

@@ -16,8 +16,8 @@ from pathlib import Path
 import grpc
 import pytest
 
-from landscape.server import alarms
-from landscape.server.states import State
+from landscape.server.events import alarms
+from landscape.server.device.states import State
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
 
 from support import bus_history, error_info, locked_session, start_server, stubs

@@ -7,12 +7,15 @@ import grpc
 import numpy as np
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.v1 import digital_io_service_pb2 as io_pb
 from landscape.v1 import end_effector_pb2 as ee
 from landscape.v1 import control_pb2, motion_pb2, sensing_pb2, types_pb2
 
 from support import Arm, error_info, stubs, wait_until
+
+# Weights, contacts and readings of the world: the pybullet backend's (tests/conftest.py).
+pytestmark = pytest.mark.physics
 
 TABLE_TOP = 0.2
 PLACE_X = 0.73                      # the place zone's centre line

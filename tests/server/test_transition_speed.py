@@ -16,8 +16,8 @@ DT = 0.004
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     a.device.SetSpeed(settings_pb2.SetSpeedRequest(
         speed=100, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED))
     a.device.SetAcceleration(settings_pb2.SetAccelerationRequest(

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.units import AngularUnit, LinearUnit, Units, matrix_rpy, pose_matrix
+from landscape.robot.units import AngularUnit, LinearUnit, Units, matrix_rpy, pose_matrix
 
 BOUNDARY = [math.pi, -math.pi, math.pi / 2, -math.pi / 2, 0.0, -0.0, math.pi - 1e-12,
             math.pi / 2 - 1e-11, -math.pi / 2 + 1e-7, 1.5707963, 1e-17]

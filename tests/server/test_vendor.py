@@ -12,8 +12,8 @@ from support import Arm, error_info, stubs
 
 
 @pytest.fixture
-def arm(tmp_path):
-    a = Arm(tmp_path)
+def arm(tmp_path, backend):
+    a = Arm(tmp_path, backend=backend)
     yield a
     a.close()
 
@@ -46,6 +46,7 @@ def test_the_recorder_writes_the_cycles_to_mcap(arm):
     assert len(data["fbk_pos"]) > 100 and np.ptp(data["fbk_pos"], axis=0).max() > 0.1
 
 
+@pytest.mark.physics   # the world: tools, parts, wired inputs, sensor readings
 def test_tare_zeroes_the_force_sensor(arm):
     arm.get_tool("vacuum")
     assert arm.reading()[2] > 5.0                       # the cup's weight

@@ -10,9 +10,9 @@ from collections import deque
 import numpy as np
 
 from landscape.sim.bullet_controller import BulletController
-from landscape.sim.cell import Cell, load_cell
-from landscape.sim.controller import EnableState, JointCmd
-from landscape.sim.kinematics import Config, ReversingResult
+from landscape.robot.cell import Cell, load_cell
+from landscape.robot.controller import EnableState, JointCmd
+from landscape.robot.kinematics import Config, ReversingResult
 
 DEFAULT_CELL = load_cell()
 

@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from landscape.sim.arm import VARIANTS
-from landscape.sim.cell import Pose
-from landscape.sim.controller import (CalibState, EnableState, EstopState, InitState, IoctrlCode,
+from landscape.robot.arm import VARIANTS
+from landscape.robot.cell import Pose
+from landscape.robot.controller import (CalibState, EnableState, EstopState, InitState, IoctrlCode,
                                       JointCmd, SettleState, Status)
-from landscape.sim.kinematics import Config, ReversingResult
+from landscape.robot.kinematics import Config, ReversingResult
 from landscape.sim.recorder import read_recording
 
 sys.path.insert(0, str(Path(__file__).parent))

@@ -6,10 +6,10 @@ from importlib import resources
 
 import pytest
 
-from landscape.sim.arm import VARIANTS
-from landscape.sim.cell import CellError, load_cell, parse_cell
+from landscape.robot.arm import VARIANTS
+from landscape.robot.cell import CellError, load_cell, parse_cell
 
-DEFAULT_TEXT = resources.files("landscape.sim").joinpath("cells/default.toml").read_text()
+DEFAULT_TEXT = resources.files("landscape.robot").joinpath("cells/default.toml").read_text()
 
 
 def edited(old: str, new: str) -> str:

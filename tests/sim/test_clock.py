@@ -24,12 +24,12 @@ import numpy as np
 import pytest
 
 from landscape.sim.bullet_controller import BulletController
-from landscape.sim.cell import load_cell
-from landscape.sim.clock import CycleProcessError, LockStepClock, RealTimeClock
-from landscape.sim.controller import (Controller, DioStatus, DoutValue, EnableState, InitState,
+from landscape.robot.cell import load_cell
+from landscape.server.link.clock import CycleProcessError, LockStepClock, RealTimeClock
+from landscape.robot.controller import (Controller, DioStatus, DoutValue, EnableState, InitState,
                                       IoctrlCode, IoType, JointCmd, Status)
-from landscape.sim import cycle_process
-from landscape.sim.cycle_process import check_cycle_time
+from landscape.server.cycle import process as cycle_process
+from landscape.server.cycle.process import check_cycle_time
 from landscape.sim.movegen import JointMove, sample_controller
 from landscape.sim.recorder import read_recording
 
@@ -333,7 +333,7 @@ def test_a_message_written_slowly_holds_no_cycle_up():
 PARENT_SCRIPT = textwrap.dedent("""
     import sys, time
     sys.path.insert(0, {test_dir!r})
-    from landscape.sim.clock import RealTimeClock
+    from landscape.server.link.clock import RealTimeClock
     from {module} import {factory} as factory
     if __name__ == "__main__":
         clock = RealTimeClock(factory).start()

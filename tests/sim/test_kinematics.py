@@ -10,10 +10,10 @@ import warnings
 import numpy as np
 import pytest
 
-from landscape.sim.arm import VARIANTS, ArmModel, arm_model
-from landscape.sim.kinematics import (BRANCHES, Config, Kinematics, PosNeg, ReversingResult,
+from landscape.robot.arm import VARIANTS, ArmModel, arm_model
+from landscape.robot.kinematics import (BRANCHES, Config, Kinematics, PosNeg, ReversingResult,
                                       Shoulder, wrap_angle)
-from landscape.sim.pinocchio_model import PinocchioModel
+from landscape.robot.pinocchio_model import PinocchioModel
 
 TX90 = arm_model()
 TOL_POS = 1e-12  # m: the closed form is exact to rounding
@@ -411,6 +411,6 @@ def test_pinocchio_dls_agrees_with_closed_form(kin):
 
 
 def test_module_imports_without_pinocchio():
-    code = ("import sys, landscape.sim.kinematics; "
+    code = ("import sys, landscape.robot.kinematics; "
             "sys.exit('pinocchio' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0

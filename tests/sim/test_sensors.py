@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from landscape.sim.controller import EnableState
+from landscape.robot.controller import EnableState
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bullet_helpers import (DEFAULT_CELL, controller, joints_for, matrix,  # noqa: E402

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from landscape.sim.controller import (DioStatus, DoutValue, EstopState, IoType, Status)
+from landscape.robot.controller import (DioStatus, DoutValue, EstopState, IoType, Status)
 from landscape.sim.dio import EdgeDetector
 
 sys.path.insert(0, str(Path(__file__).parent))

@@ -21,7 +21,7 @@ from dashboard_support import (CONNECT, DEVICE, PageClient, open_page, run_with_
                                signed_in_http)
 from landscape.server.app import serve
 from landscape.server.config import SecurityConfig, ServerConfig
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.supervisor import DeviceTarget
 from landscape.v1 import event_service_pb2, settings_pb2, state_service_pb2, types_pb2
 from support import start_server, wait_until
@@ -289,7 +289,7 @@ def _bodies(frame: dict) -> dict[str, dict]:
 
 def test_each_device_describes_its_own_cell(people):
     first = start_server()
-    second = start_server(cell=str(ROOT / "sim" / "cells" / "press_tending.toml"))
+    second = start_server(cell=str(ROOT / "robot" / "cells" / "press_tending.toml"))
 
     async def body(page, dashboard):
         cells = {}
@@ -350,7 +350,7 @@ def test_an_unanswered_question_times_out_on_the_device_and_the_backend_sends_no
         assert (answer["choice"], answer["timedOut"]) == ("stay", True)
         await asyncio.sleep(1.0)   # an answer the backend sent would have arrived by now
 
-    with caplog.at_level(logging.WARNING, logger="landscape.server.servicers.session"):
+    with caplog.at_level(logging.WARNING, logger="landscape.server.api.servicers.session"):
         run_with_page(server, body, people)
     late = [r.getMessage() for r in caplog.records if "no such question waits" in r.getMessage()]
     assert not late

@@ -14,7 +14,7 @@ import pytest
 
 from dashboard_support import (CONNECT, DEVICE, PageClient, open_page, origin_of, page_headers,
                                run_with_page, signed_in_http)
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.supervisor import DashboardConfig, DeviceTarget, start
 from landscape.supervisor.connections import HEADER_TIMEOUT_S
 from support import wait_until

@@ -8,7 +8,7 @@ import asyncio
 import pytest
 
 from dashboard_support import CONNECT, DEVICE, PageClient, run_with_page
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 JOG = DEVICE + "Jog"
 DEADMAN_CYCLES = 50          # the device's default deadman: 200 ms of 4 ms cycles

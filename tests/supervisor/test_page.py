@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from dashboard_support import Page
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,7 +11,7 @@ import signal
 import pytest
 
 from dashboard_support import Page, SpawnedDashboard
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import wait_until
 
 

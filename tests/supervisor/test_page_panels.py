@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from dashboard_support import DashboardThread, Page
 from landscape.client import Frame, Pose, Robot, TagPoint
 from landscape.server.config import SecurityConfig
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import start_server, wait_until
 
 HOME = [0.0, 0.0, 1.5708, 0.0, 1.5708, 0.0]

@@ -10,7 +10,7 @@ import threading
 import pytest
 
 from dashboard_support import Page
-from landscape.server.states import State
+from landscape.server.device.states import State
 
 # The page another site serves: with the operator's cookie in the same browser, it tries the
 # supervisor's WebSocket (session, lock, power, a move), fetch POSTs and a form POST.

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from landscape.server.auth import Role, TokenStore
+from landscape.server.security.auth import Role, TokenStore
 from landscape.supervisor.origins import OriginPolicy, normalize, own_origins
 from landscape.supervisor.sign_in import SignInRefused, SignIns
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import grpc
 import pytest
 
-from landscape.server.states import State
+from landscape.server.device.states import State
 from landscape.v1 import device_service_pb2_grpc
 
 from support import make_keys, start_secured_server, start_server, wait_until

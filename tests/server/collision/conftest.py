@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from landscape.server.collision import CollisionScene, check_motion
-from landscape.server.moves import Planner
-from landscape.server.settings import MotionSettings
-from landscape.server.units import pose_matrix
-from landscape.sim.cell import load_cell
-from landscape.sim.kinematics import Kinematics
+from landscape.server.planning.collision import CollisionScene, check_motion
+from landscape.server.planning.moves import Planner
+from landscape.server.device.motion_settings import MotionSettings
+from landscape.robot.units import pose_matrix
+from landscape.robot.cell import load_cell
+from landscape.robot.kinematics import Kinematics
 
 DOWN = (np.pi, 0.0, 0.0)   # flange pointing down
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from landscape.server.collision import AllowedContact, CollisionModelError, check_motion
-from landscape.server.units import pose_matrix
+from landscape.server.planning.collision import AllowedContact, CollisionModelError, check_motion
+from landscape.robot.units import pose_matrix
 
 ARM = {"link1", "link2", "link3", "link4", "link5", "link6"}
 

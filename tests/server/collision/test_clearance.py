@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from landscape.server.collision import CollisionModelError, clearance
+from landscape.server.planning.collision import CollisionModelError, clearance
 
 
 def brute_force(model, q) -> tuple[float, int]:

@@ -9,12 +9,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from landscape.server.collision import (DEFAULT_MARGIN, CollisionModelError, CollisionScene,
+from landscape.server.planning.collision import (DEFAULT_MARGIN, CollisionModelError, CollisionScene,
                                         check_motion)
-from landscape.server.collision.bounds import SphereCentres, joint_travel, lower_bounds
-from landscape.server.collision.shapes import ARM_LINKS, FLOOR
-from landscape.server.units import pose_matrix
-from landscape.sim.cell import parse_cell
+from landscape.server.planning.collision.distance_bounds import SphereCentres, joint_travel, lower_bounds
+from landscape.server.planning.collision.shapes import ARM_LINKS, FLOOR
+from landscape.robot.units import pose_matrix
+from landscape.robot.cell import parse_cell
 
 
 def test_the_default_cell_has_every_body(scene, kit):
@@ -60,7 +60,7 @@ def test_a_held_part_reaching_link5_stays_paired(scene, kit):
 
 
 def test_geometry_follows_the_link_frames_and_the_base(kit):
-    toml = resources.files("landscape.sim").joinpath("cells/default.toml").read_text()
+    toml = resources.files("landscape.robot").joinpath("cells/default.toml").read_text()
     moved = parse_cell(toml.replace("base_xyz = [0.0, 0.0, 0.0]", "base_xyz = [0.0, 0.0, 0.1]")
                        .replace("base_rpy_deg = [0.0, 0.0, 0.0]",
                                 "base_rpy_deg = [0.0, 0.0, 30.0]"))

@@ -7,8 +7,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from landscape.server.collision import CollisionScene, check_motion, clearance
-from landscape.server.units import pose_matrix
+from landscape.server.planning.collision import CollisionScene, check_motion, clearance
+from landscape.robot.units import pose_matrix
 
 MARGIN = 0.005
 DENSE_STEP = 5e-4      # rad: the brute force's largest joint step (at most ~0.6 mm of motion)

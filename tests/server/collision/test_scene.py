@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from landscape.server.collision import CollisionModelError, check_motion
-from landscape.server.units import pose_matrix
+from landscape.server.planning.collision import CollisionModelError, check_motion
+from landscape.robot.units import pose_matrix
 
 
 def test_mounting_moves_a_tool_from_its_slot_to_the_flange(scene, kit):
@@ -116,7 +116,7 @@ def test_a_model_is_a_snapshot(scene, kit):
 
 
 def test_allowed_contacts_name_known_bodies(scene):
-    from landscape.server.collision import AllowedContact
+    from landscape.server.planning.collision import AllowedContact
     with pytest.raises(CollisionModelError, match="unknown body"):
         scene.allow(AllowedContact("oops", "link6", "tabel"))
     with pytest.raises(CollisionModelError, match="no tool"):

@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.motion.cartesian import (arc, circle, joint_waypoints, slerp, straight_line,
+from landscape.server.planning.motion.cartesian import (arc, circle, joint_waypoints, slerp, straight_line,
                                                straight_path, tool_pose)
-from landscape.server.motion.timing import LIMIT_SLACK, time_path
-from landscape.server.motion.trajectory import Limits, PlanningError
-from landscape.server.units import pose_matrix, rpy_matrix
-from landscape.sim.arm import arm_model
-from landscape.sim.kinematics import Config, Kinematics, PosNeg, Shoulder
+from landscape.server.planning.motion.timing import LIMIT_SLACK, time_path
+from landscape.server.planning.motion.trajectory import Limits, PlanningError
+from landscape.robot.units import pose_matrix, rpy_matrix
+from landscape.robot.arm import arm_model
+from landscape.robot.kinematics import Config, Kinematics, PosNeg, Shoulder
 
 ARM = arm_model()
 DT = 0.004

@@ -11,11 +11,11 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.motion.timing import (LIMIT_SLACK, ConstAccelProfile, chord_parameters,
+from landscape.server.planning.motion.timing import (LIMIT_SLACK, ConstAccelProfile, chord_parameters,
                                             gridpoints, speed_caps, time_path, topp_ra,
                                             toppra_reference)
-from landscape.server.motion.trajectory import JointPath, Limits, PlanningError, Trajectory
-from landscape.sim.arm import arm_model
+from landscape.server.planning.motion.trajectory import JointPath, Limits, PlanningError, Trajectory
+from landscape.robot.arm import arm_model
 
 ARM = arm_model()
 DT = 0.004
@@ -252,9 +252,9 @@ def test_the_stage_solver_with_tool_acceleration_rows_returns_what_toppra_return
     """The one-sided rows of the tool's acceleration (an arc: tangential and centripetal
     faces), ours against toppra's on the same grid."""
     pytest.importorskip("toppra")
-    from landscape.server.motion.cartesian import arc, tool_pose
-    from landscape.server.motion.timing import tool_constraints
-    from landscape.sim.kinematics import Kinematics
+    from landscape.server.planning.motion.cartesian import arc, tool_pose
+    from landscape.server.planning.motion.timing import tool_constraints
+    from landscape.robot.kinematics import Kinematics
     kin = Kinematics(ARM)
     q0 = np.array([0.0, 0.3, 1.4, 0.0, 1.4, 0.0])
     tip = tool_pose(kin)
@@ -296,7 +296,7 @@ def test_a_waypoint_is_passed_at_its_pass_speed(fraction):
 def fine_reference(W, limits, tool_path=None, parts: int = 8) -> float:
     """The duration (s) of the TOPP-RA profile on our grid with each stage cut in `parts`: the
     fine-grid optimum the sampled trajectory is held to (our solver equals toppra's, above)."""
-    from landscape.server.motion.timing import tool_constraints
+    from landscape.server.planning.motion.timing import tool_constraints
     s, keep = chord_parameters(np.asarray(W, dtype=float))
     path = JointPath(s, np.asarray(W, dtype=float)[keep])
     grid, _ = gridpoints(path)
@@ -307,9 +307,9 @@ def fine_reference(W, limits, tool_path=None, parts: int = 8) -> float:
 
 
 def motion_kinds():
-    from landscape.server.motion.cartesian import arc, straight_line, tool_pose
-    from landscape.server.units import pose_matrix
-    from landscape.sim.kinematics import Kinematics
+    from landscape.server.planning.motion.cartesian import arc, straight_line, tool_pose
+    from landscape.robot.units import pose_matrix
+    from landscape.robot.kinematics import Kinematics
     kin = Kinematics(ARM)
     tcp = pose_matrix([0.0, 0.0, 0.15], [0.0, 0.0, 0.0])
     start = pose_matrix([0.5, -0.25, 0.55], [np.pi, 0.0, 0.0])

@@ -1,0 +1,223 @@
+"""Jog integration with its deadman, every cycle in the cycle process (seed 3.7.3, DESIGN 5).
+
+A jog session turns velocity requests into setpoints. A JOINT jog moves the joints at the
+velocities asked. A Cartesian jog (base, world or tool axes) moves the tool tip at the twist
+asked (linear m/s, angular rad/s about the tip): the tip follows a reference pose that
+advances with the twist, the joints through the tip Jacobian (pinocchio, damped near
+singularities) with a correction towards the reference (closed-loop inverse kinematics), so
+the tip keeps its line and its orientation instead of drifting.
+
+Every cycle the wanted motion is scaled down as a whole (its direction holds) to the joint jog
+speeds and to the manual-mode tip speed (ISO 10218-1: 250 mm/s); the velocity moves towards it
+within the acceleration limits, at the arm's full deceleration when stopping; and each joint
+brakes so as to stop before the end of its range.
+
+The deadman: no request for `deadman` cycles, or a request with the deadman released, brakes
+the arm to rest along its direction. Silence ends the session ("aborted", saying why); a
+released deadman only holds the arm until it is pressed again.
+
+Near obstacles (a velocity damper): the server's clearance guard (jog_guard.py) sends the
+gradient of the arm's clearance in joint space (m/rad) and the rate (m/s) at which the arm may
+still close it; every cycle a motion whose approach (-gradient . qd) exceeds that rate is
+scaled down to it, within the arm's full deceleration, while any motion that keeps or opens the
+clearance stays free. The guard's figures hold for STALE_CYCLES only: a late guard (its thread
+stalled) allows no approach at all, and with no figures of its own (far from everything, or
+none yet) the arm is held until it speaks again.
+
+Messages (executor.py routes them):
+  server -> cycle  {"op": "jog", "id", "limits": JogLimits, "tool_offset": (4, 4),
+                    "guarded": bool (a clearance guard reports every few cycles)}
+                   {"op": "jog_velocity", "frame": "joint" | "base" | "world" | "tool",
+                    "velocity": (6,) rad/s or (m/s, rad/s), "deadman": bool,
+                    "world_rotation": (3, 3) world axes in base}
+                   {"op": "jog_clearance", "gradient": (6,) m/rad or None, "rate": m/s}
+                   {"op": "jog_end"}   the client is done: brake, then "done"
+                   "stop" / "abort" end the session the same way, reporting "aborted"
+  cycle -> server  {"op": "started", "id", "wall_time"}, then "done" or "aborted" (with a
+                   "message" saying why) or "failed" (drives off), as a motion's
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from landscape.server.cycle.tip_model import TipModel, damped_solve
+
+MANUAL_TIP_SPEED = 0.25   # m/s, reduced speed for manual jogging (ISO 10218-1, 5.6)
+RANGE_MARGIN = 1e-3       # rad: jogging stops this far inside the joint range
+TRACKING = 0.2            # of the tip's distance to its reference made good per cycle
+HEADROOM = 0.98           # of the speed limits a Cartesian jog asks for: the rest corrects
+STALE_CYCLES = 10         # a clearance older than this is not trusted (the guard sends every 2)
+
+
+@dataclass(frozen=True)
+class JogLimits:
+    """(6,) arrays: velocity (rad/s, the set speed applied), acceleration (rad/s^2, the set
+    acceleration), stop_acceleration (rad/s^2, the arm's own), lower / upper (rad, the joint
+    range); (2,) cartesian_acceleration and cartesian_stop: linear m/s^2 and angular rad/s^2
+    of the tip, set and the arm's; tip_speed (m/s); deadman (cycles without a request before
+    the arm stops)."""
+
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    stop_acceleration: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    cartesian_acceleration: np.ndarray
+    cartesian_stop: np.ndarray
+    tip_speed: float
+    deadman: int
+
+
+class JogIntegrator:
+    def __init__(self, id: str, q: np.ndarray, limits: JogLimits, tip: TipModel,
+                 tool_offset: np.ndarray, dt: float, guarded: bool = False):
+        self.id, self.limits, self.tip, self.dt = id, limits, tip, dt
+        self.tool_offset = tool_offset
+        self.q = np.array(q, dtype=float)
+        self.qd = np.zeros(6)
+        self._clearance: tuple[np.ndarray, float] | None = None   # gradient (6,) m/rad, m/s
+        self._clearance_age = 0 if guarded else None   # cycles since the guard's figures
+        self.ending: tuple[str, str] | None = None   # (report, message) once it must stop
+        self._frame = "joint"
+        self._velocity = np.zeros(6)
+        self._pressed = False
+        self._world = np.eye(3)
+        self._silent = 0              # cycles since the last request
+        self._twist = np.zeros(6)     # the tip's, Cartesian jogs: m/s, rad/s in base axes
+        self._reference: np.ndarray | None = None   # where the tip should be, Cartesian jogs
+
+    def command(self, msg: dict) -> None:
+        self._silent = 0
+        self._frame = msg["frame"]
+        self._velocity = np.asarray(msg["velocity"], dtype=float)
+        self._pressed = bool(msg["deadman"])
+        self._world = np.asarray(msg.get("world_rotation", np.eye(3)), dtype=float)
+
+    def keep_clear(self, msg: dict) -> None:
+        gradient = msg["gradient"]
+        self._clearance = None if gradient is None else (
+            np.asarray(gradient, dtype=float), max(0.0, float(msg["rate"])))
+        self._clearance_age = 0
+
+    def end(self, how: str, message: str = "") -> None:
+        if self.ending is None:
+            self.ending = (how, message)
+
+    @property
+    def finished(self) -> bool:
+        return self.ending is not None and not np.any(self.qd)
+
+    def step(self) -> tuple[np.ndarray, np.ndarray]:
+        """The next setpoint (position rad, velocity rad/s)."""
+        limits, dt = self.limits, self.dt
+        self._silent += 1
+        if self._silent > limits.deadman:
+            self.end("aborted", f"deadman: no jog request for {limits.deadman * dt * 1000:g} ms;"
+                                f" the arm stopped")
+        stopping = self.ending is not None or not self._pressed
+        self.tip.set_tool(self.tool_offset)
+        if self._frame == "joint":
+            self._reference = None
+            qd = self._joint_step(stopping)
+        else:
+            qd = self._cartesian_step(stopping)
+        limited = self._within_range(self._clear_of_obstacles(qd))
+        if not np.array_equal(limited, qd):
+            self._reference = None    # a joint range or an obstacle decides: off the line
+        q = self.q + limited * dt
+        self.q, self.qd = np.clip(q, limits.lower, limits.upper), limited
+        return self.q, self.qd
+
+    def _clear_of_obstacles(self, qd: np.ndarray) -> np.ndarray:
+        """qd scaled down as a whole (its direction holds: the arm does not slide along what
+        it nears) so that its approach to the nearest obstacle is at most the rate allowed,
+        reached within the arm's full deceleration. Figures older than STALE_CYCLES allow no
+        approach; no figures from a late guard hold the arm."""
+        clearance = self._clearance
+        if self._clearance_age is not None:
+            self._clearance_age += 1
+            if self._clearance_age > STALE_CYCLES:
+                if clearance is None:
+                    return self.qd + _limited(-self.qd, self.limits.stop_acceleration * self.dt)
+                clearance = (clearance[0], 0.0)
+        if clearance is None:
+            return qd
+        gradient, rate = clearance
+        approach = -float(gradient @ qd)
+        if approach <= rate:
+            return qd
+        wanted = qd * (rate / approach)
+        return self.qd + _limited(wanted - self.qd, self.limits.stop_acceleration * self.dt)
+
+    # ---- joint jogs -------------------------------------------------------------------------
+
+    def _joint_step(self, stopping: bool) -> np.ndarray:
+        limits = self.limits
+        wanted = np.zeros(6) if stopping else self._velocity / self._scale(self._velocity)
+        accel = limits.stop_acceleration if stopping else limits.acceleration
+        return self.qd + _limited(wanted - self.qd, accel * self.dt)
+
+    # ---- Cartesian jogs ---------------------------------------------------------------------
+
+    def _cartesian_step(self, stopping: bool) -> np.ndarray:
+        limits, dt, tip = self.limits, self.dt, self.tip
+        jacobian = tip.jacobian(self.q).copy()
+        if self._reference is None:   # (re)anchored where the tip is, moving as it moves
+            self._reference = tip.forward(self.q).copy()
+            self._twist = jacobian @ self.qd
+        if stopping:
+            if not np.any(self._twist):
+                return np.zeros(6)    # at rest on the reference
+            wanted, accel = np.zeros(6), limits.cartesian_stop
+        else:
+            wanted = self._base_twist()
+            wanted = wanted / self._scale(damped_solve(jacobian, wanted), jacobian, HEADROOM)
+            accel = limits.cartesian_acceleration
+        self._twist = self._twist + _limited(wanted - self._twist, np.repeat(accel, 3) * dt)
+        reference = self._reference
+        # The tip model's last pose is the tip's now (every call above was at self.q).
+        correction = TRACKING / dt * tip.pose_error(reference)   # before it moves on
+        reference[:3, 3] += self._twist[:3] * dt
+        reference[:3, :3] = pin.exp3(self._twist[3:] * dt) @ reference[:3, :3]
+        qd = damped_solve(jacobian, self._twist + correction)
+        return qd / self._scale(qd, jacobian)   # the correction too stays within the limits
+
+    def _base_twist(self) -> np.ndarray:
+        """The request's twist in base axes."""
+        if self._frame == "world":
+            rotation = self._world
+        elif self._frame == "tool":
+            rotation = self.tip.forward(self.q)[:3, :3]
+        else:
+            rotation = np.eye(3)
+        return np.concatenate([rotation @ self._velocity[:3], rotation @ self._velocity[3:]])
+
+    # ---- limits -----------------------------------------------------------------------------
+
+    def _scale(self, qd: np.ndarray, jacobian: np.ndarray | None = None,
+               share: float = 1.0) -> float:
+        """How much a joint velocity is too fast for `share` of the joint jog speeds and of
+        the manual tip speed (1: not at all)."""
+        limits = self.limits
+        if jacobian is None:
+            jacobian = self.tip.jacobian(self.q)
+        tip_speed = float(np.linalg.norm(jacobian[:3] @ qd))
+        return max(1.0, float(np.max(np.abs(qd) / limits.velocity)) / share,
+                   tip_speed / limits.tip_speed / share)
+
+    def _within_range(self, qd: np.ndarray) -> np.ndarray:
+        """Each joint slow enough to stop before its range ends (at the arm's deceleration)."""
+        limits = self.limits
+        room = np.where(qd > 0, limits.upper - RANGE_MARGIN - self.q,
+                        self.q - (limits.lower + RANGE_MARGIN))
+        top = np.sqrt(2.0 * limits.stop_acceleration * np.maximum(room, 0.0))
+        return np.clip(qd, -top, top)
+
+
+def _limited(change: np.ndarray, most: np.ndarray) -> np.ndarray:
+    """`change` scaled down as a whole so that no component exceeds its `most` (>= 0)."""
+    excess = float(np.max(np.abs(change) / most))
+    return change / excess if excess > 1.0 else change
