@@ -26,6 +26,10 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-background-networking", "--disable-g
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 
 
+# LANDSCAPE_PAGE_DIST=<a built page> serves that build instead of the package's (to see a new
+# page test fail on an older page: build it with `npx vite build --outDir DIR`).
+PAGE_DIST = os.environ.get("LANDSCAPE_PAGE_DIST")
+
 # Who may sign in, by role: the names their tokens carry in the folder's files.
 PEOPLE = {"viewer": ("vera", "watcher", "supervisor"),
           "operator": ("olga", "operator-1", "owner-page", "watcher-page"),
@@ -153,6 +157,8 @@ class DashboardThread:
         self._thread = threading.Thread(target=self._loop.run_forever, name="dashboard", daemon=True)
         self._thread.start()
         targets = tuple(DeviceTarget(name, target) for name, target in devices.items())
+        if PAGE_DIST:
+            config.setdefault("static_dir", PAGE_DIST)
         self._running = self.run(start(DashboardConfig(
             devices=targets, port=0, sign_in_tokens=str(people.folder), **config)))
         self.url = self._running.url
@@ -232,7 +238,8 @@ class Page:
         self.sign_in(dashboard.people.token(name))
         expect(self.page.locator("#person")).to_have_text(
             f"{name} ({next(r for r, names in PEOPLE.items() if name in names)})")
-        expect(self.page.locator("#connection")).to_have_text("connected", timeout=self.TIMEOUT_MS)
+        expect(self.page.locator("#connection")).to_have_text("supervisor connected",
+                                                              timeout=self.TIMEOUT_MS)
         expect(self.page.locator("#joints .joint")).to_have_count(6, timeout=self.TIMEOUT_MS)
 
     def sign_in(self, token: str) -> None:
@@ -272,7 +279,7 @@ class Page:
         box = self.page.locator("#manual-control")
         if box.is_checked() != on:
             box.click(timeout=self.TIMEOUT_MS)
-        self.shows("st-manual", "teachpendant" if on else "off")
+        self.shows("st-manual", "teach pendant" if on else "off")
 
     def joint(self, index: int) -> str:
         return self.page.inner_text(f"#joints .joint:nth-child({index + 1}) .jvalue",
