@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import json
 import os
+import re
 import secrets
 import signal
 import subprocess
@@ -238,7 +239,8 @@ class Page:
         self.sign_in(dashboard.people.token(name))
         expect(self.page.locator("#person")).to_have_text(
             f"{name} ({next(r for r, names in PEOPLE.items() if name in names)})")
-        expect(self.page.locator("#connection")).to_have_text("supervisor connected",
+        # ("connected" alone: the older page's words, for LANDSCAPE_PAGE_DIST)
+        expect(self.page.locator("#connection")).to_have_text(re.compile("^(supervisor )?connected$"),
                                                               timeout=self.TIMEOUT_MS)
         expect(self.page.locator("#joints .joint")).to_have_count(6, timeout=self.TIMEOUT_MS)
 
@@ -280,6 +282,28 @@ class Page:
         if box.is_checked() != on:
             box.click(timeout=self.TIMEOUT_MS)
         self.shows("st-manual", "teach pendant" if on else "off")
+
+    def status(self, field: str, device: str = "arm1"):
+        """A field of a device's row in the status bar (state, lock, power, estop, alarms,
+        speed, fresh)."""
+        return self.page.locator(f".status-row[data-device='{device}'] [data-field='{field}']")
+
+    def in_view(self, locator) -> bool:
+        """Whether the element is drawn whole inside the window."""
+        box = locator.bounding_box()
+        size = self.page.viewport_size
+        return bool(box) and box["x"] >= 0 and box["y"] >= 0 and \
+            box["x"] + box["width"] <= size["width"] + 0.5 and box["y"] + box["height"] <= size["height"] + 0.5
+
+    def fold_and_scroll_to_the_end(self) -> None:
+        """Every foldable part folded, then opened again and everything scrolled to its end."""
+        self.page.evaluate("""() => {
+            document.querySelectorAll('details').forEach((d) => { d.open = false; });
+            document.querySelectorAll('details').forEach((d) => { d.open = true; });
+            for (const box of [document.scrollingElement, ...document.querySelectorAll('.panels, .log')]) {
+                box.scrollTop = box.scrollHeight;
+            }
+        }""")
 
     def joint(self, index: int) -> str:
         return self.page.inner_text(f"#joints .joint:nth-child({index + 1}) .jvalue",

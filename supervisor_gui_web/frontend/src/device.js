@@ -71,6 +71,8 @@ export class Device {
     else if (frame.rpc === FEED_EVENTS) this.event(frame);
     else if (frame.rpc.startsWith(SUPERVISOR)) this.supervisor(method, frame.reply || {});
     else if (method === 'GetCellDescription') {
+      const known = this.ctx.model.cell && !this.ctx.model.cell.refused;
+      if (frame.status && known) return;   // the device is away: the cell it gave stays drawn
       this.ctx.model.cell = frame.status ? { refused: frame.status } : frame.reply;
       if (frame.reply && this.arm.robot) this.arm.setCell(frame.reply);
       this.ctx.changed('cell');

@@ -57,9 +57,22 @@ export const frameWord = (name) => lookup(FRAMES, name, 'REFERENCE_FRAME_');
 export const manualWord = (text) => lookup(MANUAL, text, '');
 export const unitWord = (name) => UNIT_WORDS[name] || '?';
 
-// A message the device or gRPC wrote, readable: a garbled transport status said plainly.
+// gRPC's words for a device server that is not there, and what they mean.
+const ADDRESS = /(?:\d+\.){3}\d+:\d+|\[[^\]]+\]:\d+/;
+function transport(text) {
+  if (/failed to connect to all addresses/i.test(text)) {
+    const at = ADDRESS.exec(text);
+    return /Connection refused/i.test(text)
+      ? `the device server${at ? ` at ${at[0]}` : ''} refuses connections (it is not running)`
+      : 'the device server cannot be reached';
+  }
+  return /^(Socket closed|Connection reset by peer|Broken pipe)$/i.test(text) ? 'the connection to the device server closed' : '';
+}
+
+// A message the device or gRPC wrote, readable: a garbled or transport status said plainly.
 export function readable(message) {
-  return GARBLED.test(message || '') ? (message || '').replace(GARBLED, GARBLED_SAYS) : (message || '');
+  const text = message || '';
+  return transport(text) || (GARBLED.test(text) ? text.replace(GARBLED, GARBLED_SAYS) : text);
 }
 
 // A google.rpc.Status as {text, codes}: what happened in words (the server's own message
