@@ -56,8 +56,14 @@ export class EventLog {
     this.add(kind, severity, `${device} ${event.eventId.replaceAll('_', ' ')}: ${summary(event)}`, time, `#${sequence}`);
   }
 
-  addRefused(text) {
-    this.add('refused', 3, `refused: ${text}`);
+  // A refusal: what the person did and why; the machine's codes in small print.
+  addRefused(text, codes = '') {
+    const item = this.add('refused', 3, `refused: ${text}`);
+    if (!codes) return;
+    const small = document.createElement('small');
+    small.className = 'codes';
+    small.textContent = ` [${codes}]`;
+    item.lastChild.append(small);
   }
 
   // One line: its time, its number (an event's sequence), the text.
@@ -71,10 +77,13 @@ export class EventLog {
     const seq = document.createElement('span');
     seq.className = 'seq';
     seq.textContent = number;
-    item.append(when, seq, text);
+    const words = document.createElement('span');
+    words.textContent = text;
+    item.append(when, seq, words);
     item.hidden = !this.shows(item);
     this.list.prepend(item);
     while (this.list.childElementCount > MAX_ENTRIES) this.list.lastElementChild.remove();
+    return item;
   }
 
   shows(item) {

@@ -44,7 +44,11 @@ export class PathBook {
 
   async start(name, cycles) {
     const reply = await this.ctx.command('PathMove', { pathName: name, numberOfCycles: cycles });
-    if (reply && this.run?.commandId !== reply.retVal.commandId) this.follow(reply.retVal.commandId, name, cycles);
+    if (!reply) return reply;
+    // Its started event may have come first: the run is followed already, without its cycles.
+    if (this.run?.commandId === reply.retVal.commandId) this.run.cycles = cycles;
+    else this.follow(reply.retVal.commandId, name, cycles);
+    this.ctx.changed('paths');
     return reply;
   }
 

@@ -12,7 +12,9 @@ export class Refusals {
     this.log = log;
     this.box = $('refusal');
     $('btn-refusal-close').addEventListener('click', () => this.hide());
-    this.box.addEventListener('keydown', (event) => { if (event.key === 'Escape') this.hide(); });
+    document.addEventListener('keydown', (event) => {
+      if (event.key === 'Escape' && !this.box.hidden && !document.querySelector('dialog[open]')) this.hide();
+    });
   }
 
   // `what` ("SetSpeed", "Jog") of `device` was refused with google.rpc.Status `status`.
@@ -23,7 +25,7 @@ export class Refusals {
     this.box.hidden = false;
     clearTimeout(this.timer);
     this.timer = setTimeout(() => this.hide(), SHOWN_MS);
-    this.log.addRefused(`${device} ${what}: ${text} [${codes}]`);
+    this.log.addRefused(`${device} ${what}: ${text}`, codes);
   }
 
   hide() {

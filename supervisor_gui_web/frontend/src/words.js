@@ -84,9 +84,8 @@ export function explain(status) {
     codes.push(info.reason);
     if (info.metadata && info.metadata.ret_code !== undefined) codes.push(`ret_code ${info.metadata.ret_code}`);
   }
-  const word = CODE_WORDS[status.code] || 'refused';
   const message = readable(status.message);
-  return { text: message ? `${message} (${word})` : word, codes: codes.join(' ') };
+  return { text: message || CODE_WORDS[status.code] || 'refused', codes: codes.join(' ') };
 }
 
 // One line: the words, then the codes.
