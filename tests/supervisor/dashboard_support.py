@@ -228,8 +228,10 @@ class Page:
 
     TIMEOUT_MS = 30_000
 
-    def __init__(self, chromium, dashboard: DashboardThread, name: str = "olga", query: str = ""):
-        self.context = chromium.new_context(viewport={"width": 1400, "height": 1000})
+    def __init__(self, chromium, dashboard: DashboardThread, name: str = "olga", query: str = "",
+                 scale: float = 1):
+        self.context = chromium.new_context(viewport={"width": 1400, "height": 1000},
+                                            device_scale_factor=scale)
         self.page = self.context.new_page()
         self.errors: list[str] = []
         self.page.on("pageerror", lambda error: self.errors.append(str(error)))

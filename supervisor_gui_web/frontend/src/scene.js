@@ -28,6 +28,8 @@ export class CellView {
     this.software = !full && /swiftshader|llvmpipe|software/i.test(this.rendererName);
     this.minFrameMs = this.software ? 1000 / SOFTWARE_FPS : 0;
     this.lastFrame = 0;
+    this.ratio = 1;                 // the pixel ratio drawn at
+    this.onRatio = () => {};        // (it changed)
     this.arms = [];
     // What the benchmarks read: frames drawn, when the first arm was, and the frames that
     // showed an arm moved (page clock, ms).
@@ -111,10 +113,20 @@ export class CellView {
     query.addEventListener('change', () => { this.resize(); this.watchPixelRatio(); }, { once: true });
   }
 
+  // Why the view draws fewer pixels than the screen has, or '' when it does not.
+  resolutionNote() {
+    if (this.ratio >= window.devicePixelRatio) return '';
+    const rasterizer = /swiftshader|llvmpipe/i.exec(this.rendererName)?.[0] || 'a software rasterizer';
+    const why = this.software ? `software rendering (${rasterizer}), no GPU` : 'the GPU\'s largest picture';
+    return `drawn at ${Math.round(this.ratio * 100) / 100}× the screen's pixels: ${why}`;
+  }
+
   resize() {
     const { clientWidth: w, clientHeight: h } = this.canvas.parentElement;
     if (!w || !h) return;
-    this.renderer.setPixelRatio(this.pixelRatio(w, h));
+    const ratio = this.pixelRatio(w, h);
+    this.renderer.setPixelRatio(ratio);
+    if (ratio !== this.ratio) { this.ratio = ratio; this.onRatio(); }
     this.renderer.setSize(w, h, false);
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();

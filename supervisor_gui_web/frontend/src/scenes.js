@@ -28,6 +28,7 @@ export class Scenes {
       container.append(box);
       const view = new CellView(canvas);
       view.add(device.arm);
+      view.onRatio = () => this.describe(device);
       this.views.set(device, { view, box, note, stale });
       this.describe(device);
     }
@@ -45,9 +46,10 @@ export class Scenes {
 
   // What a view shows, in one line, and whether it is live.
   describe(device) {
-    const { note, stale, box } = this.views.get(device);
+    const { view, note, stale, box } = this.views.get(device);
     const model = device.ctx.model;
-    note.textContent = `${device.name}: ${describeCell(model.robotType, model.cell)}`;
+    const resolution = view.resolutionNote();
+    note.textContent = `${device.name}: ${describeCell(model.robotType, model.cell)}${resolution ? `; ${resolution}` : ''}`;
     stale.hidden = !device.fresh.stale;
     stale.textContent = device.fresh.stale ? `${device.name}: ${device.fresh.describe()}` : '';
     box.classList.toggle('stale', device.fresh.stale);
