@@ -77,7 +77,7 @@ async function main() {
   new SensorPanel(selection);
   new RecordsPanel(selection);
   new Access(selection, person);
-  const plots = new Plots();
+  const plots = window.livePlots = new Plots();   // (and for the page tests)
   selection.on((what, device) => {
     if (device === selection.device && ['sample', 'switch', 'status'].includes(what)) {
       plots.show(device.plotData, device.ctx.model.units);

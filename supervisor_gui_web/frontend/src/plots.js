@@ -3,11 +3,11 @@
 // (PlotData), gathered all the time; the plots draw the selected device's.
 import uPlot from 'uplot';
 import 'uplot/dist/uPlot.min.css';
-import { fromSI, symbol } from './units.js';
+import { fromSI, symbol, tickText } from './units.js';
 
 const WINDOW_S = 10;
 const REDRAW_HZ = 5;
-const HEIGHT = 150;
+const HEIGHT = 170;   // px, the x axis (seconds) included
 const COLORS = ['#c62828', '#2e7d32', '#1565c0', '#ef6c00', '#6a1b9a', '#00838f'];
 const JOINTS = ['J1', 'J2', 'J3', 'J4', 'J5', 'J6'];
 
@@ -15,20 +15,11 @@ const JOINTS = ['J1', 'J2', 'J3', 'J4', 'J5', 'J6'];
 // its axis shows (SI), so a still arm's flat line is not drawn as noise.
 const PLOTS = {
   joints: { labels: JOINTS, kind: 'angular', unit: (u) => symbol(u.angular), span: 0.01 },
-  velocities: { labels: JOINTS, kind: 'angular', unit: (u) => `${symbol(u.angular)}/s`, span: 0.01 },
+  velocities: { labels: JOINTS, kind: 'angular', unit: (u) => `${symbol(u.angular)}/s`, span: 0.02 },
   tip: { labels: ['x', 'y', 'z'], kind: 'linear', unit: (u) => symbol(u.linear), span: 0.001 },
   force: { labels: ['fx', 'fy', 'fz'], kind: null, unit: () => 'N', span: 1 },
   following: { labels: JOINTS, kind: 'angular', unit: (u) => symbol(u.angular), span: 1e-4 },
 };
-
-// Tick labels with as many decimals as the step between ticks needs, and no more: a step
-// of 0.25 shows 0.25, 0.5, ...; a step of 2 shows 0, 2, 4.
-export function tickText(value, step) {
-  let decimals = Math.min(6, Math.max(0, Math.ceil(-Math.log10(step) - 1e-9)));
-  if (decimals < 6 && Math.abs(step * 10 ** decimals - Math.round(step * 10 ** decimals)) > 1e-6) decimals += 1;
-  const text = value.toFixed(decimals);
-  return /^-0(\.0*)?$/.test(text) ? text.slice(1) : text;
-}
 
 // One device's series, in SI, gathered from every sample.
 export class PlotData {
@@ -73,7 +64,7 @@ class LivePlot {
     this.plot = new uPlot({
       width: 10, height: HEIGHT,
       scales: { x: { time: false }, y: { range: (u, min, max) => this.range(min, max) } },
-      axes: [{ label: 's', values: tick }, { values: tick, size: 56 }],
+      axes: [{ values: tick, size: 30 }, { values: tick, size: 60, space: 24 }],
       legend: { live: false },
       series: [{}, ...spec.labels.map((label, i) => ({ label, stroke: COLORS[i % COLORS.length], width: 1.5 }))],
     }, [[], ...spec.labels.map(() => [])], this.element);

@@ -8,6 +8,8 @@ export class RsvpDialog {
   constructor() {
     this.dialog = $('rsvp');
     this.current = null;    // {rsvpId, timer}
+    // Escape puts the question aside: it stays answerable in the alarm list until its time.
+    this.dialog.addEventListener('cancel', () => this.close());
   }
 
   // request: landscape.v1.RsvpRequest (JSON) of `device`; answer(choice, data) sends the
