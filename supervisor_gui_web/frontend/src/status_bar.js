@@ -62,7 +62,7 @@ export class StatusBar {
     button.className = 'estop';
     button.id = `estop-${device.name}`;
     button.textContent = 'E-STOP';
-    button.setAttribute('aria-label', `emergency stop ${device.name}`);
+    button.setAttribute('aria-label', `E-STOP ${device.name}: emergency stop`);
     button.addEventListener('click', () => device.ctx.command('OperatePanel', ESTOP_PRESS));
     return button;
   }
