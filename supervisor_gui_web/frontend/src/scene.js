@@ -12,6 +12,11 @@ const SOFTWARE_FPS = 15;
 const SOFTWARE_PIXEL_RATIO = 0.5;
 const MOVE_FRAMES_KEPT = 1000;
 
+function keep(times, time) {
+  times.push(time);
+  if (times.length > MOVE_FRAMES_KEPT) times.shift();
+}
+
 function rendererName(renderer) {
   const gl = renderer.getContext();
   const info = gl.getExtension('WEBGL_debug_renderer_info');
@@ -31,9 +36,9 @@ export class CellView {
     this.ratio = 1;                 // the pixel ratio drawn at
     this.onRatio = () => {};        // (it changed)
     this.arms = [];
-    // What the benchmarks read: frames drawn, when the first arm was, and the frames that
-    // showed an arm moved (page clock, ms).
-    this.stats = { frames: 0, firstArmAt: null, moveFrames: [] };
+    // What the benchmarks read: frames drawn, when the first arm was, the samples that moved
+    // an arm and the frames that showed it (page clock, ms).
+    this.stats = { frames: 0, firstArmAt: null, moveSamples: [], moveFrames: [] };
     this.moved = false;
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xe8ecef);
@@ -62,7 +67,10 @@ export class CellView {
   // none: the view's frame is the arm's world.
   add(arm, placement = null) {
     arm.requestRender = () => this.requestRender();
-    arm.onMoved = () => { this.moved = true; };
+    arm.onMoved = () => {
+      this.moved = true;
+      keep(this.stats.moveSamples, performance.now());
+    };
     if (placement) placement.decompose(arm.root.position, arm.root.quaternion, arm.root.scale);
     this.arms.push(arm);
     this.scene.add(arm.root);
@@ -93,8 +101,7 @@ export class CellView {
     if (stats.firstArmAt === null && this.arms.some((arm) => arm.robot)) stats.firstArmAt = this.lastFrame;
     if (this.moved) {
       this.moved = false;
-      stats.moveFrames.push(this.lastFrame);
-      if (stats.moveFrames.length > MOVE_FRAMES_KEPT) stats.moveFrames.shift();
+      keep(stats.moveFrames, this.lastFrame);
     }
   }
 
