@@ -10,6 +10,7 @@
 import { phaseWord } from './words.js';
 
 export const ENDED = new Set(['done', 'failed', 'aborted']);
+const RUNNING = new Set(['PHASE_STARTED', 'PHASE_RESUMED']);
 
 // A tag as its events name it (TagStruct JSON and CommandEvent spell both fields alike).
 export const tagKey = (tag) => `${tag.tagIndex || 0}:${tag.tagName}`;
@@ -53,7 +54,7 @@ export class PathBook {
   }
 
   follow(commandId, path, cycles = null) {
-    this.run = { commandId, path, phase: 'started', cycles, cycle: 1, reached: new Map() };   // tag key -> name
+    this.run = { commandId, path, phase: 'running', cycles, cycle: 1, reached: new Map() };   // tag key -> name
     if (!this.paths.has(path)) this.paths.set(path, { frame: '', motionType: '', tags: [], length: null, source: 'seen running' });
     this.ctx.changed('paths');
   }
@@ -72,7 +73,7 @@ export class PathBook {
       if (run.reached.has(key)) { run.cycle += 1; run.reached.clear(); }
       run.reached.set(key, c.tagName);
     } else {
-      run.phase = phaseWord(c.phase);
+      run.phase = RUNNING.has(c.phase) ? 'running' : phaseWord(c.phase);
     }
     this.ctx.changed('paths');
   }
