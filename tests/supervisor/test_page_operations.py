@@ -93,6 +93,13 @@ def test_the_move_form_moves_the_chosen_arm_of_two(chromium, two_arm_dashboard, 
     page.close()
 
 
+# Each plot scrolled into view (plots off screen are not drawn), then what it drew.
+SHOW_PLOTS = """async () => {
+    for (const p of window.livePlots.plots) {
+        p.element.scrollIntoView();
+        await new Promise((resolve) => setTimeout(resolve, 600));
+    }
+}"""
 PLOTS = """() => Object.fromEntries(window.livePlots.plots.map((p) => [p.name, {
     points: p.plot.data[0].length,
     ticks: p.plot.axes[1]._values,          // the y axis's labels as uPlot drew them
@@ -104,6 +111,7 @@ def test_joint_and_tool_plots_with_units_and_distinct_tick_labels(chromium, dash
     page = Page(chromium, dashboard)
     page.take_control()
     page.page.wait_for_timeout(1500)     # a second or so of a still arm: flat lines
+    page.page.evaluate(SHOW_PLOTS)
     plots = page.page.evaluate(PLOTS)
     assert set(plots) == {"joints", "velocities", "tip", "force", "following"}
     for name, plot in plots.items():
@@ -116,6 +124,7 @@ def test_joint_and_tool_plots_with_units_and_distinct_tick_labels(chromium, dash
     page.page.mouse.down()
     page.page.wait_for_timeout(800)
     page.page.mouse.up()
+    page.page.locator("#plot-velocities").scroll_into_view_if_needed()
     page.page.wait_for_timeout(600)
     moving = page.page.evaluate(PLOTS)
     assert any(abs(float(v)) > 0 for v in moving["velocities"]["ticks"] if v != "0")

@@ -69,6 +69,12 @@ class LivePlot {
       series: [{}, ...spec.labels.map((label, i) => ({ label, stroke: COLORS[i % COLORS.length], width: 1.5 }))],
     }, [[], ...spec.labels.map(() => [])], this.element);
     new ResizeObserver(() => this.plot.setSize({ width: this.element.clientWidth, height: HEIGHT })).observe(this.element);
+    this.seen = false;   // on screen: a plot scrolled away or folded is not drawn
+    this.onSeen = () => {};
+    new IntersectionObserver(([entry]) => {
+      this.seen = entry.isIntersecting;
+      if (this.seen) this.onSeen();
+    }).observe(this.element);
   }
 
   range(min, max) {
@@ -97,18 +103,26 @@ export class Plots {
   constructor() {
     this.plots = Object.entries(PLOTS).map(([name, spec]) => new LivePlot(name, spec));
     this.pending = false;
+    for (const plot of this.plots) plot.onSeen = () => { if (this.data) this.show(this.data, this.units); };
   }
 
-  // Redrawn with the device's data at most REDRAW_HZ times a second: a plot needs no more, and
-  // each redraw takes the page's main thread from the live state.
+  // Redrawn with the device's data at most REDRAW_HZ times a second, the plots on screen only,
+  // one an animation frame: a plot needs no more, and each redraw takes the page's main thread
+  // from the live state (several in one task would hold a sample back all the longer).
   show(data, units) {
     this.data = data;
     this.units = units;
     if (this.pending) return;
     this.pending = true;
-    setTimeout(() => requestAnimationFrame(() => {
-      this.pending = false;
-      for (const plot of this.plots) plot.show(this.data, this.units);
-    }), 1000 / REDRAW_HZ);
+    setTimeout(() => this.drawFrom(0), 1000 / REDRAW_HZ);
+  }
+
+  drawFrom(index) {
+    const next = this.plots.findIndex((plot, i) => i >= index && plot.seen);
+    if (next < 0) { this.pending = false; return; }
+    requestAnimationFrame(() => {
+      this.plots[next].show(this.data, this.units);
+      this.drawFrom(next + 1);
+    });
   }
 }
