@@ -78,8 +78,7 @@ export class ControlRequests {
     const words = document.createElement('span');
     words.textContent = `${text} Handing over powers the arm down and releases the lock to them (answer by ${until}). `;
     this.banner.replaceChildren(words, give, decline);
-    this.banner.hidden = false;
-    give.focus();
+    this.banner.hidden = false;   // (no focus taken: a key meant for something else must not hand over)
   }
 }
 

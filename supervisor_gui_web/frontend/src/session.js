@@ -102,14 +102,15 @@ export class DeviceSession {
     this.ctx.changed('lock');
   }
 
-  // The lock is ours from Lock's reply until GetDeviceState, having shown it locked, shows it
-  // unlocked (released, or the device's disconnect handler) or held by someone else; a read
-  // older than the lock may still arrive after its reply, and is not taken as losing it.
+  // The lock is ours from Lock's reply (or a hand-over) until GetDeviceState, having shown it
+  // ours, shows it unlocked (released, or the device's disconnect handler) or held by someone
+  // else; a read older than the lock (unlocked, or the previous holder's) may still arrive
+  // after the reply, and is not taken as losing it.
   checkLock() {
     const ctx = this.ctx;
     const status = ctx.model.status.GetDeviceState;
     if (!ctx.holdsLock || !status || status.refused) return;
-    if (status.locked) this.lockSeen = true;
+    if (status.locked && status.lockHolder === ctx.person.name) this.lockSeen = true;
     if (this.lockSeen && (!status.locked || status.lockHolder !== ctx.person.name)) {
       ctx.holdsLock = false;
       this.notice.lockTakenAway(ctx.lastStateReason);
