@@ -15,7 +15,6 @@ Prints, no pass/fail. Run: .venv/bin/python bench/bench_page.py [seconds]
 from __future__ import annotations
 
 import http.server
-import os
 import shutil
 import sys
 import tempfile
@@ -25,8 +24,8 @@ from functools import partial
 from pathlib import Path
 
 import grpc
-from bench_dashboard import CHROMIUM, CHROMIUM_ARGS, drive_tour, spawn, stop
-from common import pct, record, skipped
+from bench_dashboard import CHROMIUM, CHROMIUM_ARGS, drive_tour, no_chromium, spawn, stop
+from common import pct, record
 
 THREE = Path(__file__).resolve().parents[1] / "supervisor_gui_web" / "frontend" / "node_modules" / "three" / "build"
 LOADS = 5
@@ -129,9 +128,10 @@ def bare_client_to_motion(target: str, runs: int = CLICKS) -> list[float]:
             resting = types_pb2.DEVICE_STATE_RESTING
             while device.GetDeviceState(control_pb2.GetDeviceStateRequest()).state != resting:
                 time.sleep(0.05)
-    with grpc.insecure_channel(target) as channel:   # the session's end released the lock
+    with grpc.insecure_channel(target) as channel:   # the session's end powers down, releases
         device = device_service_pb2_grpc.DeviceServiceStub(channel)
-        while device.GetDeviceState(control_pb2.GetDeviceStateRequest()).locked:
+        unlocked = types_pb2.DEVICE_STATE_UNLOCKED
+        while device.GetDeviceState(control_pb2.GetDeviceStateRequest()).state != unlocked:
             time.sleep(0.05)
     return delays
 
@@ -158,9 +158,7 @@ def row(name: str, values: list[float], unit: str) -> str:
 
 def main() -> None:
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 10.0
-    if not os.access(CHROMIUM, os.X_OK):
-        print(f"skipped: {CHROMIUM} is absent (apt-get install -y chromium; no browser is downloaded)")
-        skipped(f"{CHROMIUM} is absent")
+    if no_chromium():
         return
     from playwright.sync_api import sync_playwright
     from landscape.cell.tokens import make_tokens
