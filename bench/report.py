@@ -44,6 +44,7 @@ BENCHES = {
     "bench_kinematics": ([], ["--poses", "200"]),
     "bench_crcl": ([], []),
     "bench_dashboard": (["8"], ["5"]),
+    "bench_page": (["8"], ["3"]),
     "bench_events": ([], ["--quick"]),
     "bench_tracking": ([], ["--quick"]),
     "bench_security": ([], ["--quick"]),

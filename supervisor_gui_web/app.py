@@ -29,11 +29,13 @@ from landscape.supervisor.http_guard import GUARD, POLICY, SIGN_INS, WS_PATH, gu
 from landscape.supervisor.origins import OriginPolicy, own_origins
 from landscape.supervisor.outbox import Outbox, TooSlow
 from landscape.supervisor.sign_in import SignIn, SignIns
+from landscape.supervisor.supervisor_calls import SupervisorCalls
 
 log = logging.getLogger(__name__)
 
 STATIC_DIR = Path(__file__).parent / "frontend" / "dist"
 LINKS = web.AppKey("links", dict)
+CALLS = web.AppKey("calls", SupervisorCalls)
 CONFIG = web.AppKey("config", DashboardConfig)
 # WebSocket close code 1013 "try again later": the page reconnects and is sent the history.
 CLOSE_TOO_SLOW = 1013
@@ -55,6 +57,7 @@ def create_app(config: DashboardConfig, origins: tuple[str, ...]) -> web.Applica
                             forward_tokens=config.token is not None,
                             idle_s=config.sign_in_idle_s, max_age_s=config.sign_in_max_age_s)
     app[GUARD] = ConnectionGuard(config.max_unauthenticated)
+    app[CALLS] = SupervisorCalls()
     app.router.add_get(WS_PATH, _websocket)
     app.router.add_get("/api/devices", _devices)
     sign_in_routes.add_routes(app)
@@ -103,10 +106,12 @@ async def _websocket(request: web.Request) -> web.WebSocketResponse:
     links = request.app[LINKS]
     sign_ins = request.app[SIGN_INS]
     outbox = Outbox()
-    console = Console(links, outbox, person)
+    calls = request.app[CALLS]
+    console = Console(links, outbox, person, calls)
     sign_ins.page_opened(person)
     for link in links.values():
         link.join(outbox)
+    calls.acks.join(outbox)
     sender = asyncio.create_task(_send(ws, outbox))
     ender = asyncio.create_task(_close_when_signed_out(ws, person))
     try:
@@ -125,6 +130,7 @@ async def _websocket(request: web.Request) -> web.WebSocketResponse:
         sign_ins.page_closed(person)
         for link in links.values():
             link.leave(outbox)
+        calls.acks.leave(outbox)
         outbox.close()
         await console.close()   # ends this page's sessions: the device's disconnect handler runs
         await sender

@@ -16,6 +16,10 @@ of a new press opens the stream; a message of a press whose stream has ended (re
 by the device's deadman, aborted, failed) or of a press older than the newest is refused and
 never reaches the device: a late or repeated message cannot start the arm again.
 
+The supervisor's own calls ("supervisor/...": alarms acknowledged, control handed over between
+people signed in here) go to supervisor_calls.py; the console tells its control desk when
+its lock starts and ends.
+
 Every call runs in its own task, so a StopMotion never waits behind an Activate in progress.
 Closing the console (the page closed or lost its connection) ends its sessions: the device's
 disconnect handler then stops, deactivates and releases, as for any client.
@@ -34,8 +38,9 @@ from landscape.supervisor.caller import CallerChannel, identity_metadata
 from landscape.supervisor.device_link import DeviceLink
 from landscape.supervisor.outbox import Outbox
 from landscape.supervisor.roles import OPERATE_PANEL, needed_role, refusal
-from landscape.supervisor.rpc_table import CONNECT, JOG, LOCK, RPCS, Rpc
+from landscape.supervisor.rpc_table import CONNECT, JOG, LOCK, RELEASE, RPCS, Rpc
 from landscape.supervisor.sign_in import SignIn
+from landscape.supervisor.supervisor_calls import CallRefused, ConsolePage, SupervisorCalls
 from landscape.client import AsyncSession
 from landscape.v1 import control_pb2, session_service_pb2, types_pb2
 
@@ -78,10 +83,13 @@ class _Stream:
 
 
 class Console:
-    def __init__(self, links: dict[str, DeviceLink], outbox: Outbox, person: SignIn):
+    def __init__(self, links: dict[str, DeviceLink], outbox: Outbox, person: SignIn,
+                 calls: SupervisorCalls):
         self.links = links
         self.outbox = outbox
         self.person = person
+        self._calls = calls
+        self._page = ConsolePage(self)   # this page, as the control desk knows it
         self._metadata = identity_metadata(person.name, person.token)
         self._sides = {name: _DeviceSide(link.caller(self._metadata))
                        for name, link in links.items()}
@@ -100,6 +108,11 @@ class Console:
             link = self.links.get(device)
             if link is None:
                 raise Refused(grpc.StatusCode.NOT_FOUND, f"no device named {device!r} here")
+            if self._calls.handles(rpc_name):
+                reply = await self._calls.call(self._page, self.person.role, link.name, rpc_name,
+                                               body.get("request"))
+                self.outbox.put(wire.note(link.name, rpc_name, reply, call_id))
+                return
             rpc = RPCS.get(rpc_name)
             if rpc is None or rpc_name in FED:
                 raise Refused(grpc.StatusCode.UNIMPLEMENTED,
@@ -111,7 +124,7 @@ class Console:
                 await self._jog(link, rpc, call_id, body)
             else:
                 await self._call(link, rpc, call_id, body)
-        except Refused as refused:
+        except (Refused, CallRefused) as refused:
             self._send(device, rpc_name, call_id, status=refused.status)
         except json_format.ParseError as error:
             self._send(device, rpc_name, call_id,
@@ -142,6 +155,8 @@ class Console:
                 await self._lock(link, side, call_id)
                 return
             reply = await invoke(request, metadata=metadata)
+            if rpc.name == RELEASE:
+                self._calls.desk.unlocked(link.name, self._page)
         elif rpc.kind == "client_stream":
             requests = [wire.parse_request(rpc.request_class, r) for r in body.get("requests", ())]
             reply = await invoke(iter(requests), metadata=metadata)
@@ -154,6 +169,7 @@ class Console:
             raise Refused(grpc.StatusCode.FAILED_PRECONDITION,
                           "open a session first: the lock belongs to a session")
         await side.session.lock()
+        self._calls.desk.locked(link.name, self._page)
         # The lease stays in the backend with the session: the page learns only that the lock
         # is its own (AsyncSession.lock returns the lease, not the server's whole reply).
         self._send(link.name, LOCK, call_id, reply=control_pb2.LockResponse(ret_val=types_pb2.RetVal()))
@@ -200,6 +216,7 @@ class Console:
                            call_id) -> None:
         async def wait_end():
             await session.ended.wait()
+            self._calls.desk.unlocked(link.name, self._page)
             code = session.end_status
             if code is None:   # closed from here: the page asked, or went away
                 self._send(link.name, CONNECT, call_id,
@@ -265,8 +282,16 @@ class Console:
             if side.jog is stream:
                 side.jog = None
 
+    # ---- what the control desk uses (supervisor_calls.ConsolePage)
+    def session_of(self, device: str) -> AsyncSession | None:
+        return self._sides[device].session
+
+    def caller_of(self, device: str) -> CallerChannel:
+        return self._sides[device].caller
+
     # ---- the page went away
     async def close(self) -> None:
+        self._calls.desk.gone(self._page)
         for side in self._sides.values():
             if side.jog is not None:
                 side.jog.queue.put_nowait(None)

@@ -76,6 +76,7 @@ def rpc_name(service: str, method: str) -> str:
 
 CONNECT = rpc_name("SessionService", "Connect")
 LOCK = rpc_name("DeviceService", "Lock")
+RELEASE = rpc_name("DeviceService", "Release")
 JOG = rpc_name("DeviceService", "Jog")
 STREAM_STATE = rpc_name("StateService", "StreamState")
 SUBSCRIBE = rpc_name("EventService", "Subscribe")

@@ -20,6 +20,10 @@ The feeds the backend keeps for every browser arrive under their own RPC names
 (StateService/StreamState, EventService/Subscribe, the read-only gets of `status_poll`, and
 DeviceService/GetCellDescription, the cell around the arm: world_feed.py).
 Nothing here is a second schema: "reply" and "status" are protobuf's own JSON mapping.
+
+Beside the contract, the supervisor's own calls among the people signed in to it (alarms
+acknowledged, control handed over: supervisor_calls.py) use the same frames under names
+"supervisor/<Name>", with plain JSON objects as their "request" and "reply" (`note`).
 """
 from __future__ import annotations
 
@@ -70,6 +74,14 @@ def frame(device: str, rpc: str, *, reply: Message | None = None,
     if status is not None:
         body["status"] = message_dict(status)
     return json.dumps(body, separators=(",", ":"))
+
+
+def note(device: str, rpc: str, body: dict, call_id: int | None = None) -> str:
+    """A frame of the supervisor's own ("supervisor/<Name>"), its reply a plain JSON object."""
+    frame_body: dict = {"device": device, "rpc": rpc, "reply": body}
+    if call_id is not None:
+        frame_body["id"] = call_id
+    return json.dumps(frame_body, separators=(",", ":"))
 
 
 def parse_request(message_class: type[Message], body: dict | None) -> Message:

@@ -16,7 +16,12 @@ from support import start_server
 # so), and the tests that start the backend skip, naming what is missing.
 PAGE = Path(__file__).resolve().parents[2] / "supervisor_gui_web" / "frontend" / "dist"
 NEED_THE_PAGE = {"test_backend.py", "test_page.py", "test_page_panels.py", "test_http_guard.py",
-                 "test_page_trust.py", "test_jog_press.py", "test_page_lost.py"}
+                 "test_page_trust.py", "test_jog_press.py", "test_page_lost.py",
+                 "test_page_status.py", "test_page_words.py", "test_page_layout.py",
+                 "test_page_operations.py", "test_page_a11y.py", "test_page_cell.py",
+                 "test_handover.py", "test_page_alarms.py",
+                 "test_supervisor_calls.py"}
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def pytest_collection_modifyitems(items):
@@ -34,6 +39,25 @@ def cell_server():
     running = start_server(lockstep_pace=1.0)
     yield running
     running.stop(grace=None)
+
+
+@pytest.fixture
+def two_arm_servers():
+    """A cell of two arms: two device servers on the lock-step clock at the pace of real time,
+    the second in the press-tending world (a TX90L)."""
+    first = start_server(lockstep_pace=1.0)
+    second = start_server(lockstep_pace=1.0, cell=str(ROOT / "sim" / "cells" / "press_tending.toml"))
+    yield first, second
+    first.stop(grace=None)
+    second.stop(grace=None)
+
+
+@pytest.fixture
+def two_arm_dashboard(two_arm_servers, people):
+    first, second = two_arm_servers
+    running = DashboardThread({"arm1": first.target, "arm2": second.target}, people)
+    yield running
+    running.stop()
 
 
 @pytest.fixture(scope="session")

@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import json
 import os
+import re
 import secrets
 import signal
 import subprocess
@@ -25,6 +26,10 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-background-networking", "--disable-gpu",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 
+
+# LANDSCAPE_PAGE_DIST=<a built page> serves that build instead of the package's (to see a new
+# page test fail on an older page: build it with `npx vite build --outDir DIR`).
+PAGE_DIST = os.environ.get("LANDSCAPE_PAGE_DIST")
 
 # Who may sign in, by role: the names their tokens carry in the folder's files.
 PEOPLE = {"viewer": ("vera", "watcher", "supervisor"),
@@ -153,6 +158,8 @@ class DashboardThread:
         self._thread = threading.Thread(target=self._loop.run_forever, name="dashboard", daemon=True)
         self._thread.start()
         targets = tuple(DeviceTarget(name, target) for name, target in devices.items())
+        if PAGE_DIST:
+            config.setdefault("static_dir", PAGE_DIST)
         self._running = self.run(start(DashboardConfig(
             devices=targets, port=0, sign_in_tokens=str(people.folder), **config)))
         self.url = self._running.url
@@ -221,8 +228,10 @@ class Page:
 
     TIMEOUT_MS = 30_000
 
-    def __init__(self, chromium, dashboard: DashboardThread, name: str = "olga", query: str = ""):
-        self.context = chromium.new_context(viewport={"width": 1400, "height": 1000})
+    def __init__(self, chromium, dashboard: DashboardThread, name: str = "olga", query: str = "",
+                 scale: float = 1):
+        self.context = chromium.new_context(viewport={"width": 1400, "height": 1000},
+                                            device_scale_factor=scale)
         self.page = self.context.new_page()
         self.errors: list[str] = []
         self.page.on("pageerror", lambda error: self.errors.append(str(error)))
@@ -232,7 +241,9 @@ class Page:
         self.sign_in(dashboard.people.token(name))
         expect(self.page.locator("#person")).to_have_text(
             f"{name} ({next(r for r, names in PEOPLE.items() if name in names)})")
-        expect(self.page.locator("#connection")).to_have_text("connected", timeout=self.TIMEOUT_MS)
+        # ("connected" alone: the older page's words, for LANDSCAPE_PAGE_DIST)
+        expect(self.page.locator("#connection")).to_have_text(re.compile("^(supervisor )?connected$"),
+                                                              timeout=self.TIMEOUT_MS)
         expect(self.page.locator("#joints .joint")).to_have_count(6, timeout=self.TIMEOUT_MS)
 
     def sign_in(self, token: str) -> None:
@@ -272,7 +283,29 @@ class Page:
         box = self.page.locator("#manual-control")
         if box.is_checked() != on:
             box.click(timeout=self.TIMEOUT_MS)
-        self.shows("st-manual", "teachpendant" if on else "off")
+        self.shows("st-manual", "teach pendant" if on else "off")
+
+    def status(self, field: str, device: str = "arm1"):
+        """A field of a device's row in the status bar (state, lock, power, estop, alarms,
+        speed, fresh)."""
+        return self.page.locator(f".status-row[data-device='{device}'] [data-field='{field}']")
+
+    def in_view(self, locator) -> bool:
+        """Whether the element is drawn whole inside the window."""
+        box = locator.bounding_box()
+        size = self.page.viewport_size
+        return bool(box) and box["x"] >= 0 and box["y"] >= 0 and \
+            box["x"] + box["width"] <= size["width"] + 0.5 and box["y"] + box["height"] <= size["height"] + 0.5
+
+    def fold_and_scroll_to_the_end(self) -> None:
+        """Every foldable part folded, then opened again and everything scrolled to its end."""
+        self.page.evaluate("""() => {
+            document.querySelectorAll('details').forEach((d) => { d.open = false; });
+            document.querySelectorAll('details').forEach((d) => { d.open = true; });
+            for (const box of [document.scrollingElement, ...document.querySelectorAll('.panels, .log')]) {
+                box.scrollTop = box.scrollHeight;
+            }
+        }""")
 
     def joint(self, index: int) -> str:
         return self.page.inner_text(f"#joints .joint:nth-child({index + 1}) .jvalue",

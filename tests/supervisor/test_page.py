@@ -37,14 +37,15 @@ def test_lock_and_activate_through_the_buttons(chromium, dashboard, cell_server)
     page.shows("st-lock", "operator-1")
     page.shows("role", "commanding")
     page.log_has("activated")
-    page.shows("scene-note", "TX90 in cell “default”")   # the world from the device
+    page.expect(page.page.locator(".cell-view[data-device=arm1] .scene-note")).to_contain_text(
+        "TX90 in cell “default”")   # the world from the device
     page.close()
 
 
 def test_path_run_reaches_every_tag_in_the_log(chromium, dashboard, cell_server):
     page = Page(chromium, dashboard, query="?render=full")   # a sharp picture for the README
     page.take_control()
-    page.page.fill("#speed", "30")
+    page.page.fill("#speed-typed", "30")
     page.click("btn-speed")
     page.shows("st-speed", "30 %")
     page.page.fill("#path-name", "tour")
@@ -72,7 +73,7 @@ def test_path_run_reaches_every_tag_in_the_log(chromium, dashboard, cell_server)
 def test_estop_release_asks_the_lock_holder_and_the_dialog_answers(chromium, dashboard, cell_server):
     page = Page(chromium, dashboard)
     page.take_control()
-    page.click("btn-estop-press")
+    page.click("estop-arm1")
     page.shows("st-state", "error")
     page.shows("st-estop", "PRESSED")
     page.click("btn-estop-release")
@@ -92,14 +93,15 @@ def test_estop_release_asks_the_lock_holder_and_the_dialog_answers(chromium, das
 def test_a_refused_command_shows_the_servers_code_and_message(chromium, dashboard, cell_server):
     page = Page(chromium, dashboard)
     page.take_control()
-    page.page.fill("#speed", "250")   # out of range: the server judges, not the page
+    page.page.fill("#speed-typed", "250")   # out of range: the server judges, not the page
     page.click("btn-speed")
     page.shows("refusal", "SetSpeed")
     refusal = page.text("refusal")
     assert "OUT_OF_RANGE PARAM_OUT_OF_RANGE ret_code -3" in refusal
-    page.log_has("refused: SetSpeed")
+    page.log_has("refused: arm1 SetSpeed")
     page.click("btn-release")   # Resting: Release is valid in Inactive only
-    page.shows("refusal", "Release — FAILED_PRECONDITION WRONG_STATE ret_code -1")
+    page.shows("refusal-text", "arm1: Release refused: Release is not valid in state resting")
+    page.shows("refusal-codes", "FAILED_PRECONDITION WRONG_STATE ret_code -1")
     assert cell_server.device.state is State.RESTING   # nothing changed
     page.close()
 
@@ -125,7 +127,8 @@ def test_a_second_browser_watches_live_and_cannot_command(chromium, dashboard, c
     watcher.click("btn-session")
     watcher.expect(watcher.page.locator("#btn-lock")).to_be_enabled(timeout=30_000)
     watcher.click("btn-lock")
-    watcher.shows("refusal", "Lock — FAILED_PRECONDITION")
+    watcher.shows("refusal-text", "arm1: Lock refused: the device is locked by owner-page")
+    watcher.shows("refusal-codes", "FAILED_PRECONDITION")
     owner.shows("path-progress", "done", timeout_ms=60_000)
     watcher.close()
     owner.close()

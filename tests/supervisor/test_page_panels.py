@@ -80,7 +80,7 @@ def test_world_frame_points_are_drawn_through_the_devices_world_frame(chromium, 
     page.page.fill("#path-points", "\n".join(lines))
     page.click("btn-path-load")
     page.expect(page.page.locator("#path-progress .tag")).to_have_count(2, timeout=30_000)
-    dots = "window.cellView.pathGroup.children.filter((c) => c.isMesh).map((c) => c.position.toArray())"
+    dots = "window.armViews.arm1.pathGroup.children.filter((c) => c.isMesh).map((c) => c.position.toArray())"
     page.page.wait_for_function(f"{dots}.length === 2", timeout=30_000)
     drawn = np.array(page.page.evaluate(dots))
     assert drawn == pytest.approx(goals, abs=1e-4)   # in the base frame, where the arm goes

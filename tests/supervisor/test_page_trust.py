@@ -128,7 +128,7 @@ def test_a_viewer_watches_with_the_controls_disabled_and_may_stop_the_cell(chrom
         locator = vera.page.locator(f"#{button}")
         assert locator.is_disabled(), button
         assert "you are signed in as viewer" in locator.get_attribute("title"), button
-    assert vera.page.locator("#btn-estop-press").is_enabled()
+    assert vera.page.locator("#estop-arm1").is_enabled()
     # A frame forged in her own page (her cookie, her origin): refused with the reason.
     status = vera.page.evaluate("""() => new Promise((resolve) => {
         const ws = new WebSocket(`ws://${location.host}/ws`);
@@ -142,7 +142,7 @@ def test_a_viewer_watches_with_the_controls_disabled_and_may_stop_the_cell(chrom
     assert status["code"] == 7 and "Lock needs the operator role" in status["message"], status
     assert not cell_server.device.status().locked
     vera.screenshot("viewer")
-    vera.click("btn-estop-press")   # anyone watching the cell may stop it
+    vera.click("estop-arm1")   # anyone watching the cell may stop it
     vera.shows("st-estop", "PRESSED")
     vera.shows("st-state", "error")
     vera.close()

@@ -1,19 +1,25 @@
 // Tools (get, put, open, close), the digital I/O panel (bits by name, outputs toggled) and sensor
-// readings. Each is a plain call of the contract; a device that has not built one answers
-// UNIMPLEMENTED, and the page says so as for any refusal.
+// readings of the selected device. Each is a plain call of the contract; a device that has not
+// built one answers UNIMPLEMENTED, and the page says so as for any refusal.
 const $ = (id) => document.getElementById(id);
 const DIO = 'landscape.v1.DigitalIOService/';
 const IO_PERIOD_MS = 500;
 const MAIN_FUNCTION = 1;   // bit 0: the tool's main function (close the gripper, vacuum on)
 
 export class ToolPanel {
-  constructor(ctx) {
+  constructor(selection) {
     const tool = () => $('tool-id').value;
     const on = (id, handler) => $(id).addEventListener('click', handler);
-    on('btn-tool-get', () => ctx.command('GetTool', { toolId: tool() }));
-    on('btn-tool-put', () => ctx.command('PutTool', { toolId: tool() }));
-    on('btn-tool-close', () => ctx.command('ActivateTool', { toolId: tool(), bitField: MAIN_FUNCTION }));
-    on('btn-tool-open', () => ctx.command('DeactivateTool', { toolId: tool(), bitField: MAIN_FUNCTION }));
+    const command = (rpc, request) => selection.ctx.command(rpc, request);
+    on('btn-tool-get', () => command('GetTool', { toolId: tool() }));
+    on('btn-tool-put', () => command('PutTool', { toolId: tool() }));
+    on('btn-tool-close', () => command('ActivateTool', { toolId: tool(), bitField: MAIN_FUNCTION }));
+    on('btn-tool-open', () => command('DeactivateTool', { toolId: tool(), bitField: MAIN_FUNCTION }));
+    selection.on((what, device) => {
+      const cell = device.ctx.model.cell;
+      if (device !== selection.device || !['switch', 'cell'].includes(what)) return;
+      this.setTools(cell && !cell.refused ? cell.bodies.filter((b) => b.kind === 'KIND_TOOL').map((b) => b.name) : []);
+    });
   }
 
   // The cell's tools, from its description; the one chosen stays chosen.
@@ -27,11 +33,19 @@ export class ToolPanel {
 }
 
 export class IoPanel {
-  constructor(ctx) {
-    this.ctx = ctx;
+  constructor(selection) {
+    this.selection = selection;
     this.units = [];
     $('btn-io-list').addEventListener('click', () => this.list());
+    selection.on((what) => {
+      if (what !== 'switch') return;
+      clearInterval(this.timer);
+      this.units = [];
+      $('io').replaceChildren();
+    });
   }
+
+  get ctx() { return this.selection.ctx; }
 
   async list() {
     clearInterval(this.timer);
@@ -43,7 +57,9 @@ export class IoPanel {
     for (const unit of this.units) {
       const row = document.createElement('div');
       row.className = 'io-unit';
-      row.innerHTML = `<strong>${unit.name}</strong> (${unit.type} ${unit.unitId}) `;
+      const name = document.createElement('strong');
+      name.textContent = unit.name;
+      row.append(name, ` (${unit.type} ${unit.unitId}) `);
       for (const bit of unit.bits) {
         const element = document.createElement(unit.type === 'output' ? 'button' : 'span');
         element.className = 'bit';
@@ -58,20 +74,21 @@ export class IoPanel {
       }
       box.append(row);
     }
-    this.ctx.changed('io');
     this.timer = setInterval(() => this.read(), IO_PERIOD_MS);
   }
 
   async read() {
+    const ctx = this.ctx;
     for (const unit of this.units) {
       let reply;
       try {
-        reply = await this.ctx.link.call(this.ctx.device, DIO + 'GetDigitalIO', { type: unit.type, unitId: unit.unitId });
+        reply = await ctx.link.call(ctx.device, DIO + 'GetDigitalIO', { type: unit.type, unitId: unit.unitId });
       } catch (refused) {
         clearInterval(this.timer);
-        this.ctx.refused('GetDigitalIO', refused.status);
+        ctx.refused('GetDigitalIO', refused.status);
         return;
       }
+      if (ctx !== this.ctx) return;   // another device was chosen meanwhile
       for (const element of document.querySelectorAll(`#io .bit[data-unit="${unit.unitId}"]`)) {
         element.classList.toggle('on', Boolean(reply.bitsOn & (1 << Number(element.dataset.bit))));
       }
@@ -89,9 +106,9 @@ export class IoPanel {
 }
 
 export class SensorPanel {
-  constructor(ctx) {
+  constructor(selection) {
     const show = async (sensorType) => {
-      const reply = await ctx.command('GetSensorReading', { sensorType });
+      const reply = await selection.ctx.command('GetSensorReading', { sensorType });
       if (reply) $('sensors').textContent = `${sensorType}: ${reply.currentData.map((v) => v.toFixed(4)).join(', ')}`;
     };
     $('btn-read-force').addEventListener('click', () => show('force_sensor'));

@@ -1,17 +1,18 @@
-// What the panels of one device share: the link, the device's latest messages (the model), who
-// is signed in, the page's own session and lock, and `command`, which calls an RPC and shows a refusal as the
-// server gave it.
-import { Refused, describeStatus } from './link.js';
+// What the page knows of one device and how it calls it: the link, the device's latest
+// messages (the model), who is signed in, the page's own session and lock on it, and
+// `command`, which calls an RPC and shows a refusal as the server gave it.
+import { Refused } from './link.js';
 import { SI } from './units.js';
 
 export const DEVICE = 'landscape.v1.DeviceService/';
 
 export class DeviceContext {
-  constructor(link, device, log, person) {
+  constructor(link, device, log, person, refusals) {
     this.link = link;
     this.device = device;
     this.log = log;
-    this.person = person;   // {name, role} of who is signed in
+    this.person = person;        // {name, role} of who is signed in
+    this.refusals = refusals;    // shows a refusal to the person (refusal.js)
     this.lastStateReason = '';   // the newest state change's reason (the event stream's)
     this.lastSequence = 0;       // the newest event's sequence number
     this.model = {
@@ -19,11 +20,12 @@ export class DeviceContext {
       sample: null,         // the newest StateSample
       status: {},           // "GetDeviceState" -> its newest reply (or {refused: Status})
       units: SI,            // the device's units (GetUnits), for display and for commands
+      cell: null,           // GetCellDescription's reply (or {refused: Status})
+      robotType: '',
     };
-    this.session = null;    // {id, sessionId} of the page's open session
+    this.session = null;    // {stream, sessionId} of the page's open session
     this.holdsLock = false;
     this.listeners = [];
-    this.refusal = document.getElementById('refusal');
   }
 
   onChange(listener) { this.listeners.push(listener); }
@@ -44,12 +46,7 @@ export class DeviceContext {
   }
 
   refused(what, status) {
-    const text = `${what} — ${describeStatus(status)}`;
-    this.refusal.textContent = `Refused: ${text}`;
-    this.refusal.hidden = false;
-    clearTimeout(this.refusalTimer);
-    this.refusalTimer = setTimeout(() => { this.refusal.hidden = true; }, 15000);
-    this.log.addRefused(text);
+    this.refusals.show(this.device, what, status);
   }
 
   // The device's state as the newest sample or GetDeviceState says.

@@ -1,5 +1,6 @@
-// The live log of events and alarms (EventService.Subscribe), and the page's refused commands,
-// with filters by kind, severity and text.
+// The live log of events and alarms (EventService.Subscribe) of every device, and the page's
+// refused commands, with filters by kind, severity and text; in words, newest first.
+import { phaseWord, readable, severityWord, stateWord } from './words.js';
 
 const MAX_ENTRIES = 1000;
 const SEVERITY = { ALARM_SEVERITY_INFO: 1, ALARM_SEVERITY_WARNING: 2, ALARM_SEVERITY_ERROR: 3, ALARM_SEVERITY_CRITICAL: 4 };
@@ -11,11 +12,14 @@ const KIND_OF_DETAIL = {
 function summary(event) {
   if (event.command) {
     const c = event.command;
-    const tag = c.phase === 'PHASE_TAG_REACHED' ? ` tag ${c.tagName} (#${c.tagIndex})` : '';
-    return `${c.command} ${c.pointName} ${c.phase.replace('PHASE_', '').toLowerCase()}${tag} [${c.commandId}]${c.message ? ': ' + c.message : ''}`;
+    const tag = c.phase === 'PHASE_TAG_REACHED' ? ` tag ${c.tagName} (#${c.tagIndex})` : ` ${phaseWord(c.phase)}`;
+    return `${c.command} ${c.pointName}${tag} [${c.commandId}]${c.message ? ': ' + readable(c.message) : ''}`;
   }
-  if (event.alarm) return `${event.alarm.severity.replace('ALARM_SEVERITY_', '')} ${event.alarm.code}: ${event.alarm.message}`;
-  if (event.stateChange) return `${event.stateChange.fromState} → ${event.stateChange.toState} (${event.stateChange.reason})`;
+  if (event.alarm) return `${severityWord(event.alarm.severity)} ${event.alarm.code}: ${readable(event.alarm.message)}`;
+  if (event.stateChange) {
+    const s = event.stateChange;
+    return `${stateWord(s.fromState)} → ${stateWord(s.toState)} (${readable(s.reason)})`;
+  }
   if (event.rsvpRequest) return `asks: ${event.rsvpRequest.data.join(' ')} [${event.rsvpRequest.choices.join(' / ')}]`;
   if (event.rsvpAnswer) {
     const a = event.rsvpAnswer;
@@ -49,22 +53,37 @@ export class EventLog {
     const detail = Object.keys(KIND_OF_DETAIL).find((key) => event[key]);
     const kind = detail ? KIND_OF_DETAIL[detail] : 'command';
     const severity = event.alarm ? SEVERITY[event.alarm.severity] || 0 : 0;
-    this.add(kind, severity, `${new Date(time).toLocaleTimeString()} #${sequence} ${device} ${event.eventId}: ${summary(event)}`);
+    this.add(kind, severity, `${device} ${event.eventId.replaceAll('_', ' ')}: ${summary(event)}`, time, `#${sequence}`);
   }
 
-  addRefused(text) {
-    this.add('refused', 3, `${new Date().toLocaleTimeString()} refused: ${text}`);
+  // A refusal: what the person did and why; the machine's codes in small print.
+  addRefused(text, codes = '') {
+    const item = this.add('refused', 3, `refused: ${text}`);
+    if (!codes) return;
+    const small = document.createElement('small');
+    small.className = 'codes';
+    small.textContent = ` [${codes}]`;
+    item.lastChild.append(small);
   }
 
-  add(kind, severity, text) {
+  // One line: its time, its number (an event's sequence), the text.
+  add(kind, severity, text, time = Date.now(), number = '') {
     const item = document.createElement('li');
     item.dataset.kind = kind;
     item.dataset.severity = severity;
     item.className = `log-${kind} sev-${severity}`;
-    item.textContent = text;
+    const when = document.createElement('time');
+    when.textContent = new Date(time).toLocaleTimeString();
+    const seq = document.createElement('span');
+    seq.className = 'seq';
+    seq.textContent = number;
+    const words = document.createElement('span');
+    words.textContent = text;
+    item.append(when, seq, words);
     item.hidden = !this.shows(item);
     this.list.prepend(item);
     while (this.list.childElementCount > MAX_ENTRIES) this.list.lastElementChild.remove();
+    return item;
   }
 
   shows(item) {

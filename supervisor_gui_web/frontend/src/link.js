@@ -25,13 +25,18 @@ export class Link {
     this.connectionHandlers = [];  // handler(up, closeEvent?) when the socket opens or closes
     this.onSignedOut = () => {};   // (why): the sign-in ended; no reconnecting
     this.mayReconnect = async () => true;
+    this.up = false;               // the socket is open
     this.connect();
   }
 
   connect() {
     this.ws = new WebSocket(this.url);
-    this.ws.onopen = () => this.connectionHandlers.forEach((handler) => handler(true));
+    this.ws.onopen = () => {
+      this.up = true;
+      this.connectionHandlers.forEach((handler) => handler(true));
+    };
     this.ws.onclose = (event) => {
+      this.up = false;
       const signedOut = event.code === CLOSE_SIGNED_OUT;
       const why = signedOut ? `signed out: ${event.reason}`
         : `connection to the supervisor lost (WebSocket closed, code ${event.code})`;
@@ -100,19 +105,4 @@ export class Link {
 // The message type of an Any's JSON, e.g. "landscape.v1.StateSample".
 export function typeOf(any) {
   return any && any['@type'] ? any['@type'].split('/').pop() : '';
-}
-
-const CODES = ['OK', 'CANCELLED', 'UNKNOWN', 'INVALID_ARGUMENT', 'DEADLINE_EXCEEDED', 'NOT_FOUND',
-  'ALREADY_EXISTS', 'PERMISSION_DENIED', 'RESOURCE_EXHAUSTED', 'FAILED_PRECONDITION', 'ABORTED',
-  'OUT_OF_RANGE', 'UNIMPLEMENTED', 'INTERNAL', 'UNAVAILABLE', 'DATA_LOSS', 'UNAUTHENTICATED'];
-
-// "FAILED_PRECONDITION WRONG_STATE ret_code -1: <message>", from the server's google.rpc.Status.
-export function describeStatus(status) {
-  const info = (status.details || []).find((d) => typeOf(d) === 'google.rpc.ErrorInfo');
-  const parts = [CODES[status.code] || `code ${status.code}`];
-  if (info) {
-    parts.push(info.reason);
-    if (info.metadata && info.metadata.ret_code !== undefined) parts.push(`ret_code ${info.metadata.ret_code}`);
-  }
-  return `${parts.join(' ')}: ${status.message}`;
 }

@@ -1,49 +1,31 @@
-// The page: one device at a time (?device=NAME, tabs for the others), fed by the backend's
-// WebSocket with that device's live state, events and status reads, and commanding it through
-// the same socket.
+// The page: every device of the supervisor at a glance (the status bar) and in 3D, the chosen
+// one's panels, fed by the backend's WebSocket with each device's live state, events and
+// status reads, and commanding it through the same socket.
 import './style.css';
+import { Access } from './access.js';
+import { AlarmPanel } from './alarms.js';
 import { ToolPanel, IoPanel, SensorPanel } from './cell_panels.js';
-import { DeviceContext } from './context.js';
 import { Controls } from './controls.js';
+import { Device } from './device.js';
 import { EventLog } from './event_log.js';
+import { ControlRequests, HandoverPanel } from './handover.js';
 import { JogPendant } from './jog.js';
-import { Link, describeStatus } from './link.js';
-import { showPerson, showSignIn, whoAmI } from './sign_in.js';
-import { PathPanel } from './paths.js';
+import { Link } from './link.js';
+import { MoveForm } from './move_form.js';
+import { PathPanel } from './path_panel.js';
 import { Plots } from './plots.js';
+import { RecordsPanel } from './records.js';
+import { Refusals } from './refusal.js';
 import { RsvpDialog } from './rsvp.js';
-import { CellView } from './scene.js';
+import { Scenes } from './scenes.js';
+import { Selection } from './selection.js';
+import { showPerson, showSignIn, whoAmI } from './sign_in.js';
 import { StatePanel } from './state_panel.js';
-import { SI, fromSI, poseToSI, toSI } from './units.js';
+import { StatusBar } from './status_bar.js';
 
 const $ = (id) => document.getElementById(id);
-const FEED_STATE = 'landscape.v1.StateService/StreamState';
-const FEED_EVENTS = 'landscape.v1.EventService/Subscribe';
-const STATS_KEPT = 5000;
 
-// Milliseconds since the epoch, to the microsecond, of an RFC 3339 timestamp (protobuf JSON).
-function timestampMs(text) {
-  const match = /^(.*T\d\d:\d\d:\d\d)(\.\d+)?Z$/.exec(text || '');
-  if (!match) return NaN;
-  return Date.parse(`${match[1]}Z`) + (match[2] ? Number(match[2]) * 1000 : 0);
-}
-
-async function main() {
-  const person = await whoAmI();
-  if (!person) { showSignIn(); return; }
-  showPerson(person);
-  $('app').hidden = false;
-  const devices = await (await fetch('/api/devices')).json();
-  const params = new URLSearchParams(location.search);
-  const device = params.get('device') || devices[0].name;
-  $('devices').replaceChildren(...devices.map((d) => {
-    const a = document.createElement('a');
-    a.href = `?device=${encodeURIComponent(d.name)}`;
-    a.textContent = `${d.name} (${d.target})`;
-    a.className = d.name === device ? 'current' : '';
-    return a;
-  }));
-
+function connectLink() {
   const link = new Link(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`);
   link.onSignedOut = (why) => showSignIn(`Your sign-in ended: ${why}`);
   link.mayReconnect = async () => {
@@ -55,88 +37,55 @@ async function main() {
     showSignIn('Your sign-in ended: sign in again.');
     return false;
   };
+  link.onConnection((up) => {
+    $('connection').textContent = up ? 'supervisor connected' : 'supervisor disconnected: reconnecting…';
+    $('connection').className = `pill ${up ? 'ok' : 'alert'}`;
+  });
+  return link;
+}
+
+async function main() {
+  const person = await whoAmI();
+  if (!person) { showSignIn(); return; }
+  showPerson(person);
+  $('app').hidden = false;
+  // The panels' column scrolls below the top, whose height changes (arms, banners, wrapping).
+  new ResizeObserver(([entry]) => document.documentElement.style.setProperty(
+    '--top-h', `${Math.ceil(entry.target.getBoundingClientRect().height)}px`)).observe($('top'));
+  const list = await (await fetch('/api/devices')).json();
   const log = new EventLog();
-  const ctx = new DeviceContext(link, device, log, person);
-  const view = new CellView($('scene'));
-  const state = new StatePanel(ctx);
-  const plots = new Plots();
-  const rsvp = new RsvpDialog();
-  const paths = new PathPanel(ctx, view);
-  const controls = new Controls(ctx, { onRsvp: (request, answer) => rsvp.ask(request, answer) });
-  new JogPendant(ctx);
-  new IoPanel(ctx);
-  new SensorPanel(ctx);
-  const tools = new ToolPanel(ctx);
-  // What the 3D view shows, in one line: the arm, and the cell as its device describes it.
-  const showCell = () => {
-    const cell = ctx.model.cell;
-    const world = cell?.refused ? `no cell description: ${describeStatus(cell.refused)}` : `cell “${cell?.cellName || '…'}”`;
-    $('scene-note').textContent = `${ctx.model.robotType || '…'} in ${world}`;
-  };
   // What the latency benchmark reads: when each sample's cycle ran and when it arrived here.
   const stats = window.dashboardStats = { samples: [] };
-  window.cellView = view;   // the 3D view, for the console and the page tests
+  const page = { link: connectLink(), log, person, refusals: new Refusals(log), rsvp: new RsvpDialog(), stats };
+  const devices = new Map(list.map((entry) => [entry.name, new Device(page, entry)]));
+  for (const device of devices.values()) device.handover = new ControlRequests(device);
+  const selection = new Selection(devices);
+  const wanted = new URLSearchParams(location.search).get('device');
+  if (wanted) selection.select(wanted);
 
-  link.onConnection(async (up) => {
-    $('connection').textContent = up ? 'connected' : 'disconnected: reconnecting…';
-    $('connection').className = `pill ${up ? 'ok' : 'alert'}`;
-    if (!up || view.robot) return;
-    const description = await ctx.command('GetRobotDescription');
-    if (description) state.setLimits(view.loadRobot(description.urdf));
-    ctx.model.robotType = description?.robotType || '?';
-    showCell();
-    ctx.changed('robot');
-  });
-
-  link.onFeed((frame) => {
-    if (frame.device !== device) return;
-    const method = frame.rpc.split('/').pop();
-    if (frame.rpc === FEED_STATE) {
-      if (frame.status) { $('st-note').textContent = `live state: ${describeStatus(frame.status)}`; return; }
-      if (frame.reply.started) {
-        ctx.model.started = frame.reply.started;
-        $('st-note').textContent = frame.reply.started.note || `live state at ${frame.reply.started.grantedRateHz}/s`;
-        return;
-      }
-      const sample = frame.reply.sample;
-      const received = performance.timeOrigin + performance.now();
-      const cycle = timestampMs(sample.time);
-      stats.samples.push({ sequence: Number(sample.sequence), cycle, received });
-      if (stats.samples.length > STATS_KEPT) stats.samples.shift();
-      ctx.model.sample = sample;
-      const units = sample.units || SI;
-      view.setJoints((sample.jointPositions || []).map((q) => toSI(q, 'angular', units)));
-      view.setEndEffector(sample.endEffector, sample.endEffectorState);
-      if (sample.toolPose) view.setToolPose(poseToSI(sample.toolPose, units));
-      state.sample(sample, received - cycle);
-      plots.add(sample, performance.now() / 1000, (a) => fromSI(toSI(a, 'angular', units), 'angular', ctx.model.units));
-      if (ctx.deviceState !== state.lastState) { state.lastState = ctx.deviceState; ctx.changed('state'); }
-    } else if (frame.rpc === FEED_EVENTS) {
-      if (frame.status) { log.add('alarm', 3, `event stream: ${describeStatus(frame.status)}`); return; }
-      const event = frame.reply.event;
-      if (event.stateChange) ctx.lastStateReason = event.stateChange.reason;
-      ctx.lastSequence = Math.max(ctx.lastSequence, Number(event.sequence));
-      controls.event(event);
-      log.addEvent(device, event);
-      paths.event(event);
-      rsvp.event(event);
-    } else if (method === 'GetCellDescription') {
-      ctx.model.cell = frame.status ? { refused: frame.status } : frame.reply;
-      if (frame.reply) {
-        view.setCell(frame.reply);
-        tools.setTools(frame.reply.bodies.filter((b) => b.kind === 'KIND_TOOL').map((b) => b.name));
-      }
-      showCell();
-    } else if (method.startsWith('Get')) {
-      ctx.model.status[method] = frame.status ? { refused: frame.status } : frame.reply;
-      if (method === 'GetUnits' && frame.reply) {
-        ctx.model.units = { linear: frame.reply.linearUnits, angular: frame.reply.angularUnits };
-      }
-      if (method === 'GetToolOffsets' && frame.reply) view.setTipOffset(poseToSI(frame.reply.offset, frame.reply.units));
-      state.status();
-      ctx.changed('status');
+  new Scenes($('scenes'), selection);
+  new StatusBar(selection, () => { $('panel-alarms').open = true; $('panel-alarms').scrollIntoView(); });
+  new StatePanel(selection);
+  new Controls(selection);
+  new HandoverPanel(selection);
+  new MoveForm(selection);
+  new JogPendant(selection);
+  new PathPanel(selection);
+  new AlarmPanel(selection);
+  new ToolPanel(selection);
+  new IoPanel(selection);
+  new SensorPanel(selection);
+  new RecordsPanel(selection);
+  new Access(selection, person);
+  const plots = window.livePlots = new Plots();   // (and for the page tests)
+  selection.on((what, device) => {
+    if (device === selection.device && ['sample', 'switch', 'status'].includes(what)) {
+      plots.show(device.plotData, device.ctx.model.units);
     }
+    if (what === 'switch') $('panels-device').textContent = device.name;
   });
+  selection.emit('switch', selection.device);
+  page.link.onFeed((frame) => devices.get(frame.device)?.feed(frame));
 }
 
 main();

@@ -1,20 +1,23 @@
-// An RSVP question of the device to this page's session (SessionService.Connect): a dialog with
+// An RSVP question of a device to this page's session (SessionService.Connect): a dialog with
 // the device's choices and the countdown to its timeout, after which the device takes its
 // default. The answer goes back on the session stream; the dialog closes when the event stream
-// shows the exchange settled (answered here, elsewhere, or timed out).
+// shows the exchange settled (answered here, in the alarm list, elsewhere, or timed out).
 const $ = (id) => document.getElementById(id);
 
 export class RsvpDialog {
   constructor() {
     this.dialog = $('rsvp');
     this.current = null;    // {rsvpId, timer}
+    // Escape puts the question aside: it stays answerable in the alarm list until its time.
+    this.dialog.addEventListener('cancel', () => this.close());
   }
 
-  // request: landscape.v1.RsvpRequest (JSON); answer(choice, data) sends the RsvpAnswer.
-  ask(request, answer) {
+  // request: landscape.v1.RsvpRequest (JSON) of `device`; answer(choice, data) sends the
+  // RsvpAnswer.
+  ask(device, request, answer) {
     this.close();
     const deadline = performance.now() + request.timeoutMs;
-    $('rsvp-title').textContent = `${request.alarm ? 'Alarm' : 'Event'}: ${request.eventId}`;
+    $('rsvp-title').textContent = `${device} asks (${request.alarm ? 'alarm' : 'event'} ${request.eventId})`;
     $('rsvp-text').textContent = request.data.join(' ');
     $('rsvp-default').textContent = request.defaultChoice;
     const choices = $('rsvp-choices');

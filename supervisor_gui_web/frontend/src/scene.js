@@ -1,18 +1,21 @@
-// The cell in 3D: the arm from the device's URDF (urdf-loader), the cell around it as the device
-// describes it (DeviceService.GetCellDescription: fixtures, zones, tools in the rack or on the
-// flange, parts where they lie or in the tool), the tool frame, the tool tip's trail and the
-// loaded path. Everything is in meters and radians, z up, the cell's world frame; the arm's
-// base_link sits at the cell's base pose. Orientations are fixed-axis X-Y-Z roll, pitch, yaw
-// (three.js order 'ZYX').
+// A 3D view on one canvas: a three.js scene with the arms given to it (ArmView), a camera the
+// person turns and zooms (OrbitControls), lights and the floor grid. It draws only when
+// something changed, at the device's pixel ratio as far as the GPU's limits allow.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
-import URDFLoader from 'urdf-loader';
 
-const TRAIL_POINTS = 600;
+// Without a GPU (a software rasterizer such as SwiftShader) every pixel costs the page's CPU:
+// draw at most SOFTWARE_FPS frames a second at SOFTWARE_PIXEL_RATIO, so the live state never
+// waits long behind a frame. ?render=full draws at the device's ratio and rate all the same
+// (for pictures of the page).
 const SOFTWARE_FPS = 15;
-// Changes smaller than these are not drawn (rad, and m or rad for the tool pose).
-const STILL_RAD = 1e-5;
-const STILL_M = 1e-5;
+const SOFTWARE_PIXEL_RATIO = 0.5;
+const MOVE_FRAMES_KEPT = 1000;
+
+function keep(times, time) {
+  times.push(time);
+  if (times.length > MOVE_FRAMES_KEPT) times.shift();
+}
 
 function rendererName(renderer) {
   const gl = renderer.getContext();
@@ -20,41 +23,23 @@ function rendererName(renderer) {
   return info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
 }
 
-function placePose(object, xyz, rpy) {
-  object.position.set(xyz[0], xyz[1], xyz[2]);
-  object.rotation.set(rpy[0], rpy[1], rpy[2], 'ZYX');
-}
-
-function colorOf(rgba) {
-  return rgba && rgba.length >= 3 ? new THREE.Color(rgba[0], rgba[1], rgba[2]) : new THREE.Color(0x9e9e9e);
-}
-
-// A landscape.v1 Pose (JSON) as a matrix.
-export function poseMatrix(pose) {
-  const object = new THREE.Object3D();
-  placePose(object, [pose.x, pose.y, pose.z], [pose.roll, pose.pitch, pose.yaw]);
-  object.updateMatrix();
-  return object.matrix;
-}
-
-function setLocal(object, matrix) {
-  matrix.decompose(object.position, object.quaternion, object.scale);
-}
-
 export class CellView {
   constructor(canvas) {
     THREE.Object3D.DEFAULT_UP.set(0, 0, 1);
     this.canvas = canvas;
     this.renderer = new THREE.WebGLRenderer({ canvas, antialias: false });
-    // Without a GPU (a software rasterizer such as SwiftShader) every pixel costs the page's
-    // CPU: draw at half resolution and at most SOFTWARE_FPS frames a second, so the live
-    // state never waits long behind a frame.
-    // ?render=full keeps full resolution and rate all the same (for pictures of the page).
     const full = new URLSearchParams(location.search).get('render') === 'full';
-    this.software = !full && /swiftshader|llvmpipe|software/i.test(rendererName(this.renderer));
-    this.renderer.setPixelRatio(this.software ? 0.5 : window.devicePixelRatio);
+    this.rendererName = rendererName(this.renderer);
+    this.software = !full && /swiftshader|llvmpipe|software/i.test(this.rendererName);
     this.minFrameMs = this.software ? 1000 / SOFTWARE_FPS : 0;
     this.lastFrame = 0;
+    this.ratio = 1;                 // the pixel ratio drawn at
+    this.onRatio = () => {};        // (it changed)
+    this.arms = [];
+    // What the benchmarks read: frames drawn, when the first arm was, the samples that moved
+    // an arm and the frames that showed it (page clock, ms).
+    this.stats = { frames: 0, firstArmAt: null, moveSamples: [], moveFrames: [] };
+    this.moved = false;
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xe8ecef);
     this.camera = new THREE.PerspectiveCamera(45, 1, 0.05, 50);
@@ -73,24 +58,28 @@ export class CellView {
     this.grid.rotation.x = Math.PI / 2;   // GridHelper lies in x-z; the floor is x-y
     this.scene.add(this.grid);
 
-    this.base = new THREE.Group();          // the arm's base_link frame
-    this.scene.add(this.base);
-    this.toolFrame = new THREE.AxesHelper(0.12);
-    this.toolFrame.visible = false;
-    this.base.add(this.toolFrame);
-    this.trail = this.makeLine(0x1565c0, TRAIL_POINTS);
-    this.base.add(this.trail.line);
-    this.pathGroup = new THREE.Group();
-    this.base.add(this.pathGroup);
-    this.cell = null;                       // the newest GetCellDescription
-    this.bodies = new Map();                // body name -> {object, attachedTo}
-    this.tipOffset = new THREE.Matrix4();   // the tool tip in the flange frame
-    this.endEffector = '';                  // "<tool> <state>" of the newest sample
-    this.graspFlange = null;                // the flange (world) when the tool last acted,
-                                            // if no cell description came since
-
     new ResizeObserver(() => this.resize()).observe(canvas.parentElement);
+    this.watchPixelRatio();
     this.resize();
+  }
+
+  // An arm drawn in this view; `placement`: its world frame in the view's (a Matrix4), or
+  // none: the view's frame is the arm's world.
+  add(arm, placement = null) {
+    arm.requestRender = () => this.requestRender();
+    arm.onMoved = () => {
+      this.moved = true;
+      keep(this.stats.moveSamples, performance.now());
+    };
+    if (placement) placement.decompose(arm.root.position, arm.root.quaternion, arm.root.scale);
+    this.arms.push(arm);
+    this.scene.add(arm.root);
+    this.requestRender();
+  }
+
+  // The floor grid where any arm's cell has a floor.
+  showFloor() {
+    this.grid.visible = this.arms.some((arm) => arm.cell?.floor);
   }
 
   // Draw once in the next animation frame, and only when something changed: a software-rendered
@@ -99,184 +88,55 @@ export class CellView {
     if (this.renderPending) return;
     this.renderPending = true;
     const wait = Math.max(0, this.lastFrame + this.minFrameMs - performance.now());
-    setTimeout(() => requestAnimationFrame(() => {
-      this.renderPending = false;
-      this.lastFrame = performance.now();
-      this.renderer.render(this.scene, this.camera);
-    }), wait);
+    setTimeout(() => requestAnimationFrame(() => this.draw()), wait);
+  }
+
+  draw() {
+    this.renderPending = false;
+    this.lastFrame = performance.now();
+    this.showFloor();
+    this.renderer.render(this.scene, this.camera);
+    const stats = this.stats;
+    stats.frames += 1;
+    if (stats.firstArmAt === null && this.arms.some((arm) => arm.robot)) stats.firstArmAt = this.lastFrame;
+    if (this.moved) {
+      this.moved = false;
+      keep(stats.moveFrames, this.lastFrame);
+    }
+  }
+
+  // The device's pixel ratio, as far as the GPU draws a buffer that large (its largest
+  // viewport and renderbuffer); less on a software rasterizer (above).
+  pixelRatio(width, height) {
+    const wanted = this.software ? Math.min(SOFTWARE_PIXEL_RATIO, window.devicePixelRatio) : window.devicePixelRatio;
+    const gl = this.renderer.getContext();
+    const largest = Math.min(gl.getParameter(gl.MAX_RENDERBUFFER_SIZE), ...gl.getParameter(gl.MAX_VIEWPORT_DIMS));
+    return Math.min(wanted, largest / Math.max(width, height, 1));
+  }
+
+  // The window moved to a screen of another pixel ratio (or the page was zoomed): draw anew.
+  watchPixelRatio() {
+    const query = matchMedia(`(resolution: ${window.devicePixelRatio}dppx)`);
+    query.addEventListener('change', () => { this.resize(); this.watchPixelRatio(); }, { once: true });
+  }
+
+  // Why the view draws fewer pixels than the screen has, or '' when it does not.
+  resolutionNote() {
+    if (this.ratio >= window.devicePixelRatio) return '';
+    const rasterizer = /swiftshader|llvmpipe/i.exec(this.rendererName)?.[0] || 'a software rasterizer';
+    const why = this.software ? `software rendering (${rasterizer}), no GPU` : 'the GPU\'s largest picture';
+    return `drawn at ${Math.round(this.ratio * 100) / 100}× the screen's pixels: ${why}`;
   }
 
   resize() {
     const { clientWidth: w, clientHeight: h } = this.canvas.parentElement;
     if (!w || !h) return;
+    const ratio = this.pixelRatio(w, h);
+    this.renderer.setPixelRatio(ratio);
+    if (ratio !== this.ratio) { this.ratio = ratio; this.onRatio(); }
     this.renderer.setSize(w, h, false);
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();
     this.requestRender();
-  }
-
-  makeLine(color, capacity) {
-    const geometry = new THREE.BufferGeometry();
-    geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(capacity * 3), 3));
-    geometry.setDrawRange(0, 0);
-    return { line: new THREE.Line(geometry, new THREE.LineBasicMaterial({ color })), count: 0, capacity };
-  }
-
-  // The arm, from the URDF text of DeviceService.GetRobotDescription.
-  loadRobot(urdf) {
-    const loader = new URDFLoader();
-    if (this.robot) this.base.remove(this.robot);
-    this.robot = loader.parse(urdf);
-    this.base.add(this.robot);
-    if (this.cell) {   // the bodies on the flange and in the tool go on this arm
-      for (const item of this.bodies.values()) item.attachedTo = null;
-      this.setCell(this.cell);
-    }
-    this.requestRender();
-    this.ghost = loader.parse(urdf);        // never drawn: forward kinematics of path points
-    this.jointNames = Object.keys(this.robot.joints).filter((n) => this.robot.joints[n].jointType !== 'fixed');
-    return this.jointNames.map((name) => {
-      const limit = this.robot.joints[name].limit;
-      return { name, lower: limit.lower, upper: limit.upper };
-    });
-  }
-
-  // The cell from GetCellDescription (JSON): bodies are made once, then only moved.
-  setCell(cell) {
-    this.cell = cell;
-    const base = cell.base || {};
-    placePose(this.base, [base.x || 0, base.y || 0, base.z || 0], [base.roll || 0, base.pitch || 0, base.yaw || 0]);
-    this.grid.visible = Boolean(cell.floor);
-    this.scene.updateMatrixWorld(true);
-    const names = new Set();
-    for (const body of cell.bodies || []) {
-      names.add(body.name);
-      if (!this.bodies.has(body.name)) this.bodies.set(body.name, { object: this.makeBody(body), attachedTo: null });
-      this.place(this.bodies.get(body.name), body);
-    }
-    for (const [name, item] of this.bodies) {
-      if (!names.has(name)) { item.object.removeFromParent(); this.bodies.delete(name); }
-    }
-    this.graspFlange = null;
-    this.requestRender();
-  }
-
-  makeBody(body) {
-    if (body.kind === 'KIND_TOOL') return new URDFLoader().parse(body.urdf);   // root: the mounting plate
-    const size = body.size || { x: 0, y: 0, z: 0 };
-    const box = new THREE.BoxGeometry(size.x, size.y, size.z);
-    if (body.kind === 'KIND_ZONE') {
-      return new THREE.LineSegments(new THREE.EdgesGeometry(box), new THREE.LineBasicMaterial({ color: 0x2e7d32 }));
-    }
-    const mesh = new THREE.Mesh(box, new THREE.MeshLambertMaterial({ color: colorOf(body.color) }));
-    mesh.name = body.name;
-    return mesh;
-  }
-
-  // A body in the world, on the flange (a mounted tool) or in the tool (a held part). A part
-  // keeps where it was in the tool when taken: from the flange then to where it lay. The tool
-  // acts at rest, so the flange then is the one when the sample said so (graspFlange) or, if
-  // the description came first, the one shown now. A part first seen held is drawn at the tip.
-  place(item, body) {
-    const object = item.object;
-    const flange = this.robot?.links.tool0;
-    if (!body.attachedTo) {
-      this.scene.add(object);
-      placePose(object, [body.pose.x, body.pose.y, body.pose.z], [body.pose.roll, body.pose.pitch, body.pose.yaw]);
-    } else if (!flange) {
-      object.removeFromParent();   // drawn once the arm is loaded (loadRobot places it again)
-      return;
-    } else if (item.attachedTo !== body.attachedTo || object.parent !== flange) {
-      let local = body.attachedTo === 'flange' ? new THREE.Matrix4() : this.tipOffset.clone();
-      if (body.attachedTo === 'tool' && object.parent === this.scene) {
-        object.updateMatrixWorld(true);
-        const grasp = this.graspFlange || flange.matrixWorld;
-        local = grasp.clone().invert().multiply(object.matrixWorld);
-      }
-      flange.add(object);
-      setLocal(object, local);
-    }
-    item.attachedTo = body.attachedTo;
-  }
-
-  // The tip of the tool in the flange frame (GetToolOffsets, meters and radians).
-  setTipOffset(pose) {
-    this.tipOffset = poseMatrix(pose);
-  }
-
-  // The tool on the flange and its state, from every sample: the flange's pose when the state
-  // changes is where a part was taken; a gripper's fingers open and close.
-  setEndEffector(tool, state) {
-    const now = `${tool} ${state}`;
-    if (now === this.endEffector || !this.robot) return;
-    this.endEffector = now;
-    this.scene.updateMatrixWorld(true);
-    this.graspFlange = this.robot.links.tool0.matrixWorld.clone();
-    const mounted = this.bodies.get(tool)?.object;
-    for (const [name, joint] of Object.entries(mounted?.joints || {})) {
-      if (joint.jointType === 'prismatic') mounted.setJointValue(name, state === 'open' ? joint.limit.upper : 0);
-    }
-    this.requestRender();
-  }
-
-  // Joint values in radians, joint 1 first; an arm at rest costs no frame.
-  setJoints(values) {
-    if (!this.robot) return;
-    const last = this.shownJoints || [];
-    if (values.length === last.length && values.every((q, i) => Math.abs(q - last[i]) < STILL_RAD)) return;
-    this.shownJoints = values;
-    this.jointNames.forEach((name, i) => { if (i < values.length) this.robot.setJointValue(name, values[i]); });
-    this.requestRender();
-  }
-
-  // The tool tip in the robot base frame, meters and radians: the tool frame and the trail.
-  setToolPose(pose) {
-    const last = this.shownPose;
-    if (last && ['x', 'y', 'z', 'roll', 'pitch', 'yaw'].every((k) => Math.abs(pose[k] - last[k]) < STILL_M)) return;
-    this.shownPose = pose;
-    placePose(this.toolFrame, [pose.x, pose.y, pose.z], [pose.roll, pose.pitch, pose.yaw]);
-    this.toolFrame.visible = true;
-    const t = this.trail;
-    const array = t.line.geometry.attributes.position.array;
-    if (t.count === t.capacity) { array.copyWithin(0, 3); t.count -= 1; }
-    array.set([pose.x, pose.y, pose.z], t.count * 3);
-    t.count += 1;
-    t.line.geometry.setDrawRange(0, t.count);
-    t.line.geometry.attributes.position.needsUpdate = true;
-    this.requestRender();
-  }
-
-  // The tool tip in the base frame at these joint values (radians), as a matrix; toolOffset is
-  // the tip in the flange frame (meters, radians).
-  tipMatrix(joints, toolOffset) {
-    this.jointNames.forEach((name, i) => this.ghost.setJointValue(name, joints[i]));
-    this.ghost.updateMatrixWorld(true);
-    return this.ghost.links.tool0.matrixWorld.clone().multiply(poseMatrix(toolOffset));
-  }
-
-  // Where the tool tip is at these joint values, in the base frame.
-  tipAt(joints, toolOffset) {
-    return new THREE.Vector3().setFromMatrixPosition(this.tipMatrix(joints, toolOffset));
-  }
-
-  // A point {x, y, z} through a matrix.
-  transformed(point, matrix) {
-    return new THREE.Vector3(point.x, point.y, point.z).applyMatrix4(matrix);
-  }
-
-  // The path as loaded: its points ({x, y, z}: tool tip positions, base frame, meters) joined
-  // in order.
-  setPath(xyz) {
-    this.pathGroup.clear();
-    this.requestRender();
-    if (!xyz.length) return;
-    const points = xyz.map((p) => new THREE.Vector3(p.x, p.y, p.z));
-    const geometry = new THREE.BufferGeometry().setFromPoints(points);
-    this.pathGroup.add(new THREE.Line(geometry, new THREE.LineDashedMaterial({ color: 0xef6c00, dashSize: 0.02, gapSize: 0.01 })).computeLineDistances());
-    for (const p of points) {
-      const dot = new THREE.Mesh(new THREE.SphereGeometry(0.012), new THREE.MeshBasicMaterial({ color: 0xef6c00 }));
-      dot.position.copy(p);
-      this.pathGroup.add(dot);
-    }
   }
 }

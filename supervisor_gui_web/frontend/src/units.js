@@ -37,3 +37,12 @@ export function poseToSI(pose, units) {
 export function fmt(value, digits = 3) {
   return Number.isFinite(value) ? value.toFixed(digits) : '–';
 }
+
+// Tick labels with as many decimals as the step between ticks needs, and no more: a step
+// of 0.25 shows 0.25, 0.5, ...; a step of 2 shows 0, 2, 4.
+export function tickText(value, step) {
+  let decimals = Math.min(6, Math.max(0, Math.ceil(-Math.log10(step) - 1e-9)));
+  if (decimals < 6 && Math.abs(step * 10 ** decimals - Math.round(step * 10 ** decimals)) > 1e-6) decimals += 1;
+  const text = value.toFixed(decimals);
+  return /^-0(\.0*)?$/.test(text) ? text.slice(1) : text;
+}
