@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import grpc
 
-from landscape.server.auth import Role
+from landscape.server.security.auth import Role
 from landscape.supervisor import wire
 from landscape.supervisor.alarm_acks import AlarmAcks
 from landscape.supervisor.handover import CONTROL, ControlDesk, HandoverRefused

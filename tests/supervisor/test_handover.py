@@ -6,7 +6,7 @@ session then holds the lock; nothing takes a lock without its holder's word."""
 from __future__ import annotations
 
 from dashboard_support import Page
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import wait_until
 
 def _banner(page: Page, device: str = "arm1"):

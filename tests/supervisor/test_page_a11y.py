@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dashboard_support import Page
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import wait_until
 
 AXE = Path(__file__).resolve().parents[2] / "supervisor_gui_web" / "frontend" / "node_modules" / "axe-core" / "axe.min.js"

@@ -5,7 +5,7 @@ from the list. On a cell of one arm and of two. Screenshots go to var/screenshot
 from __future__ import annotations
 
 from dashboard_support import Page
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import wait_until
 
 ESTOP_ALARM = "#alarms li.alarm", "e-stop pressed: motion stopped, drives off"

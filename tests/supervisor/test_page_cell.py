@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dashboard_support import Page
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import wait_until
 
 

@@ -15,7 +15,7 @@ import pytest
 
 from dashboard_support import Page
 from landscape.client import Robot
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import wait_until
 
 SRC = Path(__file__).resolve().parents[2] / "supervisor_gui_web" / "frontend" / "src"

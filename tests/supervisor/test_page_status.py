@@ -10,7 +10,7 @@ import pytest
 from dashboard_support import Page
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
-from landscape.server.states import State
+from landscape.server.device.states import State
 from support import wait_until
 
 SIZES = {"desktop": (1440, 900), "tablet": (1024, 768), "phone": (390, 844)}
