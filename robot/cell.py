@@ -4,7 +4,7 @@ them named here too).
 
 Like the CS8's configuration files together (controller.cfx for the cycle time, cell.cf for the
 named I/O, records.cfx for the recorder), plus what a simulator needs: the arm variant, the world
-(floor, fixtures, tools, parts, zones) and the sensors. `sim/cells/default.toml` is the
+(floor, fixtures, tools, parts, zones) and the sensors. `robot/cells/default.toml` is the
 reference, with every key commented.
 
 Units: metres, kilograms, seconds, newtons; angles in degrees where the key ends in `_deg`,

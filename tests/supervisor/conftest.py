@@ -46,7 +46,7 @@ def two_arm_servers():
     """A cell of two arms: two device servers on the lock-step clock at the pace of real time,
     the second in the press-tending world (a TX90L)."""
     first = start_server(lockstep_pace=1.0)
-    second = start_server(lockstep_pace=1.0, cell=str(ROOT / "sim" / "cells" / "press_tending.toml"))
+    second = start_server(lockstep_pace=1.0, cell=str(ROOT / "robot" / "cells" / "press_tending.toml"))
     yield first, second
     first.stop(grace=None)
     second.stop(grace=None)
