@@ -21,12 +21,14 @@ import grpc
 
 from landscape.client import Endpoint, credentials
 from landscape.gateway.device import CrclDevice
-from landscape.gateway.schemas import SchemaSet, default_directory
+from landscape.gateway.schemas import SchemaSet, default_directory, describe
 from landscape.gateway.server import DEFAULT_PORT, Gateway
 from landscape.gateway.session import GatewayOptions
 from landscape.gateway.status import DEFAULT_GRIPPER_STROKE
 from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
 from landscape.server.tls import is_loopback
+
+log = logging.getLogger("landscape.gateway")
 
 
 def arguments(argv=None) -> argparse.Namespace:
@@ -48,8 +50,9 @@ def arguments(argv=None) -> argparse.Namespace:
                         help="listen on non-loopback addresses all the same: whoever reaches "
                              "the gateway commands the arm (a network of your own only)")
     parser.add_argument("--schemas", default=None,
-                        help="folder of the CRCL XSDs (default: $LANDSCAPE_CRCL_SCHEMAS, else "
-                             "../shared/crcl/xsd if present); 'none' to skip schema validation")
+                        help="folder of NIST's CRCL XSDs (default: $LANDSCAPE_CRCL_SCHEMAS, else "
+                             "those `make install` put in .tools/crcl-schemas); 'none' to skip "
+                             "schema validation")
     parser.add_argument("--max-document", type=int, default=DEFAULT_MAX_DOCUMENT,
                         help="largest accepted document, bytes")
     parser.add_argument("--document-idle", type=float, default=DOCUMENT_IDLE,
@@ -101,9 +104,12 @@ def grpc_credentials(args: argparse.Namespace) -> grpc.ServerCredentials | None:
 
 
 async def serve(args: argparse.Namespace, ready=None) -> None:
+    schemas = schema_set(args.schemas)
+    log.log(logging.INFO if schemas else logging.WARNING, "validating CRCL documents against %s",
+            describe(schemas))
     device = CrclDevice(Endpoint(args.device, *credentials.from_arguments(args)), args.state_rate)
     await device.start()
-    options = GatewayOptions(schema_set(args.schemas), args.max_document, args.document_idle,
+    options = GatewayOptions(schemas, args.max_document, args.document_idle,
                              args.gripper_stroke)
     gateway = await Gateway(device, options).serve(args.host, args.port)
     grpc_server = None
@@ -113,8 +119,7 @@ async def serve(args: argparse.Namespace, ready=None) -> None:
         grpc_server, grpc_port = await serve_grpc(device, options, host, args.grpc_port,
                                                   grpc_credentials(args))
         print(f"CRCL gRPC face listening on {host}:{grpc_port}", flush=True)
-    print(f"CRCL gateway listening on {args.host}:{gateway.port} "
-          f"(schemas: {options.schemas.directory if options.schemas else 'none'})", flush=True)
+    print(f"CRCL gateway listening on {args.host}:{gateway.port}", flush=True)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

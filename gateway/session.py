@@ -37,7 +37,7 @@ from landscape.gateway.live import live_state
 from landscape.gateway.handlers import HANDLERS, immediate
 from landscape.gateway.rates import push_rates
 from landscape.gateway.program import expand
-from landscape.gateway.schemas import SchemaInvalid, SchemaSet
+from landscape.gateway.schemas import NEWEST, SchemaInvalid, SchemaSet
 from landscape.gateway.settings import CrclSettings
 from landscape.gateway.status import DONE, ERROR, WORKING, CommandRecord
 from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
@@ -54,6 +54,12 @@ class GatewayOptions:
     max_document: int = DEFAULT_MAX_DOCUMENT
     document_idle: float = DOCUMENT_IDLE    # s a started document may wait for more bytes
     gripper_stroke: float = status.DEFAULT_GRIPPER_STROKE
+
+    @property
+    def revision(self) -> int:
+        """The CRCL schemas' revision statuses are written in: the configured one's, else
+        the newest."""
+        return self.schemas.revision if self.schemas is not None else NEWEST
 
 
 class CrclSession:
@@ -143,7 +149,7 @@ class CrclSession:
         feed = self.device.feed
         live = live_state(feed.latest) if feed.latest is not None else None
         return status.build(self.record, next(self._status_ids), self.settings, live,
-                            feed.stale(), self.options.gripper_stroke)
+                            feed.stale(), self.options.gripper_stroke, self.options.revision)
 
     # ---- running commands ---------------------------------------------------------------------
 

@@ -18,6 +18,7 @@ from lxml import etree
 from landscape.gateway import poses
 from landscape.gateway.settings import CrclSettings, SiRate, ToleranceSi
 from landscape.gateway.live import LiveState
+from landscape.gateway.schemas import NEWEST
 from landscape.gateway.units import CrclUnits
 
 XSI = "http://www.w3.org/2001/XMLSchema-instance"
@@ -68,9 +69,11 @@ _TAIL = b"</CRCLStatus>"
 
 def build(record: CommandRecord, status_id: int, settings: CrclSettings,
           live: LiveState | None, stale: str = "",
-          gripper_stroke: float = DEFAULT_GRIPPER_STROKE) -> bytes:
+          gripper_stroke: float = DEFAULT_GRIPPER_STROKE, revision: int = NEWEST) -> bytes:
     """The CRCLStatus document, with its XML declaration, as UTF-8 bytes. `stale`: why the
-    live state is not the device's present state (none, or old), added to StateDescription."""
+    live state is not the device's present state (none, or old), added to StateDescription.
+    `revision`: of the schemas it is written for (2018 has no sensors and names the end
+    tolerance PoseTolerance)."""
     root = etree.Element("CRCLStatus")       # holds the parts made anew each time
     _command_status(root, record, status_id, stale)
     report = settings.reporting
@@ -81,8 +84,8 @@ def build(record: CommandRecord, status_id: int, settings: CrclSettings,
         if report.gripper and live.end_effector and live.end_effector not in settings.grippers_disabled:
             _gripper(root, live, settings, gripper_stroke)
     if report.settings:
-        _settings_status(root, settings)
-    if report.sensors and live is not None:
+        _settings_status(root, settings, revision)
+    if report.sensors and live is not None and revision >= NEWEST:
         _sensors(root, settings, live)
     parts = [etree.tostring(element) for element in root]
     return b"".join((_HEAD, parts[0], arm, *parts[1:], _TAIL))
@@ -191,7 +194,7 @@ def _rate_relative(parent, tag: str, rate: SiRate) -> None:
         _add(_add(parent, f"{tag}Relative"), "Fraction", number(rate.fraction))
 
 
-def _settings_status(root, s: CrclSettings) -> None:
+def _settings_status(root, s: CrclSettings, revision: int) -> None:
     units = s.units
     element = _add(root, "SettingsStatus")
     _add(element, "AngleUnitName", units.angle)
@@ -202,7 +205,8 @@ def _settings_status(root, s: CrclSettings) -> None:
     _tolerance(element, "IntermediatePoseTolerance", s.intermediate_tolerance, s)
     _add(element, "LengthUnitName", units.length)
     _add(element, "MotionCoordinated", "true" if s.coordinated else "false")
-    _tolerance(element, "EndPoseTolerance", s.end_tolerance, s)
+    _tolerance(element, "EndPoseTolerance" if revision >= NEWEST else "PoseTolerance",
+               s.end_tolerance, s)
     _parameters(element, "RobotParameterSetting",
                 {k: v for k, v in s.robot_parameters.items() if k in s.reported_parameters})
     # Schema order: RotAccelAbsolute, RotAccelRelative, RotSpeedAbsolute, RotSpeedRelative, ...
@@ -214,7 +218,7 @@ def _settings_status(root, s: CrclSettings) -> None:
     for tag, rate in (("TransAccel", s.trans_accel), ("TransSpeed", s.trans_speed)):
         _rate(element, tag, rate, units.length_out)
         _rate_relative(element, tag, rate)
-    if s.joint_tolerances:
+    if s.joint_tolerances and revision >= NEWEST:
         tolerances = _add(element, "JointTolerances")
         for joint, value in sorted(s.joint_tolerances.items()):
             setting = _add(tolerances, "Setting")
