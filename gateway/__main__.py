@@ -25,7 +25,9 @@ from landscape.gateway.schemas import SchemaSet, default_directory, describe
 from landscape.gateway.server import DEFAULT_PORT, Gateway
 from landscape.gateway.session import GatewayOptions
 from landscape.gateway.status import DEFAULT_GRIPPER_STROKE
+from landscape.gateway.units import ANGLE, LENGTH
 from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
+from landscape.gateway.workstation import BARE, Workstation, pose_values
 from landscape.server.tls import is_loopback
 
 log = logging.getLogger("landscape.gateway")
@@ -60,10 +62,33 @@ def arguments(argv=None) -> argparse.Namespace:
                              "the connection is dropped")
     parser.add_argument("--gripper-stroke", type=float, default=DEFAULT_GRIPPER_STROKE,
                         help="the gripper's opening in m, for GripperStatus")
+    parser.add_argument("--workstation-frame", type=_frame, default=Workstation().frame,
+                        metavar='"X Y Z ROLL PITCH YAW"',
+                        help="CRCL's coordinate frame in the robot's base frame, m and rad "
+                             "(fixed-axis X-Y-Z); default: the base frame itself")
+    parser.add_argument("--end-effector", default="",
+                        help="the rack tool the arm holds from InitCanon on (fetched if need "
+                             f"be), or '{BARE}' for the bare flange; default: as it is")
+    parser.add_argument("--length-units", choices=LENGTH, default=Workstation.length_unit,
+                        help="the length unit a CRCL program starts in")
+    parser.add_argument("--angle-units", choices=ANGLE, default=Workstation.angle_unit,
+                        help="the angle unit a CRCL program starts in")
     parser.add_argument("--state-rate", type=float, default=100.0,
                         help="samples per second asked of the device's state stream")
     credentials.add_arguments(parser)
     return parser.parse_args(argv)
+
+
+def _frame(text: str) -> tuple[float, ...]:
+    try:
+        return pose_values(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def workstation(args: argparse.Namespace) -> Workstation:
+    return Workstation(args.workstation_frame, args.end_effector, args.length_units,
+                       args.angle_units)
 
 
 def schema_set(option: str | None) -> SchemaSet | None:
@@ -107,10 +132,11 @@ async def serve(args: argparse.Namespace, ready=None) -> None:
     schemas = schema_set(args.schemas)
     log.log(logging.INFO if schemas else logging.WARNING, "validating CRCL documents against %s",
             describe(schemas))
+    log.info("workstation: %s", workstation(args).describe())
     device = CrclDevice(Endpoint(args.device, *credentials.from_arguments(args)), args.state_rate)
     await device.start()
     options = GatewayOptions(schemas, args.max_document, args.document_idle,
-                             args.gripper_stroke)
+                             args.gripper_stroke, workstation(args))
     gateway = await Gateway(device, options).serve(args.host, args.port)
     grpc_server = None
     if args.grpc_port is not None:

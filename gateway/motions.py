@@ -1,5 +1,8 @@
-"""CRCL motion commands as landscape.v1 motions (poses in the device's world frame = CRCL's
-workstation coordinates, m and rad).
+"""CRCL motion commands as landscape.v1 motions.
+
+Poses arrive in CRCL's frame (the session's workstation frame, its units); the device is sent
+them in the robot's base frame, in its own units (the session's Control converts), and the end
+of a motion is judged in CRCL's frame again, where the tolerances' X, Y and Z are.
 
 - MoveTo: MoveAbsolute, straight or joint-interpolated.
 - MoveThroughTo, and MoveScrew's helix: a named path (PathLoad, PathMove) from where the arm
@@ -108,8 +111,10 @@ def _end_tolerance(session, pose: m.Pose | None) -> ToleranceSi:
 
 
 async def _check_end(session, goal: np.ndarray, pose: m.Pose | None) -> str:
+    """`goal`: SI, in CRCL's frame."""
     live = await _settled(session)
-    return check_pose(session.settings.units, goal, _end_tolerance(session, pose), live.tool_pose)
+    actual = poses.to_workstation(live.tool_pose, session.settings.frame)
+    return check_pose(session.settings.units, goal, _end_tolerance(session, pose), actual)
 
 
 # ---- the commands -----------------------------------------------------------------------------------
@@ -129,43 +134,46 @@ def _straight_only(straight: bool, pose_list) -> None:
 
 async def move_to(session, cmd: m.MoveTo) -> str:
     _straight_only(cmd.straight, [cmd.end])
-    goal = poses.to_device(cmd.end, session.settings.units)
+    goal = poses.crcl_si(cmd.end, session.settings.units)
     [(speed, accel)], overrides = motion_rates(session, [cmd.end])
     if accel is not None:
         overrides[PERCENT_ACCEL] = accel
-    robot = session.control.robot
-    await _run(session, lambda: robot.move_absolute(
-        goal.tolist(), Frame.WORLD, point_name=f"CRCL MoveTo {cmd.command_id}", speed=speed,
+    control = session.control
+    values = control.units.pose(poses.to_base(goal, session.settings.frame))
+    await _run(session, lambda: control.robot.move_absolute(
+        values, Frame.BASE, point_name=f"CRCL MoveTo {cmd.command_id}", speed=speed,
         motion=Motion.STRAIGHT if cmd.straight else Motion.JOINT), overrides)
     return await _check_end(session, goal, cmd.end)
 
 
 async def move_through_to(session, cmd: m.MoveThroughTo) -> str:
     _straight_only(cmd.straight, cmd.waypoints)
-    units = session.settings.units
+    units, frame = session.settings.units, session.settings.frame
     percents, overrides = motion_rates(session, list(cmd.waypoints))
-    points = [(poses.to_device(p, units), *rates) for p, rates in zip(cmd.waypoints, percents)]
+    goals = [poses.crcl_si(p, units) for p in cmd.waypoints]
+    points = [(poses.to_base(goal, frame), *rates) for goal, rates in zip(goals, percents)]
     await run_path(session, cmd.command_id, points, cmd.straight, overrides)
-    return await _check_end(session, points[-1][0], cmd.waypoints[-1])
+    return await _check_end(session, goals[-1], cmd.waypoints[-1])
 
 
 async def run_path(session, command_id: int, points, straight: bool, overrides=None) -> None:
-    """Through (pose SI (6,), speed percent or None, accel percent or None) points from where
-    the arm is, blended through all but the last."""
+    """Through (pose SI (6,) in the base frame, speed percent or None, accel percent or None)
+    points from where the arm is, blended through all but the last."""
     live = await present(session)
     name = f"{session.name.split()[0]}-{command_id}"
     motion = Motion.STRAIGHT if straight else Motion.JOINT
     transition = speed_percent(session)
-    tags = [TagPoint(list(p), tag_name=f"waypoint {i + 1}", tag_index=i + 1,
+    control = session.control
+    tags = [TagPoint(control.units.pose(p), tag_name=f"waypoint {i + 1}", tag_index=i + 1,
                      transition_speed=0.0 if i == len(points) - 1 else transition,
                      speed=speed or 0.0, accel=accel or 0.0)
             for i, (p, speed, accel) in enumerate(points)]
-    robot = session.control.robot
+    robot = control.robot
     try:
         # The path starts where the arm is, so its first segment is straight when asked.
-        await robot.path_load(name, [TagPoint(live.joint_positions.tolist(), tag_name="start")],
-                              Frame.JOINT, motion=motion)
-        await robot.path_load(name, tags, Frame.WORLD, motion=motion)
+        await robot.path_load(name, [TagPoint(control.units.joints(live.joint_positions),
+                                              tag_name="start")], Frame.JOINT, motion=motion)
+        await robot.path_load(name, tags, Frame.BASE, motion=motion)
         await _run(session, lambda: robot.path_move(name, 1), overrides)
     finally:
         await asyncio.shield(_clear(robot, name))
@@ -181,7 +189,7 @@ async def move_screw(session, cmd: m.MoveScrew) -> str:
     the free distance, then the screw: a rigid turn about the axis through the axis point
     (default: the controlled point), parallel to the tool's Z, while advancing along it. The
     start's speeds, accelerations and tolerance (a PoseAndSetType) hold for all of it."""
-    units = session.settings.units
+    units, frame = session.settings.units, session.settings.frame
     if cmd.start is not None:
         # Straight: the start's rates (RotSpeed too) then hold on the way to it as well.
         await move_to(session, m.MoveTo(command_id=cmd.command_id, straight=True, end=cmd.start))
@@ -193,22 +201,21 @@ async def move_screw(session, cmd: m.MoveScrew) -> str:
         here[:3, 3] += axis * units.length_si(cmd.axial_distance_free)
         await run_path(session, cmd.command_id, [(poses.from_matrix(here), speed, accel)], True,
                        overrides)
-    center = here[:3, 3] if cmd.axis_point is None else np.array(
+    center = here[:3, 3] if cmd.axis_point is None else poses.point_to_base(np.array(
         [units.length_si(cmd.axis_point.x), units.length_si(cmd.axis_point.y),
-         units.length_si(cmd.axis_point.z)])
+         units.length_si(cmd.axis_point.z)]), frame)
     turn, advance = units.angle_si(cmd.turn), units.length_si(cmd.axial_distance_screw)
     radius = float(np.linalg.norm(np.cross(here[:3, 3] - center, axis)))
     steps = point_count(turn, advance, radius)
     helix = await helix_off_loop(here, center, axis, turn, advance, steps)
     points = [(pose, speed, accel) for pose in helix]
     await run_path(session, cmd.command_id, points, True, overrides)
-    return await _check_end(session, np.array(helix[-1]), cmd.start)
+    return await _check_end(session, poses.to_workstation(np.array(helix[-1]), frame), cmd.start)
 
 
 async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
     units, control = session.settings.units, session.control
-    maxima = control.limits.max_joint_velocities
-    accel_maxima = control.accel_limits.max_joint_accels
+    maxima, accel_maxima = control.limits.joint_speeds, control.limits.joint_accels
     target = (await present(session)).joint_positions.copy()
     speeds, accels = [], []
     for joint in cmd.joints:
@@ -224,7 +231,7 @@ async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
             accels.append(percent(units.angle_si(joint.details.accel),
                                    accel_maxima[joint.joint - 1]))
     await _run(session, lambda: control.robot.move_absolute(
-        target.tolist(), Frame.JOINT, point_name=f"CRCL ActuateJoints {cmd.command_id}",
+        control.units.joints(target), Frame.JOINT, point_name=f"CRCL ActuateJoints {cmd.command_id}",
         speed=min(speeds) if speeds else None),
         {PERCENT_ACCEL: min(accels)} if accels else None)
     return _check_joints(session, cmd, target, await _settled(session))

@@ -11,7 +11,7 @@ scale; the joints get the same percent of their maxima. So:
 
 The session's rates reach the device when a motion needs them, just before it starts (only
 those that changed since last sent), not when a Set*Speed / Set*Accel sets them: a setting is
-no device round trip. Per-command rates (a PoseAndSetType, a waypoint) are set the same way
+no device round trip. The session's end puts the device's own back (device.py). Per-command rates (a PoseAndSetType, a waypoint) are set the same way
 for that command's motion and the session's put back once it has started: the device plans at
 the start.
 """
@@ -37,48 +37,39 @@ def percent(value: float, maximum: float) -> float:
 
 
 def speed_percent(session, rate: SiRate | None = None) -> float:
-    v_max = session.control.limits.max_world_linear_velocity
+    v_max = session.control.limits.linear_speed
     return percent((rate or session.settings.trans_speed).value(v_max), v_max)
 
 
 def accel_percent(session, rate: SiRate | None = None) -> float:
-    a_max = session.control.accel_limits.max_world_linear_accel
+    a_max = session.control.limits.linear_accel
     return percent((rate or session.settings.trans_accel).value(a_max), a_max)
 
 
 def rot_speed(session, rate: SiRate | None = None) -> float:
-    return (rate or session.settings.rot_speed).value(
-        session.control.limits.max_world_angular_velocity)
+    return (rate or session.settings.rot_speed).value(session.control.limits.angular_speed)
 
 
 def rot_accel(session, rate: SiRate | None = None) -> float:
-    return (rate or session.settings.rot_accel).value(
-        session.control.accel_limits.max_world_angular_accel)
+    return (rate or session.settings.rot_accel).value(session.control.limits.angular_accel)
 
 
 def session_rates(session) -> dict[tuple[str, int], float]:
-    """The device settings that carry the session's rates."""
-    limits, accel_limits = session.control.limits, session.control.accel_limits
+    """The device settings that carry the session's rates (SI, or percent)."""
+    limits = session.control.limits
     return {PERCENT_SPEED: speed_percent(session),
-            LINEAR_SPEED: limits.max_world_linear_velocity,
+            LINEAR_SPEED: limits.linear_speed,
             ANGULAR_SPEED: rot_speed(session),
             PERCENT_ACCEL: accel_percent(session),
-            LINEAR_ACCEL: accel_limits.max_world_linear_accel,
+            LINEAR_ACCEL: limits.linear_accel,
             ANGULAR_ACCEL: rot_accel(session)}
 
 
 async def push(session, wanted: dict[tuple[str, int], float]) -> None:
-    """These device settings, each sent only if it differs from what was sent last."""
-    control = session.control
-    for (rpc, kind), value in wanted.items():
-        if control.pushed.get((rpc, kind)) == value:
-            continue
-        control.pushed.pop((rpc, kind), None)   # unknown until the device says yes
-        if rpc == "SetSpeed":
-            await control.robot.set_speed(value, kind)
-        else:
-            await control.robot.set_acceleration(value, kind)
-        control.pushed[(rpc, kind)] = value
+    """These device settings, each sent only if it differs from what was sent last (the
+    session's Control puts them back as they were when the session ends)."""
+    for rate, value in wanted.items():
+        await session.control.set_rate(rate, value)
 
 
 async def push_rates(session) -> None:

@@ -13,8 +13,10 @@
 - Before InitCanon, and after EndCanon, commands other than InitCanon are errors (EndCanon
   and StopMotion before InitCanon have nothing to do, and are done).
 - InitCanon takes the device's lock for this session (one session at a time holds it), turns
-  the drives on and resets units and settings; EndCanon stops, turns the drives off and
-  releases. A connection that ends lets the device's disconnect handler do the same.
+  the drives on, starts the session's settings from the cell's workstation (its frame and
+  units, workstation.py) and has the arm hold the cell's end effector; EndCanon stops, turns
+  the drives off, puts back what the session set on the device and releases. A connection
+  that ends does the same (device.py), the device's disconnect handler at the last.
 - A lock lost (the device ended the session: its keep-alives stopped arriving, the server
   stopped) ends the running command, and those queued, in CRCL_Error naming the loss and the
   device's reason; every later status says so, until InitCanon takes the lock again (never
@@ -40,7 +42,9 @@ from landscape.gateway.program import expand
 from landscape.gateway.schemas import NEWEST, SchemaInvalid, SchemaSet
 from landscape.gateway.settings import CrclSettings
 from landscape.gateway.status import DONE, ERROR, WORKING, CommandRecord
+from landscape.gateway.tooling import hold_end_effector
 from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
+from landscape.gateway.workstation import Workstation
 from landscape.v1 import types_pb2
 
 log = logging.getLogger(__name__)
@@ -54,6 +58,7 @@ class GatewayOptions:
     max_document: int = DEFAULT_MAX_DOCUMENT
     document_idle: float = DOCUMENT_IDLE    # s a started document may wait for more bytes
     gripper_stroke: float = status.DEFAULT_GRIPPER_STROKE
+    workstation: Workstation = Workstation()
 
     @property
     def revision(self) -> int:
@@ -269,16 +274,20 @@ class CrclSession:
         if self.control is None:
             control = self.control = await self.device.take_control(self.name, self.peer)
             control.robot.session.add_end_listener(lambda lost: self._ended(control, lost))
+        workstation = self.options.workstation
         try:
             await self.control.prepare()
-            self.settings = CrclSettings()
+            self.settings = CrclSettings(units=workstation.units, frame=workstation.frame)
             await self.device.feed.watch(self, ())
             await push_rates(self)
+            tool = await hold_end_effector(self, workstation.end_effector)
         except BaseException:
             await self.drop_control()
             raise
         self.ended, self.lost = False, ""
-        return "session started: lock held, drives on, default units"
+        units = self.settings.units
+        return (f"session started: lock held, drives on, {units.length} and {units.angle}"
+                f"{', ' + tool if tool else ''}")
 
     def _ended(self, control: Control, lost: SessionEnded | None) -> None:
         """The device session of `control` ended: lost, unless this client closed it."""

@@ -79,7 +79,7 @@ def build(record: CommandRecord, status_id: int, settings: CrclSettings,
     report = settings.reporting
     arm = b""
     if live is not None:
-        arm = _arm(live, settings.units, report.pose, tuple(sorted(
+        arm = _arm(live, settings.units, settings.frame, report.pose, tuple(sorted(
             report.joint_reports.items())) if report.joints else ())
         if report.gripper and live.end_effector and live.end_effector not in settings.grippers_disabled:
             _gripper(root, live, settings, gripper_stroke)
@@ -92,15 +92,15 @@ def build(record: CommandRecord, status_id: int, settings: CrclSettings,
 
 
 @functools.lru_cache(maxsize=16)
-def _arm(live: LiveState, units: CrclUnits, pose: bool,
+def _arm(live: LiveState, units: CrclUnits, frame: tuple[float, ...], pose: bool,
          joint_reports: tuple[tuple[int, tuple[bool, bool, bool]], ...]) -> bytes:
-    """JointStatuses and PoseStatus of one sample, as reported: made once per sample and
-    report, however many clients poll it (the bulk of a status)."""
+    """JointStatuses and PoseStatus (in CRCL's `frame`) of one sample, as reported: made once
+    per sample and report, however many clients poll it (the bulk of a status)."""
     root = etree.Element("CRCLStatus")
     if joint_reports:
         _joint_statuses(root, units, joint_reports, live)
     if pose:
-        point, x_axis, z_axis = poses.axes(live.tool_pose)
+        point, x_axis, z_axis = poses.axes(poses.to_workstation(live.tool_pose, frame))
         element = _add(_add(root, "PoseStatus"), "Pose")
         _vector(element, "Point", [units.length_out(v) for v in point], names="XYZ")
         _vector(element, "XAxis", x_axis)

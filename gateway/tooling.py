@@ -22,12 +22,13 @@ import pinocchio as pin
 
 from landscape.gateway import model as m
 from landscape.gateway import poses
-from landscape.gateway.errors import CrclError
+from landscape.gateway.device_units import DeviceUnits
+from landscape.gateway.errors import CrclError, describe
 from landscape.gateway.motions import SETTLE_TIMEOUT, present
 from landscape.gateway.rates import push_rates
 from landscape.gateway.status import is_vacuum
+from landscape.gateway.workstation import BARE
 from landscape.client import LandscapeError
-from landscape.v1 import types_pb2
 
 TOOL_CHANGER_OUTPUT = "toolchanger_lock"    # the cell's output: 1 couples, 0 releases
 MAIN_FUNCTION = 1                           # bit 0 of ActivateTool's bit field
@@ -37,9 +38,6 @@ AXIS_REACH = 0.002           # m off the plate's axis
 ANGLE_REACH = np.radians(3.0)   # rad between the flange's and the plate's orientation
 ON_STATES = ("closed", "suction_on", "holding")   # the device's tool states, function on
 OFF_STATES = ("open", "off")                       # and off
-_LENGTH_M = {types_pb2.LINEAR_UNIT_METERS: 1.0, types_pb2.LINEAR_UNIT_MILLIMETERS: 0.001,
-             types_pb2.LINEAR_UNIT_CENTIMETERS: 0.01, types_pb2.LINEAR_UNIT_INCHES: 0.0254,
-             types_pb2.LINEAR_UNIT_FEET: 0.3048}
 
 
 async def _tool(session) -> tuple[str, str]:
@@ -60,25 +58,28 @@ async def _changer(session, couple: bool) -> None:
     raise CrclError(f"the cell has no {TOOL_CHANGER_OUTPUT!r} output: no tool changer")
 
 
+def _matrix(pose) -> np.ndarray:
+    """4x4 of a landscape.v1 Pose in m and rad (the cell's description is in SI)."""
+    return poses.matrix(np.array([pose.x, pose.y, pose.z, pose.roll, pose.pitch, pose.yaw]))
+
+
 async def _slots(session) -> dict[str, np.ndarray]:
-    """Each rack tool's plate in its slot (4x4, world, m). A tool on the flange has no place in
-    the cell's description: its slot is the one last seen (the gateway's device remembers them)."""
+    """Each rack tool's plate in its slot (4x4, base frame, m). A tool on the flange has no
+    place in the cell's description: its slot is the one last seen (the gateway's device
+    remembers them)."""
     cell = await session.control.robot.get_cell_description()
-    session.device.slots.update({body.name: poses.matrix(np.array(
-        [body.pose.x, body.pose.y, body.pose.z, body.pose.roll, body.pose.pitch, body.pose.yaw]))
-        for body in cell.bodies if body.kind == body.KIND_TOOL and not body.attached_to})
+    world_to_base = np.linalg.inv(_matrix(cell.base))
+    session.device.slots.update({body.name: world_to_base @ _matrix(body.pose)
+                                 for body in cell.bodies
+                                 if body.kind == body.KIND_TOOL and not body.attached_to})
     return session.device.slots
 
 
 async def _flange(session) -> np.ndarray:
-    """The flange now (4x4, world, m): the controlled point less the tool offset."""
+    """The flange now (4x4, base frame, m): the controlled point less the tool offset."""
     live = await present(session)
     reply = await session.control.robot.get_tool_offsets()
-    o, scale = reply.offset, _LENGTH_M.get(reply.units.linear, 1.0)
-    angles = np.array([o.roll, o.pitch, o.yaw])
-    if reply.units.angular == types_pb2.ANGULAR_UNIT_DEGREES:
-        angles = np.radians(angles)
-    offset = poses.matrix(np.array([o.x * scale, o.y * scale, o.z * scale, *angles]))
+    offset = poses.matrix(np.array(DeviceUnits.of(reply.units).pb_pose_si(reply.offset)))
     return poses.matrix(live.tool_pose) @ np.linalg.inv(offset)
 
 
@@ -97,6 +98,33 @@ def _docking(flange: np.ndarray, plate: np.ndarray) -> float | None:
     if lateral > AXIS_REACH or turned > ANGLE_REACH or not -SLOT_REACH <= along <= DOCK_REACH:
         return None
     return max(along, 0.0)
+
+
+async def hold_end_effector(session, wanted: str) -> str:
+    """InitCanon: the arm holds the cell's end effector (workstation.py): another tool on the
+    flange goes back to its slot (PutTool) and this one is fetched (GetTool). "" leaves the
+    flange as it is, BARE empties it. Returns what was done; CrclError naming why not."""
+    target = "" if wanted == BARE else wanted
+    tool, _ = await _tool(session)
+    if not wanted or tool == target:
+        return ""
+    slots = await _slots(session)
+    if target and target not in slots:
+        raise CrclError(f"the cell's end effector {target!r} is no tool of this cell's rack "
+                        f"({', '.join(slots) or 'it has none'})")
+    await _ready_to_move(session)
+    robot, done = session.control.robot, []
+    try:
+        if tool:
+            await robot.put_tool(tool)
+            done.append(f"the {tool} put back in the rack")
+        if target:
+            await robot.get_tool(target)
+            done.append(f"the {target} fetched from the rack")
+    except LandscapeError as refused:
+        raise CrclError(f"the arm cannot hold the cell's end effector ({wanted}): "
+                        f"{describe(refused)}") from None
+    return ", ".join(done)
 
 
 async def close_tool_changer(session, cmd: m.CloseToolChanger) -> str:

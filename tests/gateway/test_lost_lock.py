@@ -123,7 +123,7 @@ def test_every_device_call_names_the_gateway_and_the_crcl_peer(proxied):
     by_method = {}
     for method, metadata in proxy.metadata:
         by_method.setdefault(method, []).append(metadata)
-    for method in ("Connect", "Lock", "Activate", "SetUnits"):
+    for method in ("Connect", "Lock", "Activate", "GetUnits"):
         for metadata in by_method[method]:
             assert metadata.get("landscape-client") == "crcl-gateway", method
             assert urllib.parse.unquote(metadata["landscape-on-behalf-of"]) == peer, method
