@@ -35,7 +35,7 @@ import numpy as np
 from landscape.client import CommandFailed, Frame, LandscapeError, Motion, TagPoint
 from landscape.gateway import model as m
 from landscape.gateway import poses
-from landscape.gateway.errors import CrclError
+from landscape.gateway.errors import CrclError, refused_before_moving
 from landscape.gateway.live import LiveState, live_state
 from landscape.gateway.rates import PERCENT_ACCEL, RatesFor, motion_rates, percent, speed_percent
 from landscape.gateway.screw import helix_off_loop, point_count
@@ -54,7 +54,8 @@ async def _run(session, start, overrides=None) -> None:
     await session.control.ensure_active()
     async with RatesFor(session, overrides or {}):
         session.motion_start = asyncio.ensure_future(start())
-        command = await asyncio.shield(session.motion_start)
+        with refused_before_moving():
+            command = await asyncio.shield(session.motion_start)
         session.motion_start = None
     try:
         done = await command.wait(timeout=None)
@@ -156,9 +157,11 @@ async def move_through_to(session, cmd: m.MoveThroughTo) -> str:
     return await _check_end(session, goals[-1], cmd.waypoints[-1])
 
 
-async def run_path(session, command_id: int, points, straight: bool, overrides=None) -> None:
+async def run_path(session, command_id: int, points, straight: bool, overrides=None,
+                   point: str = "waypoint") -> None:
     """Through (pose SI (6,) in the base frame, speed percent or None, accel percent or None)
-    points from where the arm is, blended through all but the last."""
+    points from where the arm is, blended through all but the last; `point` names them in
+    errors."""
     live = await present(session)
     name = f"{session.name.split()[0]}-{command_id}"
     motion = Motion.STRAIGHT if straight else Motion.JOINT
@@ -173,7 +176,8 @@ async def run_path(session, command_id: int, points, straight: bool, overrides=N
         # The path starts where the arm is, so its first segment is straight when asked.
         await robot.path_load(name, [TagPoint(control.units.joints(live.joint_positions),
                                               tag_name="start")], Frame.JOINT, motion=motion)
-        await robot.path_load(name, tags, Frame.BASE, motion=motion)
+        with refused_before_moving(point):
+            await robot.path_load(name, tags, Frame.BASE, motion=motion)
         await _run(session, lambda: robot.path_move(name, 1), overrides)
     finally:
         await asyncio.shield(_clear(robot, name))
@@ -200,7 +204,7 @@ async def move_screw(session, cmd: m.MoveScrew) -> str:
     if cmd.axial_distance_free:
         here[:3, 3] += axis * units.length_si(cmd.axial_distance_free)
         await run_path(session, cmd.command_id, [(poses.from_matrix(here), speed, accel)], True,
-                       overrides)
+                       overrides, "the free move's point")
     center = here[:3, 3] if cmd.axis_point is None else poses.point_to_base(np.array(
         [units.length_si(cmd.axis_point.x), units.length_si(cmd.axis_point.y),
          units.length_si(cmd.axis_point.z)]), frame)
@@ -209,7 +213,7 @@ async def move_screw(session, cmd: m.MoveScrew) -> str:
     steps = point_count(turn, advance, radius)
     helix = await helix_off_loop(here, center, axis, turn, advance, steps)
     points = [(pose, speed, accel) for pose in helix]
-    await run_path(session, cmd.command_id, points, True, overrides)
+    await run_path(session, cmd.command_id, points, True, overrides, "screw point")
     return await _check_end(session, poses.to_workstation(np.array(helix[-1]), frame), cmd.start)
 
 

@@ -56,7 +56,7 @@ def test_the_example_program_without_tool_commands_fails_where_the_arm_cannot_re
     path = tmp_path / "moves-only.xml"
     tree.write(str(path))
     with pytest.raises(ProgramFailed, match=r"command 6 \(MoveThroughTo, CommandID 8\) failed: "
-                                            r"PathLoad refused .*not reachable"):
+                                            r"waypoint 1 is out of the arm's reach, nothing moved"):
         run(path, f"127.0.0.1:{gateway.port}", out=io.StringIO())
 
 
