@@ -81,8 +81,7 @@ async def configure_status_report(session, cmd: m.ConfigureStatusReport) -> str:
     r = session.settings.reporting
     r.joints, r.pose, r.gripper = cmd.report_joints, cmd.report_pose, cmd.report_gripper
     r.settings, r.sensors, r.guards = cmd.report_settings, cmd.report_sensors, cmd.report_guards
-    return "status report configured" + (" (guards are not supported: none to report)"
-                                         if cmd.report_guards else "")
+    return "status report configured"
 
 
 MAX_DWELL = 86_400.0   # s

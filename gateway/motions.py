@@ -34,7 +34,7 @@ import numpy as np
 
 from landscape.client import CommandFailed, Frame, LandscapeError, Motion, TagPoint
 from landscape.gateway import model as m
-from landscape.gateway import poses
+from landscape.gateway import guards, poses
 from landscape.gateway.errors import CrclError, refused_before_moving
 from landscape.gateway.live import LiveState, live_state
 from landscape.gateway.rates import PERCENT_ACCEL, RatesFor, motion_rates, percent, speed_percent
@@ -134,6 +134,8 @@ def _straight_only(straight: bool, pose_list) -> None:
 
 
 async def move_to(session, cmd: m.MoveTo) -> str:
+    if cmd.guards:
+        return await _guarded_move_to(session, cmd)
     _straight_only(cmd.straight, [cmd.end])
     goal = poses.crcl_si(cmd.end, session.settings.units)
     [(speed, accel)], overrides = motion_rates(session, [cmd.end])
@@ -145,6 +147,33 @@ async def move_to(session, cmd: m.MoveTo) -> str:
         values, Frame.BASE, point_name=f"CRCL MoveTo {cmd.command_id}", speed=speed,
         motion=Motion.STRAIGHT if cmd.straight else Motion.JOINT), overrides)
     return await _check_end(session, goal, cmd.end)
+
+
+async def _guarded_move_to(session, cmd: m.MoveTo) -> str:
+    """MoveTo with guards: the device's guarded move (guards.py), in a straight line (which
+    "any convenient trajectory" allows too)."""
+    units, frame, control = session.settings.units, session.settings.frame, session.control
+    goal = poses.crcl_si(cmd.end, units)
+    goal_base = poses.to_base(goal, frame)
+    tolerance = _end_tolerance(session, cmd.end)
+    motion = guards.tool_motion((await present(session)).tool_pose, goal_base,
+                                min(tolerance.x_axis, tolerance.z_axis))
+    sensor = guards.sensor_of(cmd.guards)
+    limits = guards.thresholds(session, cmd.guards,
+                               guards.reading_si(await control.robot.get_sensor_reading(sensor)))
+    [(speed, accel)], overrides = motion_rates(session, [cmd.end])
+    if accel is not None:
+        overrides[PERCENT_ACCEL] = accel
+    in_device = ([control.units.length(v) for v in limits] if sensor == guards.RANGE_SENSOR
+                 else limits)                                   # forces are N whatever the units
+    await _run(session, lambda: control.robot.move_react(
+        sensor, [control.units.length(v) for v in motion], in_device,
+        speed or speed_percent(session)), overrides)
+    live = await _settled(session)
+    reading = guards.reading_si(await control.robot.get_sensor_reading(sensor))
+    said = guards.outcome(session, cmd.guards, limits, goal_base, live.tool_pose, reading,
+                          session.motion_ended)
+    return said or await _check_end(session, goal, cmd.end)
 
 
 async def move_through_to(session, cmd: m.MoveThroughTo) -> str:
@@ -226,8 +255,10 @@ async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
         if joint.joint > len(target):
             raise CrclError(f"joint {joint.joint}: the arm has joints 1 to {len(target)}")
         if isinstance(joint.details, m.JointForceTorque):
-            raise CrclError(f"joint {joint.joint}: force/torque control of a joint is not "
-                            f"supported (landscape.v1 has no joint torque mode); use JointSpeedAccel")
+            raise CrclError(f"JointForceTorque on joint {joint.joint}: landscape.v1 has no call "
+                            f"that commands a joint's force or torque (the controller's torque "
+                            f"mode is not part of the contract), so nothing moved; send "
+                            f"JointSpeedAccel")
         target[joint.joint - 1] = units.angle_si(joint.position)
         if joint.details.speed is not None:
             speeds.append(percent(units.angle_si(joint.details.speed), maxima[joint.joint - 1]))

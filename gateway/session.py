@@ -32,10 +32,11 @@ from dataclasses import dataclass
 
 from landscape.client import LandscapeError, SessionEnded
 from landscape.gateway import model as m
-from landscape.gateway import parse, status, xmlsafe
+from landscape.gateway import guards, parse, status, xmlsafe
 from landscape.gateway.device import Control, CrclDevice
 from landscape.gateway.errors import CrclError, describe
 from landscape.gateway.live import live_state
+from landscape.gateway.guards import GuardReport
 from landscape.gateway.handlers import HANDLERS, immediate
 from landscape.gateway.rates import push_rates
 from landscape.gateway.program import expand
@@ -87,6 +88,7 @@ class CrclSession:
         self.motion_start: asyncio.Future | None = None   # a motion call in flight
         self._dropped: asyncio.Future | None = None       # closing a lost control
         self.motion_ended = 0.0    # unix s the last device motion ended (its done event)
+        self.guard_report: GuardReport | None = None   # the last guarded command's
         self.listeners: list = []           # called with no argument when the record changes
 
     # ---- documents -------------------------------------------------------------------------
@@ -154,7 +156,8 @@ class CrclSession:
         feed = self.device.feed
         live = live_state(feed.latest) if feed.latest is not None else None
         return status.build(self.record, next(self._status_ids), self.settings, live,
-                            feed.stale(), self.options.gripper_stroke, self.options.revision)
+                            feed.stale(), self.options.gripper_stroke, self.options.revision,
+                            self.guard_report)
 
     # ---- running commands ---------------------------------------------------------------------
 
@@ -255,8 +258,7 @@ class CrclSession:
     async def execute(self, command: m.Command) -> str | None:
         """Carry out one command; returns a description for its Done status."""
         if command.guards:
-            raise CrclError("guards (sensor limits on a command) are not supported by this "
-                            "gateway; send the command without Guard elements")
+            guards.refuse(command)       # unless the device can watch them (a MoveTo's)
         if isinstance(command, m.InitCanon):
             return await self.init_canon()
         if self.control is None and self.lost:
@@ -278,6 +280,7 @@ class CrclSession:
         try:
             await self.control.prepare()
             self.settings = CrclSettings(units=workstation.units, frame=workstation.frame)
+            self.guard_report = None
             await self.device.feed.watch(self, ())
             await push_rates(self)
             tool = await hold_end_effector(self, workstation.end_effector)

@@ -17,6 +17,7 @@ from lxml import etree
 
 from landscape.gateway import poses
 from landscape.gateway.settings import CrclSettings, SiRate, ToleranceSi
+from landscape.gateway.guards import GuardReport
 from landscape.gateway.live import LiveState
 from landscape.gateway.schemas import NEWEST
 from landscape.gateway.units import CrclUnits
@@ -63,17 +64,27 @@ def _vector(parent, tag: str, values, names: str = "IJK") -> None:
         _add(element, name, number(value))
 
 
+def _pose(parent, tag: str, values, units: CrclUnits) -> None:
+    """A PoseType of SI values (in CRCL's frame), its Point in `units`."""
+    point, x_axis, z_axis = poses.axes(values)
+    element = _add(parent, tag)
+    _vector(element, "Point", [units.length_out(v) for v in point], names="XYZ")
+    _vector(element, "XAxis", x_axis)
+    _vector(element, "ZAxis", z_axis)
+
+
 _HEAD = f"<?xml version='1.0' encoding='UTF-8'?>\n<CRCLStatus xmlns:xsi=\"{XSI}\">".encode()
 _TAIL = b"</CRCLStatus>"
 
 
 def build(record: CommandRecord, status_id: int, settings: CrclSettings,
           live: LiveState | None, stale: str = "",
-          gripper_stroke: float = DEFAULT_GRIPPER_STROKE, revision: int = NEWEST) -> bytes:
+          gripper_stroke: float = DEFAULT_GRIPPER_STROKE, revision: int = NEWEST,
+          guards: GuardReport | None = None) -> bytes:
     """The CRCLStatus document, with its XML declaration, as UTF-8 bytes. `stale`: why the
     live state is not the device's present state (none, or old), added to StateDescription.
     `revision`: of the schemas it is written for (2018 has no sensors and names the end
-    tolerance PoseTolerance)."""
+    tolerance PoseTolerance). `guards`: the last guarded command's, for GuardsStatuses."""
     root = etree.Element("CRCLStatus")       # holds the parts made anew each time
     _command_status(root, record, status_id, stale)
     report = settings.reporting
@@ -87,6 +98,8 @@ def build(record: CommandRecord, status_id: int, settings: CrclSettings,
         _settings_status(root, settings, revision)
     if report.sensors and live is not None and revision >= NEWEST:
         _sensors(root, settings, live)
+    if report.guards and guards is not None and revision >= NEWEST:
+        _guards(root, settings.units, guards)
     parts = [etree.tostring(element) for element in root]
     return b"".join((_HEAD, parts[0], arm, *parts[1:], _TAIL))
 
@@ -100,11 +113,7 @@ def _arm(live: LiveState, units: CrclUnits, frame: tuple[float, ...], pose: bool
     if joint_reports:
         _joint_statuses(root, units, joint_reports, live)
     if pose:
-        point, x_axis, z_axis = poses.axes(poses.to_workstation(live.tool_pose, frame))
-        element = _add(_add(root, "PoseStatus"), "Pose")
-        _vector(element, "Point", [units.length_out(v) for v in point], names="XYZ")
-        _vector(element, "XAxis", x_axis)
-        _vector(element, "ZAxis", z_axis)
+        _pose(_add(root, "PoseStatus"), "Pose", poses.to_workstation(live.tool_pose, frame), units)
     return b"".join(etree.tostring(element) for element in root)
 
 
@@ -245,6 +254,23 @@ def _sensors(root, settings: CrclSettings, live: LiveState) -> None:
             _add(sensor, tag, number(units.force_out(value)))
         for tag, value in zip(("Tx", "Ty", "Tz"), values[3:]):
             _add(sensor, tag, number(units.torque_out(value)))
+
+
+def _guards(root, units: CrclUnits, report: GuardReport) -> None:
+    element = _add(root, "GuardsStatuses")
+    for guard in report.guards:
+        written = _add(element, "Guard")
+        _add(written, "SensorID", guard.sensor_id)
+        if guard.sub_field is not None:
+            _add(written, "SubField", guard.sub_field)
+        _add(written, "LimitType", guard.limit_type)
+        _add(written, "LimitValue", number(guard.limit_value))
+    _add(element, "TriggerCount", str(report.trigger_count))
+    _add(element, "TriggerStopTimeMicros", str(report.stop_time_us))
+    if report.value is not None:
+        _add(element, "TriggerValue", number(report.value))
+    if report.pose is not None:
+        _pose(element, "TriggerPose", report.pose, units)
 
 
 def _sensor(parent, tag: str, name: str, live: LiveState):

@@ -198,7 +198,8 @@ async def set_end_effector_parameters(session, cmd: m.SetEndEffectorParameters) 
 
 async def enable_gripper(session, cmd: m.EnableGripper) -> str:
     if cmd.options:
-        raise CrclError("gripper options are not supported")
+        names = ", ".join(o.name for o in cmd.options)
+        raise CrclError(f"GripperOption ({names}): landscape.v1 tools take no options")
     session.settings.grippers_disabled.discard(cmd.gripper_name)
     return f"gripper {cmd.gripper_name} reported"
 
@@ -209,12 +210,31 @@ async def disable_gripper(session, cmd: m.DisableGripper) -> str:
 
 
 async def enable_sensor(session, cmd: m.EnableSensor) -> str:
-    if cmd.options:
-        raise CrclError("sensor options are not supported")
+    """Reported in SensorStatuses from now on; SensorOption tare=true zeroes it first at its
+    present reading (the device's vendor command "tare <sensor>")."""
+    tare = False
+    for option in cmd.options:
+        if option.name != "tare" or option.value not in ("true", "false"):
+            raise CrclError(f"SensorOption {option.name}={option.value!r}: the one option is "
+                            f"tare (true: zero the sensor at its present reading, or false)")
+        tare = option.value == "true"
     # The gateway's one state stream carries it from now on, once the device has accepted it.
     await _watch(session, session.settings.sensors | {cmd.sensor_id})
     session.settings.sensors.add(cmd.sensor_id)
-    return f"sensor {cmd.sensor_id} reported"
+    if tare:
+        await session.control.robot.send_command(f"tare {cmd.sensor_id}")
+        await _fresh_sample(session.device.feed)
+    return f"sensor {cmd.sensor_id} reported{', tared' if tare else ''}"
+
+
+async def _fresh_sample(feed) -> None:
+    """Until a sample taken after now is there for GetStatus: the second one to arrive (the
+    first may have been on its way)."""
+    for _ in range(2):
+        newest = feed.latest.message.sequence if feed.latest is not None else -1
+        if await feed.until(lambda s: s.message.sequence > newest, SETTLE_TIMEOUT) is None:
+            raise CrclError(f"no state from the device within {SETTLE_TIMEOUT:g} s: "
+                            f"{feed.stale() or 'the stream is stalled'}")
 
 
 async def disable_sensor(session, cmd: m.DisableSensor) -> str:

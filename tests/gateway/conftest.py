@@ -9,14 +9,18 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from crcl_support import XSD, RawClient, RunningGateway, field  # noqa: E402
+from landscape.gateway.workstation import Workstation  # noqa: E402
 from grpc_proxy import GrpcProxy  # noqa: E402
 
 
 @pytest.fixture
 def gateway(request, server):
     """The gateway validating against the folder a module names in CRCL_SCHEMAS (NIST's 2021
-    revision, for the commands it adds), else the installed schemas (crcl4java's 2018)."""
-    running = RunningGateway(server.target, schemas=getattr(request.module, "CRCL_SCHEMAS", XSD))
+    revision, for the commands it adds), else the installed schemas (crcl4java's 2018); its
+    workstation is the module's CRCL_WORKSTATION, else the robot base with units as CRCL's."""
+    running = RunningGateway(server.target, schemas=getattr(request.module, "CRCL_SCHEMAS", XSD),
+                             workstation=getattr(request.module, "CRCL_WORKSTATION",
+                                                 Workstation()))
     yield running
     running.close()
 

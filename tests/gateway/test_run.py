@@ -64,7 +64,7 @@ def test_the_example_program_without_tool_commands_fails_where_the_arm_cannot_re
 @ALL
 def test_program_all_stops_at_its_first_command(gateway, example):
     with pytest.raises(ProgramFailed, match=r"command 1 \(ActuateJoints, CommandID 2\) failed: "
-                                            r"joint 3: force/torque control"):
+                                            r"JointForceTorque on joint 3"):
         run(EXAMPLES / example, f"127.0.0.1:{gateway.port}", out=io.StringIO())
 
 

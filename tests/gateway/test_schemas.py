@@ -15,7 +15,7 @@ from crcl_support import XSD, XSD_2021, RawClient, command, field, needs_xsd, po
 
 GATEWAY = [sys.executable, "-m", "landscape.gateway", "--device", "127.0.0.1:1", "--port", "0"]
 GUARDED_MOVE = ("<Guard><SensorID>force_sensor</SensorID><SubField>Fz</SubField><LimitType>"
-                "INCREASE_BEYOND_LIMIT</LimitType><LimitValue>20</LimitValue></Guard>"
+                "INCREASE_OVER_LIMIT</LimitType><LimitValue>20</LimitValue></Guard>"
                 "<MoveStraight>true</MoveStraight>" + pose(0.5, 0, 0.5))
 
 
