@@ -30,7 +30,8 @@ async def set_rate(session, cmd: m.SetRate) -> str:
     maximum = getattr(session.control.limits, limit)
     if rate.absolute is not None and rate.absolute > maximum:
         out = units.length_out if quantity == "length" else units.angle_out
-        return f"{cmd.QUANTITY} limited to the arm's maximum, {out(maximum):.6g}"
+        unit = f"{getattr(units, quantity)}/s{'^2' if 'Accel' in cmd.QUANTITY else ''}"
+        return f"{cmd.QUANTITY} limited to the arm's maximum, {out(maximum):.6g} {unit}"
     return f"{cmd.QUANTITY} set"
 
 

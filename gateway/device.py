@@ -27,13 +27,15 @@ from landscape.v1 import settings_pb2, types_pb2
 log = logging.getLogger(__name__)
 
 PROGRAM = "crcl-gateway"      # landscape-client on every call (identity.md)
+ENDING_WAIT = 10.0            # s a new session waits for this gateway's sessions still ending
 
 
 class CrclDevice:
     def __init__(self, endpoint: Endpoint, state_rate_hz: float = 100.0):
         self.target = endpoint.target
         self.link = DeviceLink(endpoint, Identity(PROGRAM), state=base_si(state_rate_hz))
-        self.slots: dict = {}      # rack tool -> its plate in the world (tooling.py)
+        self.slots: dict = {}      # rack tool -> its plate in the base frame (tooling.py)
+        self._ending: set[asyncio.Future] = set()    # sessions' ends under way
 
     @property
     def feed(self) -> StateFeed:
@@ -46,9 +48,19 @@ class CrclDevice:
     async def close(self) -> None:
         await self.link.close()
 
+    async def end(self, control: "Control") -> None:
+        """A session's end (the arm stopped, its settings put back, the lock released)."""
+        ending = asyncio.ensure_future(control.close())
+        self._ending.add(ending)
+        ending.add_done_callback(self._ending.discard)
+        await asyncio.shield(ending)
+
     async def take_control(self, client_name: str, peer: str) -> "Control":
-        """A session acting for `peer` that holds the lock; CrclError naming the holder if
-        another client has it."""
+        """A session acting for `peer` that holds the lock, once this gateway's sessions still
+        ending have let it go (a client that reconnects at once finds it free); CrclError
+        naming the holder if another client has it."""
+        if self._ending:
+            await asyncio.wait(set(self._ending), timeout=ENDING_WAIT)
         robot = AsyncRobot(self.link, client_name,
                            identity=self.link.identity.acting_for(f"crcl {peer}"))
         await robot.open()

@@ -32,7 +32,7 @@ import contextlib
 
 import numpy as np
 
-from landscape.client import CommandFailed, Frame, LandscapeError, Motion, TagPoint
+from landscape.client import CommandFailed, CommandRefused, Frame, LandscapeError, Motion, TagPoint
 from landscape.gateway import model as m
 from landscape.gateway import guards, poses
 from landscape.gateway.errors import CrclError, refused_before_moving
@@ -48,7 +48,7 @@ SETTLE_TIMEOUT = 2.0             # s for a sample of the device taken after a mo
 
 # ---- running a device motion ----------------------------------------------------------------------
 
-async def _run(session, start, overrides=None) -> None:
+async def run_motion(session, start, overrides=None) -> None:
     """Start a non-blocking device motion (`start()`: the robot's call) and wait for its end;
     an error unless it is done."""
     await session.control.ensure_active()
@@ -143,7 +143,7 @@ async def move_to(session, cmd: m.MoveTo) -> str:
         overrides[PERCENT_ACCEL] = accel
     control = session.control
     values = control.units.pose(poses.to_base(goal, session.settings.frame))
-    await _run(session, lambda: control.robot.move_absolute(
+    await run_motion(session, lambda: control.robot.move_absolute(
         values, Frame.BASE, point_name=f"CRCL MoveTo {cmd.command_id}", speed=speed,
         motion=Motion.STRAIGHT if cmd.straight else Motion.JOINT), overrides)
     return await _check_end(session, goal, cmd.end)
@@ -166,7 +166,7 @@ async def _guarded_move_to(session, cmd: m.MoveTo) -> str:
         overrides[PERCENT_ACCEL] = accel
     in_device = ([control.units.length(v) for v in limits] if sensor == guards.RANGE_SENSOR
                  else limits)                                   # forces are N whatever the units
-    await _run(session, lambda: control.robot.move_react(
+    await run_motion(session, lambda: control.robot.move_react(
         sensor, [control.units.length(v) for v in motion], in_device,
         speed or speed_percent(session)), overrides)
     live = await _settled(session)
@@ -190,24 +190,33 @@ async def run_path(session, command_id: int, points, straight: bool, overrides=N
                    point: str = "waypoint") -> None:
     """Through (pose SI (6,) in the base frame, speed percent or None, accel percent or None)
     points from where the arm is, blended through all but the last; `point` names them in
-    errors."""
+    errors. Where the blended path would collide (its curve through the points is not the
+    segments between them) the path that stops at each point runs, if it would not: CRCL asks
+    only that the waypoints be passed."""
     live = await present(session)
     name = f"{session.name.split()[0]}-{command_id}"
     motion = Motion.STRAIGHT if straight else Motion.JOINT
-    transition = speed_percent(session)
     control = session.control
-    tags = [TagPoint(control.units.pose(p), tag_name=f"waypoint {i + 1}", tag_index=i + 1,
-                     transition_speed=0.0 if i == len(points) - 1 else transition,
-                     speed=speed or 0.0, accel=accel or 0.0)
-            for i, (p, speed, accel) in enumerate(points)]
+
+    def tags(transition: float) -> list[TagPoint]:
+        return [TagPoint(control.units.pose(p), tag_name=f"waypoint {i + 1}", tag_index=i + 1,
+                         transition_speed=0.0 if i == len(points) - 1 else transition,
+                         speed=speed or 0.0, accel=accel or 0.0)
+                for i, (p, speed, accel) in enumerate(points)]
     robot = control.robot
     try:
         # The path starts where the arm is, so its first segment is straight when asked.
         await robot.path_load(name, [TagPoint(control.units.joints(live.joint_positions),
                                               tag_name="start")], Frame.JOINT, motion=motion)
         with refused_before_moving(point):
-            await robot.path_load(name, tags, Frame.BASE, motion=motion)
-        await _run(session, lambda: robot.path_move(name, 1), overrides)
+            try:
+                await robot.path_load(name, tags(speed_percent(session)), Frame.BASE,
+                                      motion=motion)
+            except CommandRefused as refused:
+                if refused.reason != "COLLISION" or len(points) < 2:
+                    raise
+                await robot.path_load(name, tags(0.0), Frame.BASE, motion=motion)
+        await run_motion(session, lambda: robot.path_move(name, 1), overrides)
     finally:
         await asyncio.shield(_clear(robot, name))
 
@@ -265,7 +274,7 @@ async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
         if joint.details.accel is not None:
             accels.append(percent(units.angle_si(joint.details.accel),
                                    accel_maxima[joint.joint - 1]))
-    await _run(session, lambda: control.robot.move_absolute(
+    await run_motion(session, lambda: control.robot.move_absolute(
         control.units.joints(target), Frame.JOINT, point_name=f"CRCL ActuateJoints {cmd.command_id}",
         speed=min(speeds) if speeds else None),
         {PERCENT_ACCEL: min(accels)} if accels else None)

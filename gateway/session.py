@@ -306,7 +306,7 @@ class CrclSession:
         self.lost = f"the lock is lost: {lost}; InitCanon takes it again"
         log.warning("%s: %s", self.name, self.lost)
         control, self.control = self.control, None
-        self._dropped = asyncio.ensure_future(control.close())   # its session has ended
+        self._dropped = asyncio.ensure_future(self.device.end(control))   # it has ended
         self._queue.clear()
         if self._running is not None and not self._running.done():
             self._running.cancel()
@@ -332,7 +332,7 @@ class CrclSession:
     async def drop_control(self) -> None:
         control, self.control = self.control, None
         if control is not None:
-            await control.close()
+            await self.device.end(control)
 
     async def close(self) -> None:
         """The connection ended."""

@@ -24,11 +24,11 @@ from landscape.gateway import model as m
 from landscape.gateway import poses
 from landscape.gateway.device_units import DeviceUnits
 from landscape.gateway.errors import CrclError, describe
-from landscape.gateway.motions import SETTLE_TIMEOUT, present
+from landscape.gateway.motions import SETTLE_TIMEOUT, present, run_motion
 from landscape.gateway.rates import push_rates
 from landscape.gateway.status import is_vacuum
 from landscape.gateway.workstation import BARE
-from landscape.client import LandscapeError
+from landscape.client import Frame, LandscapeError
 
 TOOL_CHANGER_OUTPUT = "toolchanger_lock"    # the cell's output: 1 couples, 0 releases
 MAIN_FUNCTION = 1                           # bit 0 of ActivateTool's bit field
@@ -102,8 +102,10 @@ def _docking(flange: np.ndarray, plate: np.ndarray) -> float | None:
 
 async def hold_end_effector(session, wanted: str) -> str:
     """InitCanon: the arm holds the cell's end effector (workstation.py): another tool on the
-    flange goes back to its slot (PutTool) and this one is fetched (GetTool). "" leaves the
-    flange as it is, BARE empties it. Returns what was done; CrclError naming why not."""
+    flange goes back to its slot (PutTool) and this one is fetched (GetTool), then the arm
+    returns to where it stood (a joint move), so a program starts from where it was sent, not
+    from above the rack. "" leaves the flange as it is, BARE empties it. Returns what was
+    done; CrclError naming why not."""
     target = "" if wanted == BARE else wanted
     tool, _ = await _tool(session)
     if not wanted or tool == target:
@@ -113,15 +115,18 @@ async def hold_end_effector(session, wanted: str) -> str:
         raise CrclError(f"the cell's end effector {target!r} is no tool of this cell's rack "
                         f"({', '.join(slots) or 'it has none'})")
     await _ready_to_move(session)
-    robot, done = session.control.robot, []
+    control, done = session.control, []
+    stood = control.units.joints((await present(session)).joint_positions)
     try:
         if tool:
-            await robot.put_tool(tool)
+            await control.robot.put_tool(tool)
             done.append(f"the {tool} put back in the rack")
         if target:
-            await robot.get_tool(target)
+            await control.robot.get_tool(target)
             done.append(f"the {target} fetched from the rack")
-    except LandscapeError as refused:
+        await run_motion(session, lambda: control.robot.move_absolute(
+            stood, Frame.JOINT, point_name="CRCL InitCanon: back from the rack"))
+    except (LandscapeError, CrclError) as refused:
         raise CrclError(f"the arm cannot hold the cell's end effector ({wanted}): "
                         f"{describe(refused)}") from None
     return ", ".join(done)

@@ -157,10 +157,15 @@ def _until_unlocked(server, timeout: float = 20.0) -> None:
 
 
 @pytest.mark.parametrize("cell", [Workstation(end_effector="gripper")], indirect=True)
-def test_init_canon_fetches_the_cells_end_effector(cell, server):
+def test_init_canon_fetches_the_cells_end_effector_and_comes_back(cell, server):
     _, client = cell
-    started = _ok(client.run("InitCanon", 1, timeout=120))
-    assert "the gripper fetched from the rack" in field(started, "StateDescription")
+    with Robot(server.target, "watcher") as robot:
+        stood = np.array(robot.get_robot_position().joint_position)
+        started = _ok(client.run("InitCanon", 1, timeout=120))
+        assert "the gripper fetched from the rack" in field(started, "StateDescription")
+        assert robot.get_end_effector_state().current_ee == "gripper"
+        assert np.array(robot.get_robot_position().joint_position) == pytest.approx(stood,
+                                                                                abs=1e-3)
     assert "<GripperName>gripper</GripperName>" in client.status()
     _ok(client.run("EndCanon", 2))
     again = _ok(client.run("InitCanon", 3))          # on the flange already: nothing to do
