@@ -41,7 +41,6 @@ from landscape.gateway.rates import PERCENT_ACCEL, RatesFor, motion_rates, perce
 from landscape.gateway.screw import helix_off_loop, point_count
 from landscape.gateway.settings import DEFAULT_JOINT_TOLERANCE, ToleranceSi, tolerance_si
 from landscape.gateway.units import CrclUnits
-from landscape.v1 import types_pb2
 
 SETTLE_TIMEOUT = 2.0             # s for a sample of the device taken after a motion's end
 
@@ -51,7 +50,8 @@ SETTLE_TIMEOUT = 2.0             # s for a sample of the device taken after a mo
 async def run_motion(session, start, overrides=None) -> None:
     """Start a non-blocking device motion (`start()`: the robot's call) and wait for its end;
     an error unless it is done."""
-    await session.control.ensure_active()
+    live = session.device.feed.latest
+    await session.control.ensure_active(live.message.device_state if live is not None else None)
     async with RatesFor(session, overrides or {}):
         session.motion_start = asyncio.ensure_future(start())
         with refused_before_moving():
@@ -301,19 +301,10 @@ async def stop_motion(session, cmd: m.StopMotion) -> str:
     cuts them mid-motion but the operator's e-stop). Fast: a controlled stop on the path, then
     drives off. Normal: a controlled stop on the path, drives on."""
     if cmd.condition == "Immediate":
-        await _deactivate(session)
+        await session.control.deactivate()
         return "stopped, drives off"
     await session.halt()
     if cmd.condition == "Fast":
-        await _deactivate(session)
+        await session.control.deactivate()
         return "stopped on the path, drives off"
     return "stopped on the path"
-
-
-async def _deactivate(session) -> None:
-    """Drives off (Deactivate stops a motion first); already off is fine."""
-    try:
-        await session.control.robot.deactivate()
-    except LandscapeError:
-        if await session.control.state() != types_pb2.DEVICE_STATE_INACTIVE:
-            raise
