@@ -98,6 +98,11 @@ class DeviceCommands:
     def get_tool_offsets(self):
         return self._call(DEVICE, "GetToolOffsets", settings_pb2.GetToolOffsetsRequest())
 
+    def get_world_cartesian_frame(self):
+        """The world frame in the robot base frame, as SetWorldCartesianFrame set it."""
+        return self._call(DEVICE, "GetWorldCartesianFrame",
+                          settings_pb2.GetWorldCartesianFrameRequest())
+
     def get_robot_position(self):
         """Joints, and the tool tip in the world frame, with their units."""
         return self._call(DEVICE, "GetRobotPosition", settings_pb2.GetRobotPositionRequest())

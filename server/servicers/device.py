@@ -126,6 +126,12 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.ok(), offset=convert.matrix_to_pose(s.tool_offset, s.units),
             units=convert.units_to_pb(s.units))
 
+    def GetWorldCartesianFrame(self, request, context):
+        s = self.device.settings
+        return settings_pb2.GetWorldCartesianFrameResponse(
+            ret_val=convert.ok(), frame=convert.matrix_to_pose(s.world_frame, s.units),
+            units=convert.units_to_pb(s.units))
+
     def GetRobotPosition(self, request, context):
         joints, world, units = self._position()
         return settings_pb2.GetRobotPositionResponse(
