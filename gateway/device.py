@@ -119,7 +119,7 @@ class Control:
         self.pushed: dict[Rate, float] = {}      # rates this session sent, SI
         self._rates_before: dict[Rate, float] = {}
         self._offset_before: tuple[list[float], str] | None = None   # SI offset, and the tool
-        self.drives_off = False         # this session turned them off (live state may lag)
+        self.drives_off = False         # this session turned them off
 
     async def prepare(self) -> None:
         """After Lock (or at a second InitCanon): the last session's settings put back, drives
@@ -188,14 +188,13 @@ class Control:
     async def state(self) -> int:
         return (await self.robot.get_device_state()).state
 
-    async def ensure_active(self, state: int | None = None) -> None:
-        """Drives on if they are off: this session turned them off (StopMotion Immediate or
-        Fast), or `state` (the live state's, a round trip saved; else the device's own) says
-        so. The command that needs them is what moves the arm, as the spec asks."""
-        if self.drives_off or (await self.state() if state is None else state) == \
-                types_pb2.DEVICE_STATE_INACTIVE:
+    async def ensure_active(self) -> None:
+        """Drives on if they are off (this session turned them off, StopMotion Immediate or
+        Fast, or the device says so): the command that needs them is what moves the arm, as
+        the spec asks."""
+        if self.drives_off or await self.state() == types_pb2.DEVICE_STATE_INACTIVE:
             await self.robot.activate()
-            self.drives_off = False
+        self.drives_off = False
 
     async def deactivate(self) -> None:
         """Drives off (Deactivate stops a motion first); already off is fine."""

@@ -32,31 +32,43 @@ import contextlib
 
 import numpy as np
 
-from landscape.client import CommandFailed, CommandRefused, Frame, LandscapeError, Motion, TagPoint
+from landscape.client import (CommandFailed, CommandRefused, Frame, LandscapeError, Motion,
+                              TagPoint, WrongState)
 from landscape.gateway import model as m
 from landscape.gateway import guards, poses
 from landscape.gateway.errors import CrclError, refused_before_moving
 from landscape.gateway.live import LiveState, live_state
-from landscape.gateway.rates import PERCENT_ACCEL, RatesFor, motion_rates, percent, speed_percent
+from landscape.gateway.rates import (PERCENT_ACCEL, RatesFor, motion_rates, move_rates, percent,
+                                    speed_percent)
 from landscape.gateway.screw import helix_off_loop, point_count
 from landscape.gateway.settings import DEFAULT_JOINT_TOLERANCE, ToleranceSi, tolerance_si
 from landscape.gateway.units import CrclUnits
+from landscape.v1 import types_pb2
 
 SETTLE_TIMEOUT = 2.0             # s for a sample of the device taken after a motion's end
 
 
 # ---- running a device motion ----------------------------------------------------------------------
 
-async def run_motion(session, start, overrides=None) -> None:
+async def run_motion(session, start) -> None:
     """Start a non-blocking device motion (`start()`: the robot's call) and wait for its end;
-    an error unless it is done."""
-    live = session.device.feed.latest
-    await session.control.ensure_active(live.message.device_state if live is not None else None)
-    async with RatesFor(session, overrides or {}):
+    an error unless it is done. The drives go on first if this session turned them off; if
+    the device turned them off itself, the refused start is tried once more with them on."""
+    control = session.control
+    if control.drives_off:
+        await control.ensure_active()
+    for attempt in (1, 2):
         session.motion_start = asyncio.ensure_future(start())
-        with refused_before_moving():
-            command = await asyncio.shield(session.motion_start)
-        session.motion_start = None
+        try:
+            with refused_before_moving():
+                command = await asyncio.shield(session.motion_start)
+            break
+        except WrongState:
+            if attempt == 2 or await control.state() != types_pb2.DEVICE_STATE_INACTIVE:
+                raise
+            await control.ensure_active()
+        finally:
+            session.motion_start = None
     try:
         done = await command.wait(timeout=None)
     except CommandFailed as failed:          # failed or aborted; a lost lock raises its own
@@ -143,9 +155,11 @@ async def move_to(session, cmd: m.MoveTo) -> str:
         overrides[PERCENT_ACCEL] = accel
     control = session.control
     values = control.units.pose(poses.to_base(goal, session.settings.frame))
+    rates = move_rates(session, overrides)
     await run_motion(session, lambda: control.robot.move_absolute(
-        values, Frame.BASE, point_name=f"CRCL MoveTo {cmd.command_id}", speed=speed,
-        motion=Motion.STRAIGHT if cmd.straight else Motion.JOINT), overrides)
+        values, Frame.BASE, point_name=f"CRCL MoveTo {cmd.command_id}",
+        speed=speed or speed_percent(session),
+        motion=Motion.STRAIGHT if cmd.straight else Motion.JOINT, rates=rates))
     return await _check_end(session, goal, cmd.end)
 
 
@@ -166,9 +180,10 @@ async def _guarded_move_to(session, cmd: m.MoveTo) -> str:
         overrides[PERCENT_ACCEL] = accel
     in_device = ([control.units.length(v) for v in limits] if sensor == guards.RANGE_SENSOR
                  else limits)                                   # forces are N whatever the units
-    await run_motion(session, lambda: control.robot.move_react(
-        sensor, [control.units.length(v) for v in motion], in_device,
-        speed or speed_percent(session)), overrides)
+    async with RatesFor(session, overrides):     # MoveReact takes the device's settings
+        await run_motion(session, lambda: control.robot.move_react(
+            sensor, [control.units.length(v) for v in motion], in_device,
+            speed or speed_percent(session)))
     live = await _settled(session)
     reading = guards.reading_si(await control.robot.get_sensor_reading(sensor))
     said = guards.outcome(session, cmd.guards, limits, goal_base, live.tool_pose, reading,
@@ -198,10 +213,12 @@ async def run_path(session, command_id: int, points, straight: bool, overrides=N
     motion = Motion.STRAIGHT if straight else Motion.JOINT
     control = session.control
 
-    def tags(transition: float) -> list[TagPoint]:
+    session_speed = speed_percent(session)
+
+    def tags(transition: float) -> list[TagPoint]:   # accel 0: the run's own (its rates)
         return [TagPoint(control.units.pose(p), tag_name=f"waypoint {i + 1}", tag_index=i + 1,
                          transition_speed=0.0 if i == len(points) - 1 else transition,
-                         speed=speed or 0.0, accel=accel or 0.0)
+                         speed=speed or session_speed, accel=accel or 0.0)
                 for i, (p, speed, accel) in enumerate(points)]
     robot = control.robot
     try:
@@ -210,13 +227,13 @@ async def run_path(session, command_id: int, points, straight: bool, overrides=N
                                               tag_name="start")], Frame.JOINT, motion=motion)
         with refused_before_moving(point):
             try:
-                await robot.path_load(name, tags(speed_percent(session)), Frame.BASE,
-                                      motion=motion)
+                await robot.path_load(name, tags(session_speed), Frame.BASE, motion=motion)
             except CommandRefused as refused:
                 if refused.reason != "COLLISION" or len(points) < 2:
                     raise
                 await robot.path_load(name, tags(0.0), Frame.BASE, motion=motion)
-        await run_motion(session, lambda: robot.path_move(name, 1), overrides)
+        rates = move_rates(session, overrides)
+        await run_motion(session, lambda: robot.path_move(name, 1, rates=rates))
     finally:
         await asyncio.shield(_clear(robot, name))
 
@@ -274,10 +291,10 @@ async def actuate_joints(session, cmd: m.ActuateJoints) -> str:
         if joint.details.accel is not None:
             accels.append(percent(units.angle_si(joint.details.accel),
                                    accel_maxima[joint.joint - 1]))
+    rates = move_rates(session, {PERCENT_ACCEL: min(accels)} if accels else None)
     await run_motion(session, lambda: control.robot.move_absolute(
         control.units.joints(target), Frame.JOINT, point_name=f"CRCL ActuateJoints {cmd.command_id}",
-        speed=min(speeds) if speeds else None),
-        {PERCENT_ACCEL: min(accels)} if accels else None)
+        speed=min(speeds) if speeds else speed_percent(session), rates=rates))
     return _check_joints(session, cmd, target, await _settled(session))
 
 

@@ -9,11 +9,12 @@ scale; the joints get the same percent of their maxima. So:
 - RotSpeed w and RotAccel alpha are the angular caps. The percent still scales the angular
   maximum, so rotation may come out slower than asked, never faster (spec V allows less).
 
-The session's rates reach the device when a motion needs them, just before it starts (only
-those that changed since last sent), not when a Set*Speed / Set*Accel sets them: a setting is
-no device round trip. The session's end puts the device's own back (device.py). Per-command rates (a PoseAndSetType, a waypoint) are set the same way
-for that command's motion and the session's put back once it has started: the device plans at
-the start.
+A motion carries its rates in its own request (move_rates: the session's, with the command's
+own from a PoseAndSetType or a waypoint): no setting of the device changes, and a MoveTo is one
+call. The device's guarded move (MoveReact) and its tool changes (GetTool, PutTool) take the
+device's settings: RatesFor sets the session's there just before (only those that changed
+since last sent), and the session's end puts the device's own back (device.py). A Set*Speed /
+Set*Accel is no device round trip.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ import asyncio
 
 from landscape.gateway import model as m
 from landscape.gateway.settings import SiRate, rate_si
-from landscape.v1 import types_pb2
+from landscape.v1 import motion_pb2, types_pb2
 
 MIN_PERCENT = 0.1            # the device needs a percent above 0
 PERCENT_SPEED = ("SetSpeed", types_pb2.SPEED_TYPE_PERCENT_SPEED)
@@ -90,6 +91,19 @@ class RatesFor:
     async def __aexit__(self, *exc):
         if self.overrides:
             await asyncio.shield(push_rates(self.session))
+
+
+def move_rates(session, overrides: dict[tuple[str, int], float] | None = None
+               ) -> motion_pb2.MoveRates:
+    """A motion's own MoveRates: the session's rates with `overrides` (motion_rates'), in the
+    device's units. The speed percent goes in the request's speed (or a path point's)."""
+    wanted = {**session_rates(session), **(overrides or {})}
+    units = session.control.units
+    return motion_pb2.MoveRates(
+        accel_percent=wanted[PERCENT_ACCEL], linear_speed=units.length(wanted[LINEAR_SPEED]),
+        angular_speed=units.angle(wanted[ANGULAR_SPEED]),
+        linear_accel=units.length(wanted[LINEAR_ACCEL]),
+        angular_accel=units.angle(wanted[ANGULAR_ACCEL]))
 
 
 def pose_rates(session, pose: m.Pose) -> tuple[SiRate | None, ...]:

@@ -38,7 +38,6 @@ from landscape.gateway.errors import CrclError, describe
 from landscape.gateway.live import live_state
 from landscape.gateway.guards import GuardReport
 from landscape.gateway.handlers import HANDLERS, immediate
-from landscape.gateway.rates import push_rates
 from landscape.gateway.program import expand
 from landscape.gateway.schemas import NEWEST, SchemaInvalid, SchemaSet
 from landscape.gateway.settings import CrclSettings
@@ -282,7 +281,6 @@ class CrclSession:
             self.settings = CrclSettings(units=workstation.units, frame=workstation.frame)
             self.guard_report = None
             await self.device.feed.watch(self, ())
-            await push_rates(self)
             tool = await hold_end_effector(self, workstation.end_effector)
         except BaseException:
             await self.drop_control()

@@ -55,7 +55,8 @@ ENDS = {
 PROGRAM_ALL_ERRORS = {
     2: "JointForceTorque on joint 3",                  # and joint 1 beyond its range
     3: "the gripper is coupled already",               # CloseToolChanger: it holds the gripper
-    8: "screw point",                                  # MoveScrew 6.1 m along an axis 7 m away
+    8: "the screw needs 4429 path points",             # 6.1 m along an axis 7 m away: far
+                                                       # more than any screw a TX90 can make
     9: "waypoint 1 is out of the arm's reach",         # (8.25, 1, 1): 7 m from the table
     12: "the target is out of the arm's reach",        # (8.25, 1, 0.5)
     13: "the gripper is not at its rack slot",         # OpenToolChanger over the table
