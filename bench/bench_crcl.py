@@ -174,7 +174,8 @@ def _screws(port: int, results) -> None:
         while _state(status := client.ask(document("GetStatus", command_id)))[1] not in (
                 "CRCL_Done", "CRCL_Error"):
             time.sleep(0.01)
-        results.put((kind, _state(status)[1]))
+        description = re.search(rb"<StateDescription>(.*?)</StateDescription>", status)
+        results.put((kind, _state(status)[1], description.group(1).decode() if description else ""))
     results.put(None)
 
 
@@ -224,7 +225,11 @@ def main() -> None:
                 if "CRCL gateway listening on" in line:
                     port = int(line.split(":")[1].split()[0])
                     break
-            gateway_figures = measure(Client(port, b"</CRCLStatus>"), echo=False)
+            session = Client(port, b"</CRCLStatus>")
+            gateway_figures = measure(session, echo=False)
+            session.send(document("EndCanon", 99))          # the lock, for the screws' session
+            while _state(session.ask(document("GetStatus", 99))) != ("99", "CRCL_Done"):
+                time.sleep(0.01)
             during, ends = status_during_screws(port)
         finally:
             gateway.terminate()
@@ -239,7 +244,8 @@ def main() -> None:
     record("CRCL GetStatus p50", _percentile(rtt, 50), "ms",
            baseline=_percentile(baseline[2], 50), baseline_name="TCP echo", goal=2.0)
     report("baseline: bare TCP echo", *baseline)
-    ends = ", ".join(f"{what}: {state}" for (what, _), (_, state) in zip(SCREWS, ends))
+    ends = ", ".join(f"{what}: {state}" + (f" ({why})" if state != "CRCL_Done" else "")
+                     for (what, _), (_, state, why) in zip(SCREWS, ends))
     print(f"GetStatus while another connection runs MoveScrews ({ends}): {len(during)} round "
           f"trips, p50 {_percentile(during, 50):.3f} ms  p99 {_percentile(during, 99):.3f} ms"
           f"  max {max(during):.1f} ms   (echo, same run: p50 {_percentile(baseline[2], 50):.3f}"

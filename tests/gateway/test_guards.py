@@ -51,7 +51,11 @@ def _done(status: str) -> str:
 
 
 def test_a_guarded_move_stops_on_the_table_when_the_force_falls_past_its_limit(above):
-    said = _done(above.run("MoveTo", 5, guarded(guard("force_sensor", "DECREASE_BEYOND_LIMIT", 20))))
+    # RecheckTimeMicroSeconds: the device checks every cycle (4 ms) whatever is asked;
+    # CheckCount means nothing in a command (the schema says so)
+    said = _done(above.run("MoveTo", 5, guarded(guard(
+        "force_sensor", "DECREASE_BEYOND_LIMIT", 20,
+        flags="<RecheckTimeMicroSeconds>1000</RecheckTimeMicroSeconds><CheckCount>7</CheckCount>"))))
     assert said.startswith("stopped by its guard DECREASE_BEYOND_LIMIT on force_sensor Fz: it "
                            "read -")
     status = above.status()
