@@ -7,9 +7,9 @@ the event feed that follows commands by id; the live state stream, base frame, m
 and the rack slots last seen. `Control` is one CRCL session's hold on the device: an
 AsyncRobot on that link, acting for the CRCL peer ("crcl <ip:port>"), that took the lock, and
 what CRCL keeps of the device (its units and limits, the settings this session sent and what
-they were before). Only one Control
-holds the lock at a time; the device says no to the others. Failures are the client core's
-exceptions (landscape.client.errors), worded for a CRCL client by errors.describe.
+they were before). Only one Control holds the lock at a time; the device says no to the
+others. Failures are the client core's exceptions (landscape.client.errors), worded for a
+CRCL client by errors.describe.
 """
 from __future__ import annotations
 

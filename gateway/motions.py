@@ -4,11 +4,13 @@ Poses arrive in CRCL's frame (the session's workstation frame, its units); the d
 them in the robot's base frame, in its own units (the session's Control converts), and the end
 of a motion is judged in CRCL's frame again, where the tolerances' X, Y and Z are.
 
-- MoveTo: MoveAbsolute, straight or joint-interpolated.
+- MoveTo: one MoveAbsolute, straight or joint-interpolated, carrying its rates; with guards,
+  the device's guarded move (guards.py).
 - MoveThroughTo, and MoveScrew's helix: a named path (PathLoad, PathMove) from where the arm
   is through the waypoints, blended through the intermediate ones (transition speed > 0: the
-  device's path passes through each point, so any intermediate tolerance holds), stopping at
-  the last; the path is cleared afterwards.
+  device's path passes through each point, so any intermediate tolerance holds; where the
+  blend would collide, stopping at each), stopping at the last; the path is cleared
+  afterwards.
 - ActuateJoints: MoveAbsolute in the joint frame; per-joint speeds become the move's percent
   speed (every joint stays within its own), accelerations the percent acceleration.
 - Per-command rates (PoseAndSetType, JointDetails) apply to that command only (rates.py); a
