@@ -13,6 +13,7 @@ error names the file, the key and what was expected.
 from __future__ import annotations
 
 import ipaddress
+import math
 import re
 from importlib import resources
 from pathlib import Path
@@ -24,8 +25,11 @@ from landscape.cell.config_model import (  # noqa: F401  (the parsed configurati
     FRONT_END_RATES, CellConfig, DeviceSpec, GatewaySpec, LauncherSpec, SecuritySpec,
     SupervisorSpec)
 from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
+from landscape.gateway.units import ANGLE as CRCL_ANGLE, LENGTH as CRCL_LENGTH
+from landscape.gateway.workstation import BARE
 from landscape.robot.cell import CellError, load_cell
-from landscape.robot.toml_tables import Table, flag, integer, number, problem, read_toml, string
+from landscape.robot.toml_tables import (Table, flag, integer, number, problem, read_toml,
+                                         string, vector)
 
 DEFAULT_FILE = "cells/local.toml"
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
@@ -91,6 +95,13 @@ def _origins(value):
         raise problem(str(error)) from None
 
 
+def _text(value):
+    """A string, empty or not."""
+    if not isinstance(value, str):
+        raise problem(f"expected a string, got {value!r}")
+    return value
+
+
 def _exists(path: Path | None, key: str = "", folder: bool = False) -> None:
     if path is not None and not path.exists():
         raise problem(f"{path} does not exist", key)
@@ -99,6 +110,7 @@ def _exists(path: Path | None, key: str = "", folder: bool = False) -> None:
 
 
 Name = Annotated[str, PlainValidator(_name)]
+Text = Annotated[str, PlainValidator(_text)]
 Address = Annotated[str, PlainValidator(_strip)]
 Port = integer(0, 65535)
 FilePath = Annotated[Path | None, PlainValidator(_path)]
@@ -186,6 +198,11 @@ class GatewayTable(Table):
     port: Port = GatewaySpec.port
     grpc_port: Port | None = None
     token: FilePath = None            # default, with tokens on: <security.tokens>/operator.tokens
+    workstation_xyz: vector(3) = (0.0, 0.0, 0.0)        # CRCL's frame in the robot base, m
+    workstation_rpy_deg: vector(3) = (0.0, 0.0, 0.0)
+    end_effector: Text = GatewaySpec.end_effector      # "", "none" or a tool of the world
+    length_units: string(tuple(CRCL_LENGTH)) = GatewaySpec.length_units
+    angle_units: string(tuple(CRCL_ANGLE)) = GatewaySpec.angle_units
 
 
 class SupervisorTable(Table):
@@ -236,21 +253,24 @@ class ConfigFile(Table):
             if device.data.exists() and not device.data.is_dir():
                 raise problem(f"{device.data} is not a folder", f"devices[{i}].data")
         self._config = CellConfig(
-            name=self.name, devices=devices, gateway=self._gateway(names, security),
+            name=self.name, devices=devices, gateway=self._gateway(devices, security),
             supervisor=self._supervisor(names, security, base), security=security,
             launcher=self.launcher.spec(), source=info.context["source"])
         _check_exposure(self._config)
         _check_ports(self._config)
         return self
 
-    def _gateway(self, names: list[str], security: SecuritySpec) -> GatewaySpec:
-        g = self.gateway
+    def _gateway(self, devices: tuple[DeviceSpec, ...], security: SecuritySpec) -> GatewaySpec:
+        g, names = self.gateway, [d.name for d in devices]
         device = g.device or names[0]
         if device not in names:
             raise problem(f"no device is named {device!r} (devices: {', '.join(names)})",
                           "gateway.device")
+        _tool_of(g.end_effector, devices[names.index(device)])
         return GatewaySpec(g.enabled, device, g.address, g.port, g.grpc_port,
-                           _client_token(g.token, security, "gateway.token", "operator"))
+                           _client_token(g.token, security, "gateway.token", "operator"),
+                           (*g.workstation_xyz, *map(math.radians, g.workstation_rpy_deg)),
+                           g.end_effector, g.length_units, g.angle_units)
 
     def _supervisor(self, names: list[str], security: SecuritySpec,
                     base: Path) -> SupervisorSpec:
@@ -270,6 +290,17 @@ class ConfigFile(Table):
                               _client_token(s.token, security, "supervisor.token", "viewer"),
                               sign_in_tokens, s.allowed_origins, s.sign_in_idle,
                               s.sign_in_max_age)
+
+
+def _tool_of(name: str, device: DeviceSpec) -> None:
+    """The gateway's end effector is "", "none" or a tool of its device's world."""
+    if name in ("", BARE):
+        return
+    tools = [tool.name for tool in load_cell(device.world).world.tools]
+    if name not in tools:
+        raise problem(f"{device.name}'s world has no tool named {name!r} (its tools: "
+                      f"{', '.join(tools) or 'none'}; or \"none\" for the bare flange, \"\" "
+                      f"for whatever is on it)", "gateway.end_effector")
 
 
 def _client_token(token: Path | None, security: SecuritySpec, key: str,

@@ -37,7 +37,10 @@ class DeviceSpec:
 
 @dataclass(frozen=True)
 class GatewaySpec:
-    """The CRCL gateway in front of `device`. token: the token file it presents."""
+    """The CRCL gateway in front of `device`. token: the token file it presents. The
+    workstation (landscape.gateway.workstation): CRCL's frame in the robot's base frame (x, y,
+    z in m, roll, pitch, yaw in rad), the end effector the arm holds from InitCanon on ("":
+    as it is; "none": no tool) and the units a CRCL program starts in."""
 
     enabled: bool = True
     device: str = ""
@@ -45,6 +48,10 @@ class GatewaySpec:
     port: int = 64444
     grpc_port: int | None = None
     token: Path | None = None
+    workstation_frame: tuple[float, ...] = (0.0,) * 6
+    end_effector: str = ""
+    length_units: str = "meter"
+    angle_units: str = "radian"
 
 
 @dataclass(frozen=True)

@@ -95,6 +95,9 @@ def gateway_service(config: CellConfig, targets: dict[str, str], workdir: Path) 
             "--host", gateway.address, "--port", str(gateway.port)]
     if gateway.grpc_port is not None:
         argv += ["--grpc-port", str(gateway.grpc_port)]
+    argv += ["--workstation-frame", " ".join(repr(v) for v in gateway.workstation_frame),
+             "--end-effector", gateway.end_effector, "--length-units", gateway.length_units,
+             "--angle-units", gateway.angle_units]
     if config.security.insecure:      # the gateway keeps off the network otherwise, as they do
         argv.append("--insecure")
     argv += client_arguments(config.security, gateway.token)

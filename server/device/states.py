@@ -71,6 +71,7 @@ RULES: dict[str, Rule] = {
     "GetMaxVelocities": _read("3.3.1"),
     "GetMaxAccelerations": _read("3.3.1"),
     "GetToolOffsets": _read("3.3.1"),
+    "GetWorldCartesianFrame": _read("3.3.1"),
     "GetRobotPosition": _read("3.3.1"),
     "GetMotionControlState": _read("3.3.1"),
     "GetTagId": _read("3.3.1"),

@@ -2,6 +2,7 @@
 file and the key."""
 from __future__ import annotations
 
+import math
 import shutil
 from pathlib import Path
 
@@ -29,6 +30,20 @@ def test_the_built_in_default_is_one_arm_the_gateway_and_the_supervisor_on_loopb
     assert argv[argv.index("--port") + 1] == "50051" and "--insecure" not in argv
     assert argv[argv.index("--collision-margin") + 1] == "0.005"
     assert argv[argv.index("--audit-log") + 1] == str(tmp_path / "var" / "arm1" / "audit.log")
+
+
+def test_the_gateway_is_given_the_cells_workstation(tmp_path):
+    config = parse_config("[gateway]\nworkstation_xyz = [-0.9, -1.0, 0.21]\n"
+                          "workstation_rpy_deg = [0, 0, 90]\nend_effector = 'gripper'\n"
+                          "length_units = 'millimeter'\nangle_units = 'degree'", "<t>", tmp_path)
+    argv = gateway_service(config, {"arm1": "127.0.0.1:50051"}, tmp_path).argv
+    frame = [float(v) for v in argv[argv.index("--workstation-frame") + 1].split()]
+    assert frame == pytest.approx([-0.9, -1.0, 0.21, 0.0, 0.0, math.pi / 2])   # m and rad
+    assert argv[argv.index("--end-effector") + 1] == "gripper"
+    assert argv[argv.index("--length-units") + 1] == "millimeter"
+    assert argv[argv.index("--angle-units") + 1] == "degree"
+    from landscape.gateway.__main__ import arguments, workstation
+    assert workstation(arguments(argv[argv.index("--device"):])).frame == pytest.approx(frame)
 
 
 def test_the_supervisor_signs_people_in_from_var_tokens_and_shows_its_keys(tmp_path):
@@ -96,6 +111,13 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     ("[security.rate_limits]\ncli = 0",
      r"security\.rate_limits\.cli: expected a number above 0, got 0"),
     ("name = [", r"<t>: not valid TOML"),
+    ("[gateway]\nend_effector = 'spanner'",
+     r"gateway\.end_effector: arm1's world has no tool named 'spanner' \(its tools: gripper, "
+     r"vacuum; or \"none\""),
+    ("[gateway]\nlength_units = 'mm'",
+     r"gateway\.length_units: expected one of meter, millimeter, inch; got 'mm'"),
+    ("[gateway]\nworkstation_rpy_deg = [0, 90]",
+     r"gateway\.workstation_rpy_deg: expected a list of 3 numbers, got \[0, 90\]"),
 ])
 def test_errors_name_the_file_and_the_key(text, message, tmp_path):
     with pytest.raises(CellConfigError, match=message):

@@ -13,7 +13,7 @@ EXPECTED = {
         "Lock", "Release", "Activate", "Deactivate",
         "SetSpeed", "SetAcceleration", "SetToolOffset", "SetWorldCartesianFrame", "SetUnits",
         "GetUnits", "GetVelocities", "GetAccelerations", "GetMaxVelocities", "GetMaxAccelerations",
-        "GetToolOffsets", "GetRobotPosition", "GetMotionControlState", "GetTagId",
+        "GetToolOffsets", "GetWorldCartesianFrame", "GetRobotPosition", "GetMotionControlState", "GetTagId",
         "MoveRelative", "MoveAbsolute", "MoveArc",
         "PathLoad", "PathClearPath", "PathMove",
         "StopMotion", "ResumeMotion", "AbortMotion",

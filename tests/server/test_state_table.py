@@ -34,6 +34,7 @@ ACTIVE = {State.RESTING, State.MOVING, State.PAUSED}
 READS = ["GetUnits", "GetVelocities", "GetAccelerations", "GetMaxVelocities",
          "GetMaxAccelerations", "GetToolOffsets", "GetRobotPosition", "GetMotionControlState",
          "GetTagId",                                              # 3.3.1 state neutral
+         "GetWorldCartesianFrame",                                # 3.3.1's, for 3.2.1's set
          "GetSensorReading",                                      # 3.7.1 state independent
          "GetEndEffectorState",                                   # 3.8.1 state independent
          "GetDigitalIO", "SignalDigitalIO", "SendCommand",        # 4.1 state independent

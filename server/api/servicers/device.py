@@ -126,6 +126,12 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.ok(), offset=convert.matrix_to_pose(s.tool_offset, s.units),
             units=convert.units_to_pb(s.units))
 
+    def GetWorldCartesianFrame(self, request, context):
+        s = self.device.settings
+        return settings_pb2.GetWorldCartesianFrameResponse(
+            ret_val=convert.ok(), frame=convert.matrix_to_pose(s.world_frame, s.units),
+            units=convert.units_to_pb(s.units))
+
     def GetRobotPosition(self, request, context):
         joints, world, units = self._position()
         return settings_pb2.GetRobotPositionResponse(
@@ -155,7 +161,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
         frame = convert.enum_value(convert.FRAMES, request.frame, "frame")
         values = convert.move_values(frame, request.values, self.device.settings.units)
         command_id = self.device.motions.move(command, request.point_name, frame, values, relative,
-                                      convert.motion_type(request), convert.optional_speed(request))
+                                      convert.motion_type(request), convert.optional_speed(request),
+                                      convert.move_settings(self.device.settings, request))
         return convert.started(command_id)
 
     def MoveArc(self, request, context):
@@ -204,7 +211,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
     def PathMove(self, request, context):
         cycles = request.number_of_cycles if request.HasField("number_of_cycles") else 1
         return motion_pb2.PathMoveResponse(
-            ret_val=convert.started(self.device.motions.path_move(request.path_name, cycles)))
+            ret_val=convert.started(self.device.motions.path_move(
+                request.path_name, cycles, convert.move_settings(self.device.settings, request))))
 
     # ---- 3.6 interruptions ----
     # Stops are sent to the cycle from the event loop, at once; only the wait for the arm to
