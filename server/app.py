@@ -35,6 +35,7 @@ from landscape.server.security.interceptor import SecurityInterceptor
 from landscape.server.api.servicers.device import DeviceServicer
 from landscape.server.api.servicers.digital_io import DigitalIOServicer
 from landscape.server.api.servicers.events import EventServicer
+from landscape.server.api.servicers.recording import RecordingServicer
 from landscape.server.api.guard import Dispatch
 from landscape.server.api.servicers.session import SessionServicer
 from landscape.server.api.servicers.state import StateServicer
@@ -163,7 +164,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         if config.start_device:
             device.start()
         health_servicer = runner.run(_start(server, device, workcell, bus, hub, dispatch,
-                                            limits))
+                                            limits, cell.recorder.path))
     except BaseException:
         device.close()
         workcell.close()
@@ -223,7 +224,7 @@ async def _bind(config: ServerConfig,
     return server, port
 
 
-async def _start(server, device, workcell, bus, hub, dispatch, limits):
+async def _start(server, device, workcell, bus, hub, dispatch, limits, recording: str):
     hub.attach(asyncio.get_running_loop())
     servicers = {
         services.DEVICE: DeviceServicer(device, workcell, hub, dispatch, limits),
@@ -231,6 +232,7 @@ async def _start(server, device, workcell, bus, hub, dispatch, limits):
         services.EVENTS: EventServicer(device, bus, dispatch, limits),
         services.SESSIONS: SessionServicer(device, dispatch, limits),
         services.STATE: StateServicer(device, hub, dispatch, limits),
+        services.RECORDINGS: RecordingServicer(device, recording, dispatch, limits),
     }
     for spec, servicer in servicers.items():
         spec.add_to_server(servicer, server)
