@@ -8,6 +8,8 @@ for any number of samples at once. tool0 is fixed to link6 (the flange).
 """
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
+
 import numpy as np
 
 from landscape.robot.arm import JOINT_AXES, ArmModel
@@ -17,14 +19,32 @@ _AXIS = {"x": 0, "y": 1, "z": 2}
 
 
 class LinkFrames:
-    """The parent -> child transforms of `arm`'s links (LINKS), frame ids prefixed with
-    `prefix` ("arm1/" names arm1's links in a cell of several arms)."""
+    """The parent -> child transforms of an arm's links (LINKS), frame ids prefixed with
+    `prefix` ("arm1/" names arm1's links in a cell of several arms). origins: (6, 3) m, each
+    joint's origin in its parent link; axes: each joint's axis, "x", "y" or "z"."""
 
-    def __init__(self, arm: ArmModel, prefix: str = ""):
+    def __init__(self, origins, axes, prefix: str = ""):
         self.prefix = prefix
         self.pairs = [(prefix + LINKS[i], prefix + LINKS[i + 1]) for i in range(7)]
-        self.origins = np.array([*arm.joint_origins, (0.0, 0.0, 0.0)], dtype=float)   # (7, 3)
-        self._axes = [_AXIS[axis] for axis in JOINT_AXES]
+        self.origins = np.array([*np.asarray(origins, dtype=float), (0.0, 0.0, 0.0)])   # (7, 3)
+        self._axes = [_AXIS[axis] for axis in axes]
+
+    @classmethod
+    def for_arm(cls, arm: ArmModel, prefix: str = "") -> "LinkFrames":
+        return cls(arm.joint_origins, JOINT_AXES, prefix)
+
+    @classmethod
+    def from_urdf(cls, text: str, prefix: str = "") -> "LinkFrames":
+        """From the URDF of arm.urdf (GetRobotDescription's): its six revolute joints."""
+        robot = ET.fromstring(text)
+        joints = [j for j in robot.iter("joint") if j.get("type") == "revolute"]
+        origins = [[float(v) for v in j.find("origin").get("xyz").split()] for j in joints]
+        axes = ["xyz"[[float(v) for v in j.find("axis").get("xyz").split()].index(1.0)]
+                for j in joints]
+        if len(joints) != 6:
+            raise ValueError(f"expected the six revolute joints of a TX90-class arm, got "
+                             f"{len(joints)}")
+        return cls(origins, axes, prefix)
 
     def quaternions(self, q) -> np.ndarray:
         """(..., 7, 4) quaternions x, y, z, w of each link in its parent, for joints q (..., 6)

@@ -237,7 +237,7 @@ class _Scene:
 
         from landscape.robot.arm import urdf
         from landscape.robot.link_frames import LinkFrames
-        self.writer, self.frames, self.urdf = writer, LinkFrames(arm), urdf(arm)
+        self.writer, self.frames, self.urdf = writer, LinkFrames.for_arm(arm), urdf(arm)
         schema = FrameTransforms.get_schema()
         schema_id = writer.register_schema(name=schema.name, encoding=schema.encoding,
                                            data=bytes(schema.data))

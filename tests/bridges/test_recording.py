@@ -83,7 +83,7 @@ def test_the_recording_opened_as_foxglove_does_holds_the_arm_moving_in_3d(arm):
     assert "/robot_description" in schemas and "/joint_state" in schemas
     decode = _decoder(schemas["/tf"])
     tips = []
-    frames = LinkFrames(arm.server.device.arm)
+    frames = LinkFrames.for_arm(arm.server.device.arm)
     for _, channel, message in reader.iter_messages(topics=["/tf"]):
         transforms = decode.FromString(message.data).transforms
         assert [(t.parent_frame_id, t.child_frame_id) for t in transforms] == frames.pairs
