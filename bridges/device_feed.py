@@ -4,12 +4,13 @@ web supervisor, never a lock holder.
 `DeviceFeed.run()` connects, reads the arm's description and I/O map, then hands every state
 sample (SI units, the tool pose in the base frame, at the rate asked: the device thins the
 stream, so a bridge costs the cycle nothing) and every event to its callbacks, and polls the
-digital I/O. When the device goes away it says so and connects again, every few seconds,
+digital I/O and the device's status (state, lock holder). When the device goes away it says so and connects again, every few seconds,
 until `close()`.
 """
 from __future__ import annotations
 
 import asyncio
+import inspect
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -42,13 +43,21 @@ class Description:
 
 @dataclass
 class Callbacks:
-    """What a bridge does with what the device says (each may be a plain function)."""
+    """What a bridge does with what the device says: plain functions or coroutine functions
+    (awaited before the next message: a slow one makes the device thin the stream further)."""
 
     connected: Callable[[Description], None]
     sample: Callable[[state_service_pb2.StateSample], None]
     event: Callable[[event_service_pb2.Event], None]
     io: Callable[[list[tuple[object, int]]], None]     # [(DigitalIOUnit, bits_on)]
     lost: Callable[[str], None]
+    status: Callable[[control_pb2.GetDeviceStateResponse], None] | None = None
+
+
+async def _call(callback, *args) -> None:
+    result = callback(*args)
+    if inspect.isawaitable(result):
+        await result
 
 
 class DeviceFeed:
@@ -67,8 +76,8 @@ class DeviceFeed:
             try:
                 await self._serve(channel)
             except grpc.aio.AioRpcError as error:
-                self.callbacks.lost(f"{self.name} ({self.target}): {error.code().name}: "
-                                    f"{error.details()}")
+                await _call(self.callbacks.lost, f"{self.name} ({self.target}): "
+                                                 f"{error.code().name}: {error.details()}")
             finally:
                 await channel.close()
             try:
@@ -86,11 +95,11 @@ class DeviceFeed:
                                                  metadata=self.metadata, timeout=10)
         units = (await io.ListDigitalIO(digital_io_service_pb2.ListDigitalIORequest(),
                                         metadata=self.metadata, timeout=10)).units
-        self.callbacks.connected(Description(about.robot_type, about.urdf,
-                                             tuple(about.joint_names), tuple(units)))
+        await _call(self.callbacks.connected, Description(
+            about.robot_type, about.urdf, tuple(about.joint_names), tuple(units)))
         tasks = [asyncio.create_task(self._states(channel)),
                  asyncio.create_task(self._events(channel)),
-                 asyncio.create_task(self._io(io, units)),
+                 asyncio.create_task(self._poll(device, io, units)),
                  asyncio.create_task(self._closed.wait())]
         try:
             done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
@@ -111,7 +120,7 @@ class DeviceFeed:
             try:
                 async for reply in stub.StreamState(request, metadata=self.metadata):
                     if reply.HasField("sample"):
-                        self.callbacks.sample(reply.sample)
+                        await _call(self.callbacks.sample, reply.sample)
                 return
             except grpc.aio.AioRpcError as error:
                 if error.code() is not grpc.StatusCode.INVALID_ARGUMENT or not sensors:
@@ -125,14 +134,18 @@ class DeviceFeed:
         async for reply in stub.Subscribe(event_service_pb2.SubscribeRequest(),
                                           metadata=self.metadata):
             if reply.HasField("event"):
-                self.callbacks.event(reply.event)
+                await _call(self.callbacks.event, reply.event)
 
-    async def _io(self, stub, units) -> None:
+    async def _poll(self, device, io, units) -> None:
+        """The digital I/O and the status, every IO_PERIOD (reads: no stream carries them)."""
         while True:
             values = []
             for unit in units:
-                reply = await stub.GetDigitalIO(digital_io_service_pb2.GetDigitalIORequest(
+                reply = await io.GetDigitalIO(digital_io_service_pb2.GetDigitalIORequest(
                     type=unit.type, unit_id=unit.unit_id), metadata=self.metadata, timeout=10)
                 values.append((unit, reply.bits_on))
-            self.callbacks.io(values)
+            await _call(self.callbacks.io, values)
+            if self.callbacks.status is not None:
+                await _call(self.callbacks.status, await device.GetDeviceState(
+                    control_pb2.GetDeviceStateRequest(), metadata=self.metadata, timeout=10))
             await asyncio.sleep(IO_PERIOD)
