@@ -21,8 +21,8 @@ from typing import Annotated
 from pydantic import PlainValidator, PrivateAttr, ValidationInfo, model_validator
 
 from landscape.cell.config_model import (  # noqa: F401  (the parsed configuration, named here too)
-    FRONT_END_RATES, CellConfig, DeviceSpec, GatewaySpec, LauncherSpec, SecuritySpec,
-    SupervisorSpec)
+    FRONT_END_RATES, CellConfig, DeviceSpec, FoxgloveSpec, GatewaySpec, LauncherSpec,
+    MetricsSpec, OpcUaSpec, SecuritySpec, SupervisorSpec)
 from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
 from landscape.robot.cell import CellError, load_cell
 from landscape.robot.toml_tables import Table, flag, integer, number, problem, read_toml, string
@@ -200,6 +200,34 @@ class SupervisorTable(Table):
     sign_in_max_age: Positive = SupervisorSpec.sign_in_max_age
 
 
+class MetricsTable(Table):
+    enabled: flag = MetricsSpec.enabled
+    address: Address = MetricsSpec.address
+    port: Port = MetricsSpec.port
+
+    def spec(self) -> MetricsSpec:
+        return MetricsSpec(**dict(self))
+
+
+class FoxgloveTable(Table):
+    enabled: flag = FoxgloveSpec.enabled
+    address: Address = FoxgloveSpec.address
+    port: Port = FoxgloveSpec.port
+    rate_hz: number(above=0.0, high=250.0) = FoxgloveSpec.rate_hz
+    devices: list | None = None       # default: every device
+
+
+class OpcUaTable(Table):
+    enabled: flag = OpcUaSpec.enabled
+    address: Address = OpcUaSpec.address
+    port: Port = OpcUaSpec.port
+    devices: list | None = None       # default: every device
+    users: FilePath = None
+    certificate: FilePath = None
+    key: FilePath = None
+    trusted_certs: list = []
+
+
 class LauncherTable(Table):
     restart: string(RESTART) = LauncherSpec.restart
     max_restarts: integer(low=0) = LauncherSpec.max_restarts
@@ -219,6 +247,9 @@ class ConfigFile(Table):
     supervisor: SupervisorTable = SupervisorTable()
     security: SecurityTable = SecurityTable()
     launcher: LauncherTable = LauncherTable()
+    metrics: MetricsTable = MetricsTable()
+    foxglove: FoxgloveTable = FoxgloveTable()
+    opcua: OpcUaTable = OpcUaTable()
     _config: CellConfig | None = PrivateAttr(None)
 
     @property
@@ -238,7 +269,9 @@ class ConfigFile(Table):
         self._config = CellConfig(
             name=self.name, devices=devices, gateway=self._gateway(names, security),
             supervisor=self._supervisor(names, security, base), security=security,
-            launcher=self.launcher.spec(), source=info.context["source"])
+            launcher=self.launcher.spec(), metrics=self.metrics.spec(),
+            foxglove=self._foxglove(names), opcua=self._opcua(names, base),
+            source=info.context["source"])
         _check_exposure(self._config)
         _check_ports(self._config)
         return self
@@ -271,6 +304,43 @@ class ConfigFile(Table):
                               sign_in_tokens, s.allowed_origins, s.sign_in_idle,
                               s.sign_in_max_age)
 
+    def _foxglove(self, names: list[str]) -> FoxgloveSpec:
+        f = self.foxglove
+        return FoxgloveSpec(f.enabled, f.address, f.port, f.rate_hz,
+                            _shown(f.devices, names, "foxglove.devices"))
+
+    def _opcua(self, names: list[str], base: Path) -> OpcUaSpec:
+        o = self.opcua
+        for key in ("users", "certificate", "key"):
+            _exists(getattr(o, key), f"opcua.{key}")
+        trusted = []
+        for i, path in enumerate(o.trusted_certs):
+            if not isinstance(path, str) or not path:
+                raise problem(f"expected a certificate's path, got {path!r}",
+                              f"opcua.trusted_certs[{i}]")
+            trusted.append(Path(path) if Path(path).is_absolute() else base / path)
+            _exists(trusted[-1], f"opcua.trusted_certs[{i}]")
+        spec = OpcUaSpec(o.enabled, o.address, o.port, _shown(o.devices, names, "opcua.devices"),
+                         o.users, o.certificate, o.key, tuple(trusted))
+        from landscape.server.security.tls import is_loopback
+        if spec.enabled and not is_loopback(spec.address) and not (
+                spec.certificate and spec.key and (spec.users or spec.trusted_certs)):
+            raise problem(f"the OPC UA server would take anonymous clients on {spec.address}: "
+                          f"give it certificate, key and users (or trusted_certs), or keep it "
+                          f"on loopback", "opcua.address")
+        return spec
+
+
+def _shown(shown, names: list[str], key: str) -> tuple[str, ...]:
+    """The devices a bridge shows (None: all), each named in the cell."""
+    shown = names if shown is None else shown
+    if not shown or not all(isinstance(n, str) for n in shown):
+        raise problem(f"expected a non-empty list of device names, got {shown!r}", key)
+    for name in shown:
+        if name not in names:
+            raise problem(f"no device is named {name!r} (devices: {', '.join(names)})", key)
+    return tuple(dict.fromkeys(shown))
+
 
 def _client_token(token: Path | None, security: SecuritySpec, key: str,
                   role: str) -> Path | None:
@@ -282,9 +352,22 @@ def _client_token(token: Path | None, security: SecuritySpec, key: str,
 
 
 def _check_exposure(config: CellConfig) -> None:
-    """The device servers' rule (server/tls.py), said here first, naming the key."""
+    """The device servers' rule (server/tls.py), said here first, naming the key; the
+    Foxglove bridge and /metrics off loopback: TLS (metrics) or insecure."""
     from landscape.server.security.tls import is_loopback
     security = config.security
+    if config.foxglove.enabled and not (is_loopback(config.foxglove.address)
+                                        or security.insecure):
+        raise problem(f"the Foxglove bridge would show the cell to anyone reaching "
+                      f"{config.foxglove.address} (it has no sign-in): keep it on loopback, or "
+                      f"set security.insecure = true on a network of your own",
+                      "foxglove.address")
+    if config.metrics.enabled and not (is_loopback(config.metrics.address) or security.tls
+                                       or security.insecure):
+        raise problem(f"/metrics would be served on {config.metrics.address} in plaintext: "
+                      f"set security.tls (the device servers serve it over their TLS; the "
+                      f"gateway and supervisor stay on loopback), or security.insecure = true",
+                      "metrics.address")
     for index, device in enumerate(config.devices):
         if is_loopback(device.address) or security.insecure:
             continue
@@ -304,6 +387,13 @@ def _check_ports(config: CellConfig) -> None:
                               config.gateway.grpc_port))
     if config.supervisor.enabled:
         listeners.append(("supervisor.port", config.supervisor.address, config.supervisor.port))
+    for key, bridge in (("foxglove.port", config.foxglove), ("opcua.port", config.opcua)):
+        if bridge.enabled:
+            listeners.append((key, bridge.address, bridge.port))
+    if config.metrics.enabled:
+        count = len(config.devices) + 2
+        listeners += [(f"metrics.port (+{i})", config.metrics.address,
+                       config.metrics.port_of(i)) for i in range(count)]
     seen: list[tuple[str, str, int]] = []
     for key, address, port in listeners:
         if port == 0:

@@ -7,6 +7,7 @@ Every figure is read when scraped; nothing here runs between scrapes.
 """
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 
 from prometheus_client import CollectorRegistry, ProcessCollector, start_http_server
@@ -73,3 +74,19 @@ def serve_metrics(registry: CollectorRegistry, address: str = "127.0.0.1", port:
                                       "client_auth_required": tls.ca is not None}
     server, thread = start_http_server(port, address.strip("[]"), registry, **options)
     return MetricsEndpoint(address, server.server_address[1], server, thread)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """--metrics-port and --metrics-host, for a front end (the gateway, the supervisor)."""
+    parser.add_argument("--metrics-port", type=int, default=None, metavar="PORT",
+                        help="serve /metrics for Prometheus on this port (0: any free one; "
+                             "default: off; the cell's launcher turns it on)")
+    parser.add_argument("--metrics-host", default="127.0.0.1",
+                        help="where /metrics listens (default %(default)s)")
+
+
+def options(argv=None) -> tuple[argparse.Namespace, list[str]]:
+    """(--metrics-port and --metrics-host, the other arguments) of a command line."""
+    parser = argparse.ArgumentParser(add_help=False)
+    add_arguments(parser)
+    return parser.parse_known_args(argv)
