@@ -109,3 +109,20 @@ def test_on_the_lock_step_clock_a_scrape_has_no_cycle_timing_but_the_rest(tmp_pa
                        for name, _ in samples)
     finally:
         server.stop(grace=None)
+
+
+@pytest.mark.slow   # the real-time cycle process
+def test_every_metric_the_dashboard_and_the_alerts_use_is_served(server):
+    """docs/grafana: each landscape_* name its queries use is in a device server's scrape
+    (the gateway's landscape_crcl_* is checked by tests/cell/test_bridges_launch.py)."""
+    import re
+    from pathlib import Path
+    docs = Path(__file__).resolve().parents[2] / "docs" / "grafana"
+    used = set()
+    for path in (docs / "landscape-cell.json", docs / "alerts.yml"):
+        used |= set(re.findall(r"\b(landscape_[a-z_]+|process_[a-z_]+)", path.read_text()))
+    served = {re.sub(r"_(bucket|count|sum|total|created)$", "", name)
+              for name, _ in scrape(server.metrics.url)}
+    missing = {name for name in used if not name.startswith("landscape_crcl_")
+               and re.sub(r"_(bucket|count|sum|total)$", "", name) not in served}
+    assert not missing, missing
