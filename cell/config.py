@@ -1,5 +1,6 @@
 """The cell configuration: one TOML file for the deployment of a cell (its device servers,
-the CRCL gateway, the web supervisor, security and the launcher's policy).
+the CRCL gateway, the web supervisor, the bridges (bridge_tables.py), security and the
+launcher's policy).
 
 Each device's *world* (arm, fixtures, I/O) is a cell file (robot/cells/default.toml) named by
 `world`; this file says where the device runs and how it is reached. `cells/local.toml` beside
@@ -13,7 +14,6 @@ error names the file, the key and what was expected.
 from __future__ import annotations
 
 import ipaddress
-import re
 from importlib import resources
 from pathlib import Path
 from typing import Annotated
@@ -25,10 +25,12 @@ from landscape.cell.config_model import (  # noqa: F401  (the parsed configurati
     MetricsSpec, OpcUaSpec, SecuritySpec, SupervisorSpec)
 from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
 from landscape.robot.cell import CellError, load_cell
+from landscape.cell.bridge_tables import FoxgloveTable, MetricsTable, OpcUaTable, check_bridges
+from landscape.cell.config_types import (Address, FilePath, Name, Port, Positive, exists,
+                                         path_value, shown_devices)
 from landscape.robot.toml_tables import Table, flag, integer, number, problem, read_toml, string
 
 DEFAULT_FILE = "cells/local.toml"
-_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
 RESTART = ("no", "on-failure")
 
 
@@ -37,29 +39,6 @@ class CellConfigError(ValueError):
 
 
 # ---- the file's tables ------------------------------------------------------------------------
-
-def _name(value):
-    if not isinstance(value, str) or not _NAME.fullmatch(value):
-        raise problem(f"expected a name: a letter, then letters, digits, - or _ (at most 32 in "
-                      f"all); got {value!r}")
-    return value
-
-
-def _strip(value):
-    if not isinstance(value, str) or not value:
-        raise problem(f"expected an address (a non-empty string), got {value!r}")
-    return value.strip("[]") if value.startswith("[") else value
-
-
-def _path(value, info: ValidationInfo):
-    """A path, relative ones from the file's folder; "" is the key's default."""
-    if value == "":
-        return None
-    if not isinstance(value, str):
-        raise problem(f"expected a path (a string), got {value!r}")
-    path = Path(value).expanduser()
-    return path if path.is_absolute() else info.context["base"] / path
-
 
 def _world(value, info: ValidationInfo):
     """A world file's path, or the name of one shipped with the package (robot/cells/)."""
@@ -70,9 +49,9 @@ def _world(value, info: ValidationInfo):
         with resources.as_file(resources.files("landscape.robot").joinpath(
                 f"cells/{value}.toml")) as path:
             return Path(path)
-    path = _path(value, info)
+    path = path_value(value, info)
     if path is not None:
-        _exists(path)
+        exists(path)
         try:
             load_cell(path)
         except CellError as error:
@@ -89,20 +68,6 @@ def _origins(value):
         return tuple(normalize(origin) for origin in value)
     except ValueError as error:
         raise problem(str(error)) from None
-
-
-def _exists(path: Path | None, key: str = "", folder: bool = False) -> None:
-    if path is not None and not path.exists():
-        raise problem(f"{path} does not exist", key)
-    if folder and path is not None and not path.is_dir():
-        raise problem(f"{path} is not a folder", key)
-
-
-Name = Annotated[str, PlainValidator(_name)]
-Address = Annotated[str, PlainValidator(_strip)]
-Port = integer(0, 65535)
-FilePath = Annotated[Path | None, PlainValidator(_path)]
-Positive = number(above=0.0)
 
 
 class DeviceTable(Table):
@@ -149,10 +114,10 @@ class SecurityTable(Table):
         for key, needed in (("cert", self.tls), ("key", self.tls), ("ca", self.tls),
                             ("client_cert", self.mtls), ("client_key", self.mtls)):
             if needed:
-                _exists(getattr(self, key), key)
-        _exists(self.tokens, "tokens", folder=True)
+                exists(getattr(self, key), key)
+        exists(self.tokens, "tokens", folder=True)
         if self.audit_dir is not None and self.audit_dir.exists():
-            _exists(self.audit_dir, "audit_dir", folder=True)
+            exists(self.audit_dir, "audit_dir", folder=True)
         for key, needed in (("cert", self.tls), ("key", self.tls), ("ca", self.tls),
                             ("client_cert", self.mtls), ("client_key", self.mtls)):
             if needed and getattr(self, key) is None:
@@ -200,34 +165,6 @@ class SupervisorTable(Table):
     sign_in_max_age: Positive = SupervisorSpec.sign_in_max_age
 
 
-class MetricsTable(Table):
-    enabled: flag = MetricsSpec.enabled
-    address: Address = MetricsSpec.address
-    port: Port = MetricsSpec.port
-
-    def spec(self) -> MetricsSpec:
-        return MetricsSpec(**dict(self))
-
-
-class FoxgloveTable(Table):
-    enabled: flag = FoxgloveSpec.enabled
-    address: Address = FoxgloveSpec.address
-    port: Port = FoxgloveSpec.port
-    rate_hz: number(above=0.0, high=250.0) = FoxgloveSpec.rate_hz
-    devices: list | None = None       # default: every device
-
-
-class OpcUaTable(Table):
-    enabled: flag = OpcUaSpec.enabled
-    address: Address = OpcUaSpec.address
-    port: Port = OpcUaSpec.port
-    devices: list | None = None       # default: every device
-    users: FilePath = None
-    certificate: FilePath = None
-    key: FilePath = None
-    trusted_certs: list = []
-
-
 class LauncherTable(Table):
     restart: string(RESTART) = LauncherSpec.restart
     max_restarts: integer(low=0) = LauncherSpec.max_restarts
@@ -270,7 +207,7 @@ class ConfigFile(Table):
             name=self.name, devices=devices, gateway=self._gateway(names, security),
             supervisor=self._supervisor(names, security, base), security=security,
             launcher=self.launcher.spec(), metrics=self.metrics.spec(),
-            foxglove=self._foxglove(names), opcua=self._opcua(names, base),
+            foxglove=self.foxglove.spec(names), opcua=self.opcua.spec(names, base),
             source=info.context["source"])
         _check_exposure(self._config)
         _check_ports(self._config)
@@ -288,86 +225,32 @@ class ConfigFile(Table):
     def _supervisor(self, names: list[str], security: SecuritySpec,
                     base: Path) -> SupervisorSpec:
         s = self.supervisor
-        shown = names if s.devices is None else s.devices
-        if not shown or not all(isinstance(n, str) for n in shown):
-            raise problem(f"expected a non-empty list of device names, got {shown!r}",
-                          "supervisor.devices")
-        for name in shown:
-            if name not in names:
-                raise problem(f"no device is named {name!r} (devices: {', '.join(names)})",
-                              "supervisor.devices")
+        shown = shown_devices(s.devices, names, "supervisor.devices")
         sign_in_tokens = s.sign_in_tokens or security.tokens or base / "var" / "tokens"
         if sign_in_tokens.exists() and not sign_in_tokens.is_dir():
             raise problem(f"{sign_in_tokens} is not a folder", "supervisor.sign_in_tokens")
-        return SupervisorSpec(s.enabled, s.address, s.port, tuple(dict.fromkeys(shown)),
+        return SupervisorSpec(s.enabled, s.address, s.port, shown,
                               _client_token(s.token, security, "supervisor.token", "viewer"),
                               sign_in_tokens, s.allowed_origins, s.sign_in_idle,
                               s.sign_in_max_age)
 
-    def _foxglove(self, names: list[str]) -> FoxgloveSpec:
-        f = self.foxglove
-        return FoxgloveSpec(f.enabled, f.address, f.port, f.rate_hz,
-                            _shown(f.devices, names, "foxglove.devices"))
-
-    def _opcua(self, names: list[str], base: Path) -> OpcUaSpec:
-        o = self.opcua
-        for key in ("users", "certificate", "key"):
-            _exists(getattr(o, key), f"opcua.{key}")
-        trusted = []
-        for i, path in enumerate(o.trusted_certs):
-            if not isinstance(path, str) or not path:
-                raise problem(f"expected a certificate's path, got {path!r}",
-                              f"opcua.trusted_certs[{i}]")
-            trusted.append(Path(path) if Path(path).is_absolute() else base / path)
-            _exists(trusted[-1], f"opcua.trusted_certs[{i}]")
-        spec = OpcUaSpec(o.enabled, o.address, o.port, _shown(o.devices, names, "opcua.devices"),
-                         o.users, o.certificate, o.key, tuple(trusted))
-        from landscape.server.security.tls import is_loopback
-        if spec.enabled and not is_loopback(spec.address) and not (
-                spec.certificate and spec.key and (spec.users or spec.trusted_certs)):
-            raise problem(f"the OPC UA server would take anonymous clients on {spec.address}: "
-                          f"give it certificate, key and users (or trusted_certs), or keep it "
-                          f"on loopback", "opcua.address")
-        return spec
-
-
-def _shown(shown, names: list[str], key: str) -> tuple[str, ...]:
-    """The devices a bridge shows (None: all), each named in the cell."""
-    shown = names if shown is None else shown
-    if not shown or not all(isinstance(n, str) for n in shown):
-        raise problem(f"expected a non-empty list of device names, got {shown!r}", key)
-    for name in shown:
-        if name not in names:
-            raise problem(f"no device is named {name!r} (devices: {', '.join(names)})", key)
-    return tuple(dict.fromkeys(shown))
 
 
 def _client_token(token: Path | None, security: SecuritySpec, key: str,
                   role: str) -> Path | None:
     """The token file a front end presents: its own key, else the security folder's `role`."""
-    _exists(token, key)
+    exists(token, key)
     if token is None and security.tokens is not None:
         token = security.tokens / f"{role}.tokens"
     return token
 
 
 def _check_exposure(config: CellConfig) -> None:
-    """The device servers' rule (server/tls.py), said here first, naming the key; the
-    Foxglove bridge and /metrics off loopback: TLS (metrics) or insecure."""
+    """The device servers' rule (server/tls.py), said here first, naming the key, and the
+    bridges' (bridge_tables.py)."""
     from landscape.server.security.tls import is_loopback
     security = config.security
-    if config.foxglove.enabled and not (is_loopback(config.foxglove.address)
-                                        or security.insecure):
-        raise problem(f"the Foxglove bridge would show the cell to anyone reaching "
-                      f"{config.foxglove.address} (it has no sign-in): keep it on loopback, or "
-                      f"set security.insecure = true on a network of your own",
-                      "foxglove.address")
-    if config.metrics.enabled and not (is_loopback(config.metrics.address) or security.tls
-                                       or security.insecure):
-        raise problem(f"/metrics would be served on {config.metrics.address} in plaintext: "
-                      f"set security.tls (the device servers serve it over their TLS; the "
-                      f"gateway and supervisor stay on loopback), or security.insecure = true",
-                      "metrics.address")
+    check_bridges(config)
     for index, device in enumerate(config.devices):
         if is_loopback(device.address) or security.insecure:
             continue

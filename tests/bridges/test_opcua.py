@@ -7,7 +7,6 @@ from __future__ import annotations
 import asyncio
 import hashlib
 
-import grpc
 import numpy as np
 import pytest
 from asyncua import Client, ua
