@@ -149,3 +149,17 @@ class DeviceFeed:
                 await _call(self.callbacks.status, await device.GetDeviceState(
                     control_pb2.GetDeviceStateRequest(), metadata=self.metadata, timeout=10))
             await asyncio.sleep(IO_PERIOD)
+
+
+def device_targets(parser, items: list[str]) -> dict[str, str]:
+    """{name: host:port} from a bridge's --device NAME=HOST:PORT arguments (parser.error on a
+    malformed one, or none)."""
+    devices = {}
+    for item in items:
+        name, _, target = item.partition("=")
+        if not name or not target:
+            parser.error(f"--device takes NAME=HOST:PORT, not {item!r}")
+        devices[name] = target
+    if not devices:
+        parser.error("name at least one --device")
+    return devices

@@ -20,7 +20,7 @@ import foxglove
 from foxglove import Capability, Parameter
 from foxglove.websocket import ServerListener
 
-from landscape.bridges.device_feed import DeviceFeed
+from landscape.bridges.device_feed import DeviceFeed, device_targets
 from landscape.bridges.foxglove.bridge import ArmBridge
 from landscape.client import credentials
 from landscape.server.security.tls import is_loopback
@@ -101,14 +101,7 @@ def parse_args(argv=None):
                              "the cell (a network of your own only)")
     credentials.add_arguments(parser)
     args = parser.parse_args(argv)
-    devices = {}
-    for item in args.device:
-        name, _, target = item.partition("=")
-        if not name or not target:
-            parser.error(f"--device takes NAME=HOST:PORT, not {item!r}")
-        devices[name] = target
-    if not devices:
-        parser.error("name at least one --device")
+    devices = device_targets(parser, args.device)
     if not is_loopback(args.host) and not args.insecure:
         parser.error(f"the Foxglove bridge would show the cell to anyone reaching "
                      f"{args.host}: keep it on loopback, or say --insecure")

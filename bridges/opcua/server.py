@@ -24,7 +24,7 @@ from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.user_managers import CertificateUserManager
 
-from landscape.bridges.device_feed import Callbacks, DeviceFeed
+from landscape.bridges.device_feed import Callbacks, DeviceFeed, device_targets
 from landscape.bridges.opcua.model import (AUTOMATIC_EXTERNAL, MANUAL_REDUCED_SPEED, ArmNodes,
                                            RoboticsModel)
 from landscape.client import credentials
@@ -210,14 +210,7 @@ def parse_args(argv=None):
     parser.add_argument("--key", help="the private key of --certificate (PEM)")
     credentials.add_arguments(parser)
     args = parser.parse_args(argv)
-    devices = {}
-    for item in args.device:
-        name, _, target = item.partition("=")
-        if not name or not target:
-            parser.error(f"--device takes NAME=HOST:PORT, not {item!r}")
-        devices[name] = target
-    if not devices:
-        parser.error("name at least one --device")
+    devices = device_targets(parser, args.device)
     return args, devices
 
 
