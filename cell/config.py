@@ -1,5 +1,6 @@
 """The cell configuration: one TOML file for the deployment of a cell (its device servers,
-the CRCL gateway, the web supervisor, security and the launcher's policy).
+the CRCL gateway, the web supervisor, the bridges (bridge_tables.py), security and the
+launcher's policy).
 
 Each device's *world* (arm, fixtures, I/O) is a cell file (robot/cells/default.toml) named by
 `world`; this file says where the device runs and how it is reached. `cells/local.toml` beside
@@ -14,7 +15,6 @@ from __future__ import annotations
 
 import ipaddress
 import math
-import re
 from importlib import resources
 from pathlib import Path
 from typing import Annotated
@@ -22,17 +22,19 @@ from typing import Annotated
 from pydantic import PlainValidator, PrivateAttr, ValidationInfo, model_validator
 
 from landscape.cell.config_model import (  # noqa: F401  (the parsed configuration, named here too)
-    FRONT_END_RATES, CellConfig, DeviceSpec, GatewaySpec, LauncherSpec, SecuritySpec,
-    SupervisorSpec)
+    FRONT_END_RATES, CellConfig, DeviceSpec, FoxgloveSpec, GatewaySpec, LauncherSpec,
+    MetricsSpec, OpcUaSpec, SecuritySpec, SupervisorSpec)
 from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
 from landscape.gateway.units import ANGLE as CRCL_ANGLE, LENGTH as CRCL_LENGTH
 from landscape.gateway.workstation import BARE
 from landscape.robot.cell import CellError, load_cell
+from landscape.cell.bridge_tables import FoxgloveTable, MetricsTable, OpcUaTable, check_bridges
+from landscape.cell.config_types import (Address, FilePath, Name, Port, Positive, Text, exists,
+                                         path_value, shown_devices)
 from landscape.robot.toml_tables import (Table, flag, integer, number, problem, read_toml,
                                          string, vector)
 
 DEFAULT_FILE = "cells/local.toml"
-_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
 RESTART = ("no", "on-failure")
 
 
@@ -41,29 +43,6 @@ class CellConfigError(ValueError):
 
 
 # ---- the file's tables ------------------------------------------------------------------------
-
-def _name(value):
-    if not isinstance(value, str) or not _NAME.fullmatch(value):
-        raise problem(f"expected a name: a letter, then letters, digits, - or _ (at most 32 in "
-                      f"all); got {value!r}")
-    return value
-
-
-def _strip(value):
-    if not isinstance(value, str) or not value:
-        raise problem(f"expected an address (a non-empty string), got {value!r}")
-    return value.strip("[]") if value.startswith("[") else value
-
-
-def _path(value, info: ValidationInfo):
-    """A path, relative ones from the file's folder; "" is the key's default."""
-    if value == "":
-        return None
-    if not isinstance(value, str):
-        raise problem(f"expected a path (a string), got {value!r}")
-    path = Path(value).expanduser()
-    return path if path.is_absolute() else info.context["base"] / path
-
 
 def _world(value, info: ValidationInfo):
     """A world file's path, or the name of one shipped with the package (robot/cells/)."""
@@ -74,9 +53,9 @@ def _world(value, info: ValidationInfo):
         with resources.as_file(resources.files("landscape.robot").joinpath(
                 f"cells/{value}.toml")) as path:
             return Path(path)
-    path = _path(value, info)
+    path = path_value(value, info)
     if path is not None:
-        _exists(path)
+        exists(path)
         try:
             load_cell(path)
         except CellError as error:
@@ -93,28 +72,6 @@ def _origins(value):
         return tuple(normalize(origin) for origin in value)
     except ValueError as error:
         raise problem(str(error)) from None
-
-
-def _text(value):
-    """A string, empty or not."""
-    if not isinstance(value, str):
-        raise problem(f"expected a string, got {value!r}")
-    return value
-
-
-def _exists(path: Path | None, key: str = "", folder: bool = False) -> None:
-    if path is not None and not path.exists():
-        raise problem(f"{path} does not exist", key)
-    if folder and path is not None and not path.is_dir():
-        raise problem(f"{path} is not a folder", key)
-
-
-Name = Annotated[str, PlainValidator(_name)]
-Text = Annotated[str, PlainValidator(_text)]
-Address = Annotated[str, PlainValidator(_strip)]
-Port = integer(0, 65535)
-FilePath = Annotated[Path | None, PlainValidator(_path)]
-Positive = number(above=0.0)
 
 
 class DeviceTable(Table):
@@ -161,10 +118,10 @@ class SecurityTable(Table):
         for key, needed in (("cert", self.tls), ("key", self.tls), ("ca", self.tls),
                             ("client_cert", self.mtls), ("client_key", self.mtls)):
             if needed:
-                _exists(getattr(self, key), key)
-        _exists(self.tokens, "tokens", folder=True)
+                exists(getattr(self, key), key)
+        exists(self.tokens, "tokens", folder=True)
         if self.audit_dir is not None and self.audit_dir.exists():
-            _exists(self.audit_dir, "audit_dir", folder=True)
+            exists(self.audit_dir, "audit_dir", folder=True)
         for key, needed in (("cert", self.tls), ("key", self.tls), ("ca", self.tls),
                             ("client_cert", self.mtls), ("client_key", self.mtls)):
             if needed and getattr(self, key) is None:
@@ -236,6 +193,9 @@ class ConfigFile(Table):
     supervisor: SupervisorTable = SupervisorTable()
     security: SecurityTable = SecurityTable()
     launcher: LauncherTable = LauncherTable()
+    metrics: MetricsTable = MetricsTable()
+    foxglove: FoxgloveTable = FoxgloveTable()
+    opcua: OpcUaTable = OpcUaTable()
     _config: CellConfig | None = PrivateAttr(None)
 
     @property
@@ -255,7 +215,9 @@ class ConfigFile(Table):
         self._config = CellConfig(
             name=self.name, devices=devices, gateway=self._gateway(devices, security),
             supervisor=self._supervisor(names, security, base), security=security,
-            launcher=self.launcher.spec(), source=info.context["source"])
+            launcher=self.launcher.spec(), metrics=self.metrics.spec(),
+            foxglove=self.foxglove.spec(names), opcua=self.opcua.spec(names, base),
+            source=info.context["source"])
         _check_exposure(self._config)
         _check_ports(self._config)
         return self
@@ -275,18 +237,11 @@ class ConfigFile(Table):
     def _supervisor(self, names: list[str], security: SecuritySpec,
                     base: Path) -> SupervisorSpec:
         s = self.supervisor
-        shown = names if s.devices is None else s.devices
-        if not shown or not all(isinstance(n, str) for n in shown):
-            raise problem(f"expected a non-empty list of device names, got {shown!r}",
-                          "supervisor.devices")
-        for name in shown:
-            if name not in names:
-                raise problem(f"no device is named {name!r} (devices: {', '.join(names)})",
-                              "supervisor.devices")
+        shown = shown_devices(s.devices, names, "supervisor.devices")
         sign_in_tokens = s.sign_in_tokens or security.tokens or base / "var" / "tokens"
         if sign_in_tokens.exists() and not sign_in_tokens.is_dir():
             raise problem(f"{sign_in_tokens} is not a folder", "supervisor.sign_in_tokens")
-        return SupervisorSpec(s.enabled, s.address, s.port, tuple(dict.fromkeys(shown)),
+        return SupervisorSpec(s.enabled, s.address, s.port, shown,
                               _client_token(s.token, security, "supervisor.token", "viewer"),
                               sign_in_tokens, s.allowed_origins, s.sign_in_idle,
                               s.sign_in_max_age)
@@ -306,16 +261,18 @@ def _tool_of(name: str, device: DeviceSpec) -> None:
 def _client_token(token: Path | None, security: SecuritySpec, key: str,
                   role: str) -> Path | None:
     """The token file a front end presents: its own key, else the security folder's `role`."""
-    _exists(token, key)
+    exists(token, key)
     if token is None and security.tokens is not None:
         token = security.tokens / f"{role}.tokens"
     return token
 
 
 def _check_exposure(config: CellConfig) -> None:
-    """The device servers' rule (server/tls.py), said here first, naming the key."""
+    """The device servers' rule (server/tls.py), said here first, naming the key, and the
+    bridges' (bridge_tables.py)."""
     from landscape.server.security.tls import is_loopback
     security = config.security
+    check_bridges(config)
     for index, device in enumerate(config.devices):
         if is_loopback(device.address) or security.insecure:
             continue
@@ -335,6 +292,13 @@ def _check_ports(config: CellConfig) -> None:
                               config.gateway.grpc_port))
     if config.supervisor.enabled:
         listeners.append(("supervisor.port", config.supervisor.address, config.supervisor.port))
+    for key, bridge in (("foxglove.port", config.foxglove), ("opcua.port", config.opcua)):
+        if bridge.enabled:
+            listeners.append((key, bridge.address, bridge.port))
+    if config.metrics.enabled:
+        count = len(config.devices) + 2
+        listeners += [(f"metrics.port (+{i})", config.metrics.address,
+                       config.metrics.port_of(i)) for i in range(count)]
     seen: list[tuple[str, str, int]] = []
     for key, address, port in listeners:
         if port == 0:

@@ -1,5 +1,6 @@
 """The parsed cell configuration (config.py reads the file): frozen dataclasses of its device
-servers, the CRCL gateway, the web supervisor, security and the launcher's policy."""
+servers, the CRCL gateway, the web supervisor, the bridges (Prometheus, Foxglove, OPC UA),
+security and the launcher's policy."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -102,6 +103,46 @@ class SecuritySpec:
 
 
 @dataclass(frozen=True)
+class MetricsSpec:
+    """/metrics of every service (Prometheus): the devices on port, port + 1, ..., then the
+    gateway and the supervisor (port 0: each any free one), on `address`."""
+
+    enabled: bool = True
+    address: str = "127.0.0.1"
+    port: int = 9464
+
+    def port_of(self, index: int) -> int:
+        """The index-th service's port: devices first, then the gateway, the supervisor."""
+        return 0 if self.port == 0 else self.port + index
+
+
+@dataclass(frozen=True)
+class FoxgloveSpec:
+    """The Foxglove bridge (WebSocket) showing `devices` at `rate_hz` samples a second."""
+
+    enabled: bool = False
+    address: str = "127.0.0.1"
+    port: int = 8765
+    rate_hz: float = 30.0
+    devices: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class OpcUaSpec:
+    """The OPC UA server exposing `devices`; off loopback it needs its certificate and key,
+    and users (a file of `<name> <SHA-256 of the password>`) or trusted client certificates."""
+
+    enabled: bool = False
+    address: str = "127.0.0.1"
+    port: int = 4840
+    devices: tuple[str, ...] = ()
+    users: Path | None = None
+    certificate: Path | None = None
+    key: Path | None = None
+    trusted_certs: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
 class LauncherSpec:
     """What the launcher does when a service dies ("no": stop the cell; "on-failure": start
     it again, at most max_restarts times), and how long a service may take to start and stop
@@ -121,6 +162,9 @@ class CellConfig:
     supervisor: SupervisorSpec
     security: SecuritySpec = field(default_factory=SecuritySpec)
     launcher: LauncherSpec = field(default_factory=LauncherSpec)
+    metrics: MetricsSpec = field(default_factory=MetricsSpec)
+    foxglove: FoxgloveSpec = field(default_factory=FoxgloveSpec)
+    opcua: OpcUaSpec = field(default_factory=OpcUaSpec)
     source: str = "<string>"
 
     def device(self, name: str) -> DeviceSpec:

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import grpc
 
+from landscape.bridges.metrics import endpoint as metrics_endpoint
 from landscape.client import Endpoint, credentials
+from landscape.gateway import metrics as gateway_metrics
 from landscape.gateway.device import CrclDevice
 from landscape.gateway.schemas import SchemaSet, default_directory, describe
 from landscape.gateway.server import DEFAULT_PORT, Gateway
@@ -76,6 +78,7 @@ def arguments(argv=None) -> argparse.Namespace:
     parser.add_argument("--state-rate", type=float, default=100.0,
                         help="samples per second asked of the device's state stream")
     credentials.add_arguments(parser)
+    metrics_endpoint.add_arguments(parser)   # /metrics (gateway/metrics.py)
     return parser.parse_args(argv)
 
 
@@ -146,11 +149,14 @@ async def serve(args: argparse.Namespace, ready=None) -> None:
                                                   grpc_credentials(args))
         print(f"CRCL gRPC face listening on {host}:{grpc_port}", flush=True)
     print(f"CRCL gateway listening on {args.host}:{gateway.port}", flush=True)
+    metrics = gateway_metrics.start(args, gateway)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     await stop.wait()
+    if metrics is not None:
+        metrics.close()
     await gateway.close()
     if grpc_server is not None:
         await grpc_server.stop(1.0)

@@ -63,6 +63,12 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
     _security_arguments(parser.add_argument_group(
         "security", "plaintext is for loopback: any other --address needs TLS and tokens, or "
                     "--insecure"))
+    parser.add_argument("--metrics-port", type=int, default=None, metavar="PORT",
+                        help="serve /metrics for Prometheus on this port (0: any free one; "
+                             "default: off; the cell's launcher turns it on)")
+    parser.add_argument("--metrics-address", default=DEFAULT_ADDRESS,
+                        help="where /metrics listens (default %(default)s); off loopback it "
+                             "is served over the server's TLS, or with --insecure")
     parser.add_argument("--log-level", default="INFO",
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"],
                         help="what to log (default %(default)s); refused commands are INFO")
@@ -92,7 +98,8 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
                           clock=args.clock, paths_file=args.paths,
                           reset_settings=args.reset_settings, security=security,
                           collision_margin=args.collision_margin,
-                          max_message_bytes=args.max_message_bytes)
+                          max_message_bytes=args.max_message_bytes,
+                          metrics_port=args.metrics_port, metrics_address=args.metrics_address)
     return config, args.log_level
 
 
@@ -166,7 +173,8 @@ def _say_what_runs(running, config: ServerConfig) -> None:
              f"paths and settings: {config.paths_file or 'in memory'}",
              f"gRPC: {listen_address(config.address, running.port)} "
              f"({_transport(config.security)})",
-             f"audit log: {config.security.audit_log or 'none'}"]
+             f"audit log: {config.security.audit_log or 'none'}",
+             f"metrics: {running.metrics.url if running.metrics else 'off'}"]
     log.info("LandScape device server\n  " + "\n  ".join(lines))
     for problem in link.tuning_problems:
         log.warning("the cycle process runs without real-time guarantees (%s): expect late "

@@ -74,3 +74,8 @@ class ServerConfig:
     # Initialise the controller at start-up (False leaves the device Idle, for tests).
     start_device: bool = True
     security: SecurityConfig = SecurityConfig()
+    # /metrics for Prometheus (server/metrics.py) on this port (0: any free one; None: off),
+    # on loopback unless metrics_address says otherwise (then with the server's TLS, or
+    # security.insecure).
+    metrics_port: int | None = None
+    metrics_address: str = DEFAULT_ADDRESS

@@ -69,9 +69,20 @@ class Dispatch:
         self.reads = ThreadPoolExecutor(reads, thread_name_prefix="read")
         self.panel = ThreadPoolExecutor(panel, thread_name_prefix="panel")
         self.parse = ThreadPoolExecutor(1, thread_name_prefix="parse")
+        self.lanes = {"commands": self.commands, "immediate": self.immediate,
+                      "reads": self.reads, "panel": self.panel, "parse": self.parse}
+        self._in_flight = dict.fromkeys(self.lanes.values(), 0)
 
     async def run(self, pool: ThreadPoolExecutor, func, *args):
-        return await asyncio.get_running_loop().run_in_executor(pool, func, *args)
+        self._in_flight[pool] += 1   # on the event loop only: no lock
+        try:
+            return await asyncio.get_running_loop().run_in_executor(pool, func, *args)
+        finally:
+            self._in_flight[pool] -= 1
+
+    def in_flight(self) -> dict[str, int]:
+        """Calls running or queued per lane (a queue depth of /metrics)."""
+        return {name: self._in_flight[pool] for name, pool in self.lanes.items()}
 
     def shutdown(self) -> None:
         for pool in (self.commands, self.immediate, self.reads, self.panel, self.parse):

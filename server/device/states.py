@@ -118,6 +118,8 @@ RULES: dict[str, Rule] = {
     "Connect": _read("2.2"),
     # live state
     "StreamState": _read("-"),
+    # the controller recorder's stored file (LLI s7.4 5.5), read-only
+    "FetchRecording": _read("-"),
 }
 
 
