@@ -30,6 +30,7 @@ def test_make_run_starts_the_bridges_the_cell_file_turns_on(launch):  # noqa: F8
                   "[metrics]\nport = 0\n[foxglove]\nenabled = true\nport = 0\n"
                   "[opcua]\nenabled = true\nport = 0\n")
     cell.wait_for(r"is up; Ctrl-C stops it")
+    cell.wait_for(r"OPC UA server")   # the summary's lines follow its first, the last is this
     services = {}
     for line in cell.output:
         match = SUMMARY.search(line)
