@@ -39,6 +39,9 @@ from landscape.server.link.clock import RealTimeClock, ThreadedLockStepClock
 
 log = logging.getLogger(__name__)
 FAST_SILENCE = 0.5   # s without feedback that count as a hung cycle process, fast clock
+# A process says it is ready before its first cycle (it collects its garbage and tunes its
+# scheduling in between): on a busy machine that took over 40 ms. Its first row may take this.
+START_SILENCE = 2.0
 
 
 class ControllerLink:
@@ -68,6 +71,7 @@ class ControllerLink:
         self.lost: str | None = None        # why the controller was lost, until restart()
         self._lost_lock = threading.Lock()
         self._closing = False
+        self._generation = 0                # which clock is current: a dead one's news is old
         self._clock = self._start_clock()
         self._watchdog: threading.Thread | None = None
         if clock in PROCESS_CLOCKS:
@@ -77,6 +81,8 @@ class ControllerLink:
 
     def _start_clock(self):
         last = self.feedback.latest()   # the e-stop as the controller before this one left it
+        self._generation += 1
+        generation = self._generation
         factory = functools.partial(build_controller, self._cell_path, self.feedback,
                                     estop_pressed=last is not None and last.estop,
                                     backend_name=self._backend)
@@ -85,7 +91,8 @@ class ControllerLink:
                                  free=self.clock_kind == "fast",
                                  on_failure=lambda why: self._lose(
                                      f"the cycle process died: {why.strip().splitlines()[-1]}"
-                                     if why else "the cycle process died")).start()
+                                     if why else "the cycle process died",
+                                     generation=generation)).start()
         return ThreadedLockStepClock(factory, self._on_message, self._pace)
 
     # -- the clock's surface
@@ -164,9 +171,12 @@ class ControllerLink:
         except Exception:
             log.exception("stopping the controller failed")
 
-    def _lose(self, reason: str, kill: bool = False) -> None:
+    def _lose(self, reason: str, kill: bool = False, generation: int | None = None) -> None:
+        """Report the loss of the clock of `generation` (the current one if None). A process
+        killed as silent reports its exit later, maybe after a restart: that is old news."""
         with self._lost_lock:
-            if self.lost is not None or self._closing:
+            if (self.lost is not None or self._closing
+                    or generation not in (None, self._generation)):
                 return
             self.lost = reason
             if kill:   # before anyone hears of the loss (a stalled process may resume)
@@ -176,19 +186,23 @@ class ControllerLink:
 
     def _watch(self) -> None:
         """The ring must advance; `silence_cycles` cycles without a row is a hang (on the fast
-        clock, FAST_SILENCE)."""
+        clock, FAST_SILENCE; before a new process's first row, START_SILENCE)."""
         period = self._clock.cycle_time
         limit = self.silence_cycles * period
         if self.clock_kind == "fast":
             limit = max(limit, FAST_SILENCE)
-        seen, since = self.feedback.head, time.monotonic()
+        generation, seen, since = None, self.feedback.head, time.monotonic()
         while not self._closing:
             time.sleep(period)
             head, now = self.feedback.head, time.monotonic()
+            if self._generation != generation:    # a new process: judged from its first row
+                generation, first_row, seen, since = self._generation, True, head, now
             if head != seen or self.lost is not None:
+                first_row = first_row and head == seen
                 seen, since = head, now
-            elif now - since > limit and head >= 0:
+            elif now - since > (START_SILENCE if first_row else limit):
                 alive = self._clock.alive
                 self._lose(f"the cycle process sent no feedback for {now - since:.3f} s"
-                           + (" (killed)" if alive else " and exited"), kill=True)
+                           + (" (killed)" if alive else " and exited"), kill=True,
+                           generation=generation)
 
