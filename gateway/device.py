@@ -50,7 +50,14 @@ class CrclDevice:
 
     async def end(self, control: "Control") -> None:
         """A session's end (the arm stopped, its settings put back, the lock released)."""
-        ending = asyncio.ensure_future(control.close())
+        await self.ending(control.close())
+
+    async def ending(self, end) -> None:
+        """Run the coroutine `end` (a session ending) to its end whatever cancels the caller;
+        new sessions wait for it (take_control). Counted from the call, not from its first
+        step: a connection's end first cancels its running command, and a client that
+        reconnected at once was refused the lock meanwhile (test_run)."""
+        ending = asyncio.ensure_future(end)
         self._ending.add(ending)
         ending.add_done_callback(self._ending.discard)
         await asyncio.shield(ending)
@@ -209,24 +216,28 @@ class Control:
         """EndCanon: stop, drives off, the session's settings put back, the lock released,
         the session ended."""
         try:
-            await self._stop()
-            await self._restore_quietly()
-            await self.robot.release()
+            await self._end()
         finally:
             await self.robot.close()
 
     async def close(self) -> None:
-        """The connection ended: when the session has settings of its own on the device, the
-        arm stops and its drives go off (as the device's disconnect handler would do) before
-        they are put back; closing the session then releases the lock."""
+        """The connection ended: as EndCanon, while the session is still the device's. The
+        lock is free when this returns: a client that reconnects at once gets it (closing
+        the session alone left the release to the device's disconnect handler, which a new
+        session's Lock could overtake). Whatever fails, the session is closed, and the
+        device's disconnect handler does the rest."""
         try:
-            if self.changed and self.robot.lost is None:
-                await self._stop()
-                await self._restore_quietly()
+            if self.robot.lost is None:
+                await self._end()
         except LandscapeError as error:
-            log.warning("putting back the session's device settings: %s", error)
+            log.warning("ending the session on the device: %s", error)
         finally:
             await asyncio.shield(self.robot.close())
+
+    async def _end(self) -> None:
+        await self._stop()
+        await self._restore_quietly()
+        await self.robot.release()
 
     async def _stop(self) -> None:
         """A motion stopped along its path (as the device's disconnect handler stops it),

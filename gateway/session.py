@@ -333,7 +333,10 @@ class CrclSession:
             await self.device.end(control)
 
     async def close(self) -> None:
-        """The connection ended."""
+        """The connection ended: its command stopped, then its session (device.ending)."""
+        await self.device.ending(self._close())
+
+    async def _close(self) -> None:
         self._queue.clear()
         for task in (self._running, self._worker):
             if task is not None:
