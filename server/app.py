@@ -7,6 +7,7 @@ command bodies run on the guard's thread pools (servicers/guard.py).
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import sys
 import threading
@@ -35,6 +36,7 @@ from landscape.server.planning.paths import PathStore
 from landscape.server.security.rate_limit import RateLimiter
 from landscape.server.api.reflection_pool import MethodResolvingPool
 from landscape.server.security.interceptor import SecurityInterceptor
+from landscape.server.api.servicers.audit import AuditServicer
 from landscape.server.api.servicers.device import DeviceServicer
 from landscape.server.api.servicers.digital_io import DigitalIOServicer
 from landscape.server.api.servicers.events import EventServicer
@@ -45,6 +47,7 @@ from landscape.server.api.servicers.state import StateServicer
 from landscape.server.api.state_stream import StateHub
 from landscape.server.workcell.assembly import Workcell, build_workcell
 from landscape.robot.cell import load_cell
+from landscape.robot.cell_model import Pose
 
 log = logging.getLogger(__name__)
 
@@ -161,6 +164,9 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         security.close()
         raise
     cell = load_cell(config.cell)
+    if config.placement is not None:
+        cell = dataclasses.replace(cell, shared_cell=config.shared_cell, placement=Pose(
+            config.placement[:3], config.placement[3:]))
     link = ControllerLink(config.clock, config.cell,
                           on_message=lambda msg: device and device.on_cycle_message(msg),
                           on_lost=lambda why: device and device.controller_lost(why),
@@ -178,7 +184,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         if config.start_device:
             device.start()
         health_servicer = runner.run(_start(server, device, workcell, bus, hub, dispatch,
-                                            limits, cell.recorder.path))
+                                            limits, cell.recorder.path, config.security))
     except BaseException:
         device.close()
         workcell.close()
@@ -279,7 +285,8 @@ async def _bind(config: ServerConfig,
     return server, port
 
 
-async def _start(server, device, workcell, bus, hub, dispatch, limits, recording: str):
+async def _start(server, device, workcell, bus, hub, dispatch, limits, recording: str,
+                 security: SecurityConfig):
     hub.attach(asyncio.get_running_loop())
     servicers = {
         services.DEVICE: DeviceServicer(device, workcell, hub, dispatch, limits),
@@ -288,6 +295,8 @@ async def _start(server, device, workcell, bus, hub, dispatch, limits, recording
         services.SESSIONS: SessionServicer(device, dispatch, limits),
         services.STATE: StateServicer(device, hub, dispatch, limits),
         services.RECORDINGS: RecordingServicer(device, recording, dispatch, limits),
+        services.AUDIT: AuditServicer(device, security.audit_log, security.audit_backups,
+                                      dispatch, limits),
     }
     for spec, servicer in servicers.items():
         spec.add_to_server(servicer, server)

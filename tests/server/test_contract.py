@@ -21,17 +21,19 @@ EXPECTED = {
         "GetEndEffectorState", "GetTool", "PutTool", "ActivateTool", "DeactivateTool",
         "SendCommand",
         "Jog", "Reset", "GetDeviceState", "GetRobotDescription", "OperatePanel",
-        "GetCellDescription",
+        "GetCellDescription", "ListPaths", "GetPath", "SolvePose",
     ],
     services.DIGITAL_IO: ["SetDigitalIO", "GetDigitalIO", "SignalDigitalIO", "ListDigitalIO"],
-    services.EVENTS: ["Subscribe", "PostMessage"],
+    services.EVENTS: ["Subscribe", "PostMessage", "AcknowledgeAlarm"],
     services.SESSIONS: ["Connect"],
     services.STATE: ["StreamState"],
+    services.AUDIT: ["ReadAuditLog"],
 }
 
 # (client streaming, server streaming)
 STREAMING = {"PathLoad": (True, False), "Jog": (True, True), "Subscribe": (False, True),
-             "Connect": (True, True), "StreamState": (False, True)}
+             "Connect": (True, True), "StreamState": (False, True),
+             "GetPath": (False, True), "ReadAuditLog": (False, True)}
 
 
 @pytest.mark.parametrize("spec", list(EXPECTED), ids=lambda s: s.name)
