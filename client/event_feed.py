@@ -7,7 +7,9 @@ device has registered it (it sends the call's headers then), so
 a command started after `ready()` cannot have events the feed misses. When the stream breaks it
 is opened again after the last event seen, so nothing is missed across the gap; a device that
 restarted (it no longer has that event: OUT_OF_RANGE) is followed live again, its command ids
-starting afresh. Every event also goes to the `listeners` (a supervisor shows them).
+starting afresh (with `replay`, from its first kept event). Every event also goes to the
+`listeners` (a supervisor shows them), and each time the stream is registered or fails the
+`status_listeners` hear (code, details): (OK, "") once registered.
 
 A started command's end is waited for here (`wait`, `follow`), raced against the end of the
 session that started it: a command the device aborted because that session was lost raises
@@ -41,6 +43,7 @@ class EventFeed:
         self._replay = replay
         self.log = CommandLog()
         self.listeners: list[Callable[[pb.Event], None]] = []
+        self.status_listeners: list[Callable[[grpc.StatusCode, str], None]] = []
         self.failure = ""                    # why the stream is down, while it is
         self._live = asyncio.Event()
         self._changed = asyncio.Condition()
@@ -74,22 +77,24 @@ class EventFeed:
 
     async def _run(self) -> None:
         pause = RETRY_FIRST
-        after: int | None = 0 if self._replay else None   # then after the last event seen
+        first: int | None = 0 if self._replay else None   # where a stream with no past starts
+        after = first                                     # then after the last event seen
         while True:
             try:
                 await self._stream(after)
             except grpc.aio.AioRpcError as error:
                 if error.code() is grpc.StatusCode.OUT_OF_RANGE:
-                    log.info("events: %s; following the device live", error.details())
+                    log.info("events: %s; following the device afresh", error.details())
                     self.log = CommandLog()  # a restarted device: its ids start again
-                    after, pause = None, 0.0
+                    after, pause = first, 0.0
                     continue
                 if not self.failure:
                     log.warning("event stream: %s: %s", error.code().name, error.details())
                 self.failure = f"{error.code().name}: {error.details()}"
+                self._tell(error.code(), error.details())
             finally:
                 self._live.clear()
-            after = self.log.last_sequence or None
+            after = self.log.last_sequence or first
             await asyncio.sleep(pause)
             pause = min(max(2 * pause, RETRY_FIRST), RETRY_MAX)
 
@@ -100,6 +105,7 @@ class EventFeed:
             await call.initial_metadata()    # sent once the device has subscribed us
             self._live.set()
             self.failure = ""
+            self._tell(grpc.StatusCode.OK, "")
             async for reply in call:
                 self.log.record(reply.event)
                 for listener in self.listeners:
@@ -107,6 +113,10 @@ class EventFeed:
                 await self._notify()
         finally:
             call.cancel()
+
+    def _tell(self, code: grpc.StatusCode, details: str) -> None:
+        for listener in self.status_listeners:
+            listener(code, details)
 
     async def _notify(self) -> None:
         async with self._changed:

@@ -7,7 +7,8 @@ last sample is, and the stream is opened again every RETRY_PERIOD. The sensors r
 sample are those any owner asked for (`watch`); a set that grows is tried on a new stream
 first, which replaces the running one only once the device has accepted it, so a sensor the
 stream cannot carry is refused and the feed goes on as it was. Every sample also goes to the
-`listeners`.
+`listeners`; the stream's terms are kept in `started`, and each time a stream starts or fails
+the `status_listeners` hear (code, details): (OK, "") once a stream's terms arrived.
 """
 from __future__ import annotations
 
@@ -54,6 +55,8 @@ class StateFeed:
         self.unavailable = "no state from the device yet"
         self.sensors: tuple[str, ...] = tuple(request.sensors)
         self.listeners: list[Callable[[Sample], None]] = []
+        self.started: state_service_pb2.StreamStarted | None = None   # the running stream's terms
+        self.status_listeners: list[Callable[[grpc.StatusCode, str], None]] = []
         self._wanted: dict[object, frozenset[str]] = {}     # owner -> its sensors
         self._changing = asyncio.Lock()                     # one change of sensors at a time
         self._changed = asyncio.Condition()
@@ -172,21 +175,33 @@ class StateFeed:
             call, message = opened or (self._stub.StreamState(
                 self._request_for(self.sensors), metadata=self._metadata), None)
             opened = None
+            code, details = grpc.StatusCode.UNAVAILABLE, "the device ended it"
             try:
                 while True:
-                    if message is not None and message.WhichOneof("message") == "sample":
+                    kind = message.WhichOneof("message") if message is not None else None
+                    if kind == "sample":
                         await self._publish(Sample(message.sample, time.monotonic()))
+                    elif kind == "started":
+                        self.started = message.started
+                        self._tell(grpc.StatusCode.OK, "")
                     message = await call.read()
                     if message is grpc.aio.EOF:
                         break
-                self.unavailable = "state stream: the device ended it"
+                self.unavailable = f"state stream: {details}"
             except grpc.aio.AioRpcError as error:
-                self.unavailable = f"state stream: {error.code().name}: {error.details()}"
+                code, details = error.code(), error.details()
+                self.unavailable = f"state stream: {code.name}: {details}"
             except Exception as error:   # noqa: BLE001 - the feed must outlive any surprise
-                self.unavailable = f"state stream: {error!r}"
+                code, details = grpc.StatusCode.UNKNOWN, repr(error)
+                self.unavailable = f"state stream: {details}"
                 log.exception("state stream")
             finally:
                 call.cancel()
             log.warning("%s", self.unavailable)
+            self._tell(code, details)
             await asyncio.sleep(RETRY_PERIOD)
+
+    def _tell(self, code: grpc.StatusCode, details: str) -> None:
+        for listener in self.status_listeners:
+            listener(code, details)
 
