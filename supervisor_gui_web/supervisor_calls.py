@@ -18,13 +18,9 @@ from landscape.server.security.auth import Role
 from landscape.supervisor import wire
 from landscape.supervisor.alarm_acks import AlarmAcks
 from landscape.supervisor.handover import CONTROL, ControlDesk, HandoverRefused
-from landscape.supervisor.rpc_table import RPCS, rpc_name
-from landscape.v1 import control_pb2, types_pb2
+from landscape.v1 import types_pb2
 
 PREFIX = "supervisor/"
-GET_STATE = RPCS[rpc_name("DeviceService", "GetDeviceState")]
-DEACTIVATE = RPCS[rpc_name("DeviceService", "Deactivate")]
-RELEASE = RPCS[rpc_name("DeviceService", "Release")]
 
 
 class CallRefused(Exception):
@@ -34,7 +30,8 @@ class CallRefused(Exception):
 
 
 class ConsolePage:
-    """A console (one browser page) as the control desk sees it: handover.Page."""
+    """A console (one browser page) as the control desk sees it: handover.Page. Its calls are
+    the person's, through their robot on the device (console.Console.robot_of)."""
 
     def __init__(self, console):
         self.console = console
@@ -44,25 +41,21 @@ class ConsolePage:
         self.console.outbox.put(wire.note(device, CONTROL, body))
 
     def has_session(self, device: str) -> bool:
-        session = self.console.session_of(device)
+        session = self.console.robot_of(device).session
         return session is not None and not session.ended.is_set()
 
-    def _call(self, device: str, rpc, request):
-        session = self.console.session_of(device)
-        metadata = session.metadata() if session else ()
-        return rpc.callable(self.console.caller_of(device))(request, metadata=metadata, timeout=30)
-
     async def device_state(self, device: str) -> str:
-        reply = await self._call(device, GET_STATE, control_pb2.GetDeviceStateRequest())
+        reply = await self.console.robot_of(device).get_device_state()
         return types_pb2.DeviceState.Name(reply.state)
 
     async def give_up_lock(self, device: str, deactivate: bool) -> None:
+        robot = self.console.robot_of(device)
         if deactivate:
-            await self._call(device, DEACTIVATE, control_pb2.DeactivateRequest())
-        await self._call(device, RELEASE, control_pb2.ReleaseRequest())
+            await robot.deactivate()
+        await robot.release()
 
     async def take_lock(self, device: str) -> None:
-        await self.console.session_of(device).lock()
+        await self.console.robot_of(device).lock()
 
 
 class SupervisorCalls:

@@ -17,8 +17,8 @@ Every WebSocket frame is a JSON object about one message of one RPC of one devic
                          a fresh id, larger than any before it: console.py)
 
 The feeds the backend keeps for every browser arrive under their own RPC names
-(StateService/StreamState, EventService/Subscribe, the read-only gets of `status_poll`, and
-DeviceService/GetCellDescription, the cell around the arm: world_feed.py).
+(StateService/StreamState, EventService/Subscribe, the read-only gets of the status, and
+DeviceService/GetCellDescription, the cell around the arm: device_hub.py).
 Nothing here is a second schema: "reply" and "status" are protobuf's own JSON mapping.
 
 Beside the contract, the supervisor's own calls among the people signed in to it (alarms
@@ -34,8 +34,6 @@ from google.protobuf import any_pb2, json_format
 from google.protobuf.message import Message
 from google.rpc import code_pb2, error_details_pb2, status_pb2  # noqa: F401 (ErrorInfo for JSON)
 
-STATUS_DETAILS_KEY = "grpc-status-details-bin"
-
 
 def message_dict(message: Message) -> dict:
     """Canonical JSON of a message; fields at their default value are written out too (still
@@ -48,15 +46,6 @@ def any_dict(message: Message) -> dict:
     packed = any_pb2.Any()
     packed.Pack(message)
     return message_dict(packed)
-
-
-def status_of(error: grpc.RpcError) -> status_pb2.Status:
-    """The google.rpc.Status the server sent (with its ErrorInfo), or one made of the call's
-    code and text when it sent none (a transport failure, a cancelled call)."""
-    for key, value in (error.trailing_metadata() or ()):
-        if key == STATUS_DETAILS_KEY:
-            return status_pb2.Status.FromString(value)
-    return status_pb2.Status(code=error.code().value[0], message=error.details() or "")
 
 
 def status(code: grpc.StatusCode, message: str) -> status_pb2.Status:

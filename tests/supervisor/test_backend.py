@@ -128,17 +128,38 @@ def test_closing_the_page_ends_its_session_and_the_device_releases(people, serve
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
 
-def test_a_session_the_device_ends_is_reported_with_the_devices_reason(people, server):
+def test_a_blocked_backend_loop_keeps_the_pages_session_and_lock(people, server):
     """Issue 25 item 4: the backend's loop held past the device's keep-alive timeout (2 s):
-    the device ends the session, and the page is told why, in the device's words."""
+    the session's keep-alives go from the client core's keeper threads all the same, so the
+    page keeps its session and lock (the backend's own loop sent them before: it lost both)."""
     async def body(page, dashboard):
         session = await page.send(CONNECT, {"hello": {}})
         await page.answer(session)
         await page.call(DEVICE + "Lock")
-        time.sleep(3)   # nothing on the loop runs: neither the backend nor its keep-alives
+        time.sleep(3)   # nothing on the loop runs: neither the backend nor the page's client
+        assert "reply" in await page.call(DEVICE + "Activate")
+        assert server.device.state is State.RESTING
+        assert server.device.status().lock_holder == "olga"
+        assert not [f for f in page.frames if f.get("id") == session and "status" in f]
+    run_with_page(server, body, people)
+
+
+def test_a_session_the_device_ends_is_reported_with_the_devices_reason(people, server):
+    """Issue 25 item 4: the device ends the page's session as its keep-alive watchdog does;
+    the page is told at once, in the device's words, and the lock is not taken back."""
+    async def body(page, dashboard):
+        session = await page.send(CONNECT, {"hello": {}})
+        opened = await page.answer(session)
+        await page.call(DEVICE + "Lock")
+        registry = server.device.sessions
+        registry.end(registry.get(opened["reply"]["opened"]["sessionId"]),
+                     "no keep-alive for 2 s", "DEADLINE_EXCEEDED")
         ended = await page.until(lambda f: f.get("id") == session and "status" in f)
         assert ended["status"]["code"] == 4, ended   # DEADLINE_EXCEEDED
         assert ended["status"]["message"] == "your session ended: no keep-alive for 2 s"
+        refused = await page.call(DEVICE + "Activate")   # the lock is gone, and says why
+        assert refused["status"]["message"].startswith("your session ended: no keep-alive")
+        assert not server.device.status().locked
     run_with_page(server, body, people)
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
