@@ -20,11 +20,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from typing import AsyncIterator, Callable
+from typing import AsyncIterator
 
 import grpc
 
 from landscape.client.errors import CommandTimeout, ServerUnavailable, SessionEnded
+from landscape.client.feed import Feed
 from landscape.client.tracking import ALARM_GRACE, CommandLog
 from landscape.v1 import event_service_pb2 as pb
 from landscape.v1 import event_service_pb2_grpc
@@ -36,27 +37,16 @@ SETTLE_GRACE = 2.0    # s for a command's final event once its session ended (th
 LOSS_GRACE = 5.0      # s for a session's end after the device said its lock holder is gone
 
 
-class EventFeed:
+class EventFeed(Feed[pb.Event]):
     def __init__(self, channel: grpc.aio.Channel, metadata=(), replay: bool = False):
+        super().__init__("landscape-events")
         self._stub = event_service_pb2_grpc.EventServiceStub(channel)
         self._metadata = tuple(metadata)
         self._replay = replay
         self.log = CommandLog()
-        self.listeners: list[Callable[[pb.Event], None]] = []
-        self.status_listeners: list[Callable[[grpc.StatusCode, str], None]] = []
         self.failure = ""                    # why the stream is down, while it is
         self._live = asyncio.Event()
         self._changed = asyncio.Condition()
-        self._task: asyncio.Task | None = None
-
-    def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.create_task(self._run(), name="landscape-events")
-
-    async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            await asyncio.gather(self._task, return_exceptions=True)
 
     async def ready(self, timeout: float) -> None:
         """Until the device has registered the subscription; ServerUnavailable if it does not
@@ -108,15 +98,10 @@ class EventFeed:
             self._tell(grpc.StatusCode.OK, "")
             async for reply in call:
                 self.log.record(reply.event)
-                for listener in self.listeners:
-                    listener(reply.event)
+                self._hand_on(reply.event)
                 await self._notify()
         finally:
             call.cancel()
-
-    def _tell(self, code: grpc.StatusCode, details: str) -> None:
-        for listener in self.status_listeners:
-            listener(code, details)
 
     async def _notify(self) -> None:
         async with self._changed:

@@ -21,6 +21,7 @@ from typing import Callable
 import grpc
 
 from landscape.client.errors import CommandRefused, from_rpc_error
+from landscape.client.feed import Feed
 from landscape.v1 import state_service_pb2, state_service_pb2_grpc
 
 log = logging.getLogger(__name__)
@@ -43,33 +44,22 @@ class Sample:
         return self.message.time.ToNanoseconds() / 1e9
 
 
-class StateFeed:
+class StateFeed(Feed[Sample]):
     """`request` gives the rate, frame and units; its sensors are the feed's to set."""
 
     def __init__(self, channel: grpc.aio.Channel, request: state_service_pb2.StreamStateRequest,
                  metadata=()):
+        super().__init__("landscape-state")
         self._stub = state_service_pb2_grpc.StateServiceStub(channel)
         self._request = request
         self._metadata = tuple(metadata)
         self.latest: Sample | None = None
         self.unavailable = "no state from the device yet"
         self.sensors: tuple[str, ...] = tuple(request.sensors)
-        self.listeners: list[Callable[[Sample], None]] = []
         self.started: state_service_pb2.StreamStarted | None = None   # the running stream's terms
-        self.status_listeners: list[Callable[[grpc.StatusCode, str], None]] = []
         self._wanted: dict[object, frozenset[str]] = {}     # owner -> its sensors
         self._changing = asyncio.Lock()                     # one change of sensors at a time
         self._changed = asyncio.Condition()
-        self._task: asyncio.Task | None = None
-
-    def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.create_task(self._run(), name="landscape-state")
-
-    async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            await asyncio.gather(self._task, return_exceptions=True)
 
     async def watch(self, owner, names) -> None:
         """Read `owner`'s sensors (with every other owner's) into every sample from now on;
@@ -156,15 +146,14 @@ class StateFeed:
     async def _restart(self, sensors: tuple[str, ...], first) -> None:
         old = self._task
         self.sensors = sensors
-        self._task = asyncio.create_task(self._run(first), name="landscape-state")
+        self._task = asyncio.create_task(self._run(first), name=self._task_name)
         if old is not None:
             old.cancel()
             await asyncio.gather(old, return_exceptions=True)
 
     async def _publish(self, sample: Sample) -> None:
         self.latest, self.unavailable = sample, ""
-        for listener in self.listeners:
-            listener(sample)
+        self._hand_on(sample)
         async with self._changed:
             self._changed.notify_all()
 
@@ -200,8 +189,4 @@ class StateFeed:
             log.warning("%s", self.unavailable)
             self._tell(code, details)
             await asyncio.sleep(RETRY_PERIOD)
-
-    def _tell(self, code: grpc.StatusCode, details: str) -> None:
-        for listener in self.status_listeners:
-            listener(code, details)
 

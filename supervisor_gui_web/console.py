@@ -45,7 +45,8 @@ from landscape.supervisor.roles import OPERATE_PANEL, needed_role, refusal
 from landscape.supervisor.rpc_table import (CONNECT, JOG, LOCK, RELEASE, RPCS, STREAM_STATE,
                                             SUBSCRIBE, Rpc)
 from landscape.supervisor.sign_in import SignIn
-from landscape.supervisor.supervisor_calls import CallRefused, ConsolePage, SupervisorCalls
+from landscape.supervisor.supervisor_calls import ConsolePage, SupervisorCalls
+from landscape.supervisor.wire import Refused
 from landscape.v1 import control_pb2, session_service_pb2, types_pb2
 
 log = logging.getLogger(__name__)
@@ -53,14 +54,6 @@ log = logging.getLogger(__name__)
 FED = {STREAM_STATE, SUBSCRIBE}   # fed to every browser by its hub; a browser does not open them
 SERVICES = {"DeviceService": DEVICE, "DigitalIOService": IO, "EventService": EVENTS}
 CALL_TIMEOUT_S = 120.0   # a blocking call's longest wait (an Activate, a long PathLoad)
-
-
-class Refused(Exception):
-    """The browser's frame is not a call the backend can make; nothing was sent."""
-
-    def __init__(self, code: grpc.StatusCode, message: str):
-        super().__init__(message)
-        self.status = wire.status(code, message)
 
 
 @dataclass
@@ -134,7 +127,7 @@ class Console:
                 await self._jog(hub, rpc, call_id, body)
             else:
                 await self._call(hub, rpc, call_id, body)
-        except (Refused, CallRefused) as refused:
+        except Refused as refused:
             self._send(device, rpc_name, call_id, status=refused.status)
         except json_format.ParseError as error:
             self._send(device, rpc_name, call_id,

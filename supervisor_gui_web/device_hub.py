@@ -28,7 +28,8 @@ from collections import deque
 
 import grpc
 
-from landscape.client import AsyncRobot, DeviceLink, Endpoint, Identity
+from landscape.client import AsyncRobot, DeviceLink, Endpoint, Frame, Identity
+from landscape.client.aio_streams import SI_UNITS, state_request
 from landscape.client.aio_session import AsyncRsvpHandler
 from landscape.client.credentials import ClientTLS
 from landscape.client.errors import CommandRefused, TransportError
@@ -38,7 +39,7 @@ from landscape.supervisor.config import DeviceTarget
 from landscape.supervisor.device_reads import Reads
 from landscape.supervisor.outbox import Outbox
 from landscape.supervisor.rpc_table import STREAM_STATE, SUBSCRIBE, rpc_name
-from landscape.v1 import event_service_pb2, state_service_pb2, types_pb2
+from landscape.v1 import event_service_pb2, state_service_pb2
 
 log = logging.getLogger(__name__)
 
@@ -56,22 +57,14 @@ STATIC_READS = tuple(rpc_name("DeviceService", m) for m in (   # the arm's limit
 CELL_DESCRIPTION = rpc_name("DeviceService", "GetCellDescription")
 
 
-def display_state(rate_hz: float) -> state_service_pb2.StreamStateRequest:
-    """The stream the page draws: `rate_hz` samples a second, the base frame, m and rad."""
-    return state_service_pb2.StreamStateRequest(
-        rate_hz=rate_hz, frame=types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME,
-        units=types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS,
-                              angular=types_pb2.ANGULAR_UNIT_RADIANS))
-
-
 class DeviceHub:
     def __init__(self, target: DeviceTarget, display_rate_hz: float,
                  tls: ClientTLS | None = None, token: str | None = None, history: int = 500):
         self.name = target.name
         self.target = target.address
         self.link = DeviceLink(Endpoint(target.address, tls), Identity(CLIENT, FEEDS_FOR),
-                               token=token, state=display_state(display_rate_hz),
-                               replay_events=True)
+                               token=token, replay_events=True,
+                               state=state_request(display_rate_hz, Frame.BASE, SI_UNITS, ()))
         reader = AsyncRobot(self.link, CLIENT, token=token, identity=self.link.identity)
         # The status twice a second and after every state change; the cell around the arm
         # when it may have changed: a state change (a tool change's steps, a motion's start

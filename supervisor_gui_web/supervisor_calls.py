@@ -18,15 +18,10 @@ from landscape.server.security.auth import Role
 from landscape.supervisor import wire
 from landscape.supervisor.alarm_acks import AlarmAcks
 from landscape.supervisor.handover import CONTROL, ControlDesk, HandoverRefused
+from landscape.supervisor.wire import Refused
 from landscape.v1 import types_pb2
 
 PREFIX = "supervisor/"
-
-
-class CallRefused(Exception):
-    def __init__(self, code: grpc.StatusCode, message: str):
-        super().__init__(message)
-        self.status = wire.status(code, message)
 
 
 class ConsolePage:
@@ -70,13 +65,13 @@ class SupervisorCalls:
         return isinstance(name, str) and name.startswith(PREFIX)
 
     async def call(self, page: ConsolePage, role: Role, device: str, name: str, request) -> dict:
-        """The reply to one call of `page`; CallRefused says why not."""
+        """The reply to one call of `page`; Refused says why not."""
         method = name.removeprefix(PREFIX)
         if method not in ("AcknowledgeAlarms", "RequestControl", "AnswerControl", "CancelControlRequest"):
-            raise CallRefused(grpc.StatusCode.UNIMPLEMENTED, f"{name!r} is not a call of the supervisor")
+            raise Refused(grpc.StatusCode.UNIMPLEMENTED, f"{name!r} is not a call of the supervisor")
         if role < Role.OPERATOR:
-            raise CallRefused(grpc.StatusCode.PERMISSION_DENIED,
-                              f"{method} needs the operator role; you are signed in as {role.label}")
+            raise Refused(grpc.StatusCode.PERMISSION_DENIED,
+                          f"{method} needs the operator role; you are signed in as {role.label}")
         request = request if isinstance(request, dict) else {}
         try:
             if method == "AcknowledgeAlarms":
@@ -91,7 +86,7 @@ class SupervisorCalls:
                     raise ValueError("give: true (hand the lock over) or false (decline)")
                 await self.desk.answer(device, page, give)
         except HandoverRefused as refused:
-            raise CallRefused(refused.code, str(refused)) from None
+            raise Refused(refused.code, str(refused)) from None
         except ValueError as error:
-            raise CallRefused(grpc.StatusCode.INVALID_ARGUMENT, str(error)) from None
+            raise Refused(grpc.StatusCode.INVALID_ARGUMENT, str(error)) from None
         return {}

@@ -52,6 +52,14 @@ def status(code: grpc.StatusCode, message: str) -> status_pb2.Status:
     return status_pb2.Status(code=code.value[0], message=message)
 
 
+class Refused(Exception):
+    """A browser's frame the backend answers with this status itself: no device was called."""
+
+    def __init__(self, code: grpc.StatusCode, message: str):
+        super().__init__(message)
+        self.status = status(code, message)
+
+
 def frame(device: str, rpc: str, *, reply: Message | None = None,
           status: status_pb2.Status | None = None, call_id: int | None = None) -> str:
     """One backend-to-browser frame as text (see the module docstring)."""
