@@ -25,6 +25,7 @@ help:
 	@echo "make proto    regenerate the Python stubs from proto/"
 	@echo "make bench    run every benchmark: one table, bench/results/latest.json (QUICK=1: short)"
 	@echo "make tools    build grpcurl $(GRPCURL_VERSION) into .tools/bin, fetch NIST's CRCL client"
+	@echo "              (make install fetches NIST's CRCL schemas into .tools/crcl-schemas)"
 	@echo "make clients  build the Go and TypeScript example clients (clients/)"
 	@echo "make clean    remove the virtualenv, generated stubs and caches"
 
@@ -54,7 +55,23 @@ $(FRONTEND)/dist/index.html: $(FRONTEND)/node_modules/.package-lock.json $(FRONT
 		$(FRONTEND)/vite.config.js $(wildcard $(FRONTEND)/src/*)
 	@if command -v npm >/dev/null; then cd $(FRONTEND) && npm run --silent build; fi
 
-install: $(STAMP) $(FRONTEND)/dist/index.html
+# NIST's CRCL schemas, as crcl4java-base 1.8 on Maven Central carries them (the 2018 revision,
+# which NIST's Java client speaks): the CRCL gateway validates every document against them and
+# its tests check every status. Optional, like grpcurl: without Java and Maven the gateway
+# says at start that it validates against none, and the schema tests skip, naming this step.
+CRCL_SCHEMAS := .tools/crcl-schemas/CRCLStatus.xsd
+$(CRCL_SCHEMAS): | $(STAMP)
+	@if command -v mvn >/dev/null && command -v java >/dev/null; then \
+	  echo "installing NIST's CRCL schemas (crcl4java-base 1.8) into $(@D)"; \
+	  mvn -q -B dependency:copy -Dartifact=com.github.wshackle:crcl4java-base:1.8:jar \
+	    -DoutputDirectory=$(CURDIR)/.tools/maven && \
+	  $(PY) -c 'import sys, zipfile; jar = zipfile.ZipFile(sys.argv[1]); \
+	    [jar.extract(n, sys.argv[2]) for n in jar.namelist() if n.endswith(".xsd")]' \
+	    .tools/maven/crcl4java-base-1.8.jar $(@D); \
+	else echo "make: no Java and Maven here, so no CRCL schemas: the gateway validates" \
+	  "documents with its own parser only and the schema tests skip"; fi
+
+install: $(STAMP) $(FRONTEND)/dist/index.html $(CRCL_SCHEMAS)
 
 proto: install
 	$(PY) -c 'import setup; setup.generate_stubs()'
@@ -95,7 +112,7 @@ $(CRCL4JAVA): tests/gateway/nist_client.pom.xml
 	  cd $(@D) && mvn -q -B dependency:build-classpath -Dmdep.outputFile=classpath.txt; \
 	else echo "make tools: no Java and Maven here, so no NIST CRCL client (its test will skip)"; fi
 
-tools: $(GRPCURL) $(CRCL4JAVA)
+tools: $(GRPCURL) $(CRCL4JAVA) $(CRCL_SCHEMAS)
 
 # The Go and TypeScript clients (clients/README.md); stubs and builds stay out of git. Each
 # is skipped, saying so, on a machine without its language.

@@ -9,7 +9,8 @@ ROOT = Path(__file__).parent
 PACKAGE_DIR = {"landscape.v1": "gen/landscape/v1", "landscape.server": "server",
                "landscape.robot": "robot", "landscape.sim": "sim",
                "landscape.client": "client", "landscape.gateway": "gateway",
-               "landscape.supervisor": "supervisor_gui_web", "landscape.cell": "cell"}
+               "landscape.supervisor": "supervisor_gui_web", "landscape.cell": "cell",
+               "landscape.bridges": "bridges"}
 # Every folder holding data files is a package of its own, or setuptools warns (at length) that
 # it "would be ignored".
 PACKAGE_DATA = {"landscape.robot.cells": ["*.toml"], "landscape.cell.cells": ["*.toml"]}

@@ -51,6 +51,7 @@ BENCHES = {
     "bench_cell_loops": ([], ["--cycles", "500"]),
     "bench_soak": (["--seconds", "40"], ["--seconds", "20"]),
     "bench_faults": ([], ["--repeat", "2"]),
+    "bench_bridges": ([], ["--quick"]),
 }
 # Every bench_*.py is in the report: one added without an entry fails the run at once.
 _UNLISTED = sorted({p.stem for p in HERE.glob("bench_*.py")} - set(BENCHES))

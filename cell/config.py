@@ -1,5 +1,6 @@
 """The cell configuration: one TOML file for the deployment of a cell (its device servers,
-the CRCL gateway, the web supervisor, security and the launcher's policy).
+the CRCL gateway, the web supervisor, the bridges (bridge_tables.py), security and the
+launcher's policy).
 
 Each device's *world* (arm, fixtures, I/O) is a cell file (robot/cells/default.toml) named by
 `world`; this file says where the device runs and how it is reached. `cells/local.toml` beside
@@ -13,7 +14,7 @@ error names the file, the key and what was expected.
 from __future__ import annotations
 
 import ipaddress
-import re
+import math
 from importlib import resources
 from pathlib import Path
 from typing import Annotated
@@ -21,14 +22,19 @@ from typing import Annotated
 from pydantic import PlainValidator, PrivateAttr, ValidationInfo, model_validator
 
 from landscape.cell.config_model import (  # noqa: F401  (the parsed configuration, named here too)
-    FRONT_END_RATES, CellConfig, DeviceSpec, GatewaySpec, LauncherSpec, SecuritySpec,
-    SupervisorSpec)
+    FRONT_END_RATES, CellConfig, DeviceSpec, FoxgloveSpec, GatewaySpec, LauncherSpec,
+    MetricsSpec, OpcUaSpec, SecuritySpec, SupervisorSpec)
 from landscape.server.config import CLOCKS, MAX_COLLISION_MARGIN, ServerConfig
+from landscape.gateway.units import ANGLE as CRCL_ANGLE, LENGTH as CRCL_LENGTH
+from landscape.gateway.workstation import BARE
 from landscape.robot.cell import CellError, load_cell
-from landscape.robot.toml_tables import Table, flag, integer, number, problem, read_toml, string
+from landscape.cell.bridge_tables import FoxgloveTable, MetricsTable, OpcUaTable, check_bridges
+from landscape.cell.config_types import (Address, FilePath, Name, Port, Positive, Text, exists,
+                                         path_value, shown_devices)
+from landscape.robot.toml_tables import (Table, flag, integer, number, problem, read_toml,
+                                         string, vector)
 
 DEFAULT_FILE = "cells/local.toml"
-_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}")
 RESTART = ("no", "on-failure")
 
 
@@ -37,29 +43,6 @@ class CellConfigError(ValueError):
 
 
 # ---- the file's tables ------------------------------------------------------------------------
-
-def _name(value):
-    if not isinstance(value, str) or not _NAME.fullmatch(value):
-        raise problem(f"expected a name: a letter, then letters, digits, - or _ (at most 32 in "
-                      f"all); got {value!r}")
-    return value
-
-
-def _strip(value):
-    if not isinstance(value, str) or not value:
-        raise problem(f"expected an address (a non-empty string), got {value!r}")
-    return value.strip("[]") if value.startswith("[") else value
-
-
-def _path(value, info: ValidationInfo):
-    """A path, relative ones from the file's folder; "" is the key's default."""
-    if value == "":
-        return None
-    if not isinstance(value, str):
-        raise problem(f"expected a path (a string), got {value!r}")
-    path = Path(value).expanduser()
-    return path if path.is_absolute() else info.context["base"] / path
-
 
 def _world(value, info: ValidationInfo):
     """A world file's path, or the name of one shipped with the package (robot/cells/)."""
@@ -70,9 +53,9 @@ def _world(value, info: ValidationInfo):
         with resources.as_file(resources.files("landscape.robot").joinpath(
                 f"cells/{value}.toml")) as path:
             return Path(path)
-    path = _path(value, info)
+    path = path_value(value, info)
     if path is not None:
-        _exists(path)
+        exists(path)
         try:
             load_cell(path)
         except CellError as error:
@@ -91,20 +74,6 @@ def _origins(value):
         raise problem(str(error)) from None
 
 
-def _exists(path: Path | None, key: str = "", folder: bool = False) -> None:
-    if path is not None and not path.exists():
-        raise problem(f"{path} does not exist", key)
-    if folder and path is not None and not path.is_dir():
-        raise problem(f"{path} is not a folder", key)
-
-
-Name = Annotated[str, PlainValidator(_name)]
-Address = Annotated[str, PlainValidator(_strip)]
-Port = integer(0, 65535)
-FilePath = Annotated[Path | None, PlainValidator(_path)]
-Positive = number(above=0.0)
-
-
 class DeviceTable(Table):
     name: Name | None = None          # default: arm<its place, from 1>
     address: Address = "127.0.0.1"
@@ -115,14 +84,22 @@ class DeviceTable(Table):
     clock: string(CLOCKS) = "realtime"
     reset_settings: flag = False
     collision_margin: number(above=0.0, high=MAX_COLLISION_MARGIN) = ServerConfig.collision_margin
+    # Its arm's base in the cell's frame (m, deg), shared with the other arms; either key
+    # places it (the other is zeros).
+    placement_xyz: vector(3) | None = None
+    placement_rpy_deg: vector(3) | None = None
 
-    def spec(self, index: int, base: Path) -> DeviceSpec:
+    def spec(self, index: int, base: Path, cell: str = "") -> DeviceSpec:
         name = self.name or f"arm{index + 1}"
+        placed = self.placement_xyz is not None or self.placement_rpy_deg is not None
         return DeviceSpec(
             name=name, address=self.address, port=50051 + index if self.port is None else self.port,
             host=self.host or ("127.0.0.1" if _is_wildcard(self.address) else self.address),
             world=self.world, data=self.data or base / "var" / name, clock=self.clock,
-            reset_settings=self.reset_settings, collision_margin=self.collision_margin)
+            reset_settings=self.reset_settings, collision_margin=self.collision_margin,
+            placement=(*(self.placement_xyz or (0.0,) * 3),
+                       *map(math.radians, self.placement_rpy_deg or (0.0,) * 3)) if placed else None,
+            cell=cell)
 
 
 class SecurityTable(Table):
@@ -149,10 +126,10 @@ class SecurityTable(Table):
         for key, needed in (("cert", self.tls), ("key", self.tls), ("ca", self.tls),
                             ("client_cert", self.mtls), ("client_key", self.mtls)):
             if needed:
-                _exists(getattr(self, key), key)
-        _exists(self.tokens, "tokens", folder=True)
+                exists(getattr(self, key), key)
+        exists(self.tokens, "tokens", folder=True)
         if self.audit_dir is not None and self.audit_dir.exists():
-            _exists(self.audit_dir, "audit_dir", folder=True)
+            exists(self.audit_dir, "audit_dir", folder=True)
         for key, needed in (("cert", self.tls), ("key", self.tls), ("ca", self.tls),
                             ("client_cert", self.mtls), ("client_key", self.mtls)):
             if needed and getattr(self, key) is None:
@@ -186,6 +163,11 @@ class GatewayTable(Table):
     port: Port = GatewaySpec.port
     grpc_port: Port | None = None
     token: FilePath = None            # default, with tokens on: <security.tokens>/operator.tokens
+    workstation_xyz: vector(3) = (0.0, 0.0, 0.0)        # CRCL's frame in the robot base, m
+    workstation_rpy_deg: vector(3) = (0.0, 0.0, 0.0)
+    end_effector: Text = GatewaySpec.end_effector      # "", "none" or a tool of the world
+    length_units: string(tuple(CRCL_LENGTH)) = GatewaySpec.length_units
+    angle_units: string(tuple(CRCL_ANGLE)) = GatewaySpec.angle_units
 
 
 class SupervisorTable(Table):
@@ -219,6 +201,9 @@ class ConfigFile(Table):
     supervisor: SupervisorTable = SupervisorTable()
     security: SecurityTable = SecurityTable()
     launcher: LauncherTable = LauncherTable()
+    metrics: MetricsTable = MetricsTable()
+    foxglove: FoxgloveTable = FoxgloveTable()
+    opcua: OpcUaTable = OpcUaTable()
     _config: CellConfig | None = PrivateAttr(None)
 
     @property
@@ -228,7 +213,8 @@ class ConfigFile(Table):
     @model_validator(mode="after")
     def _a_cell(self, info: ValidationInfo):
         base, security = info.context["base"], self.security.spec()
-        devices = tuple(d.spec(i, base) for i, d in enumerate(self.devices or [DeviceTable()]))
+        devices = tuple(d.spec(i, base, self.name)
+                        for i, d in enumerate(self.devices or [DeviceTable()]))
         names = [d.name for d in devices]
         for i, device in enumerate(devices):
             if names.count(device.name) > 1:
@@ -236,55 +222,66 @@ class ConfigFile(Table):
             if device.data.exists() and not device.data.is_dir():
                 raise problem(f"{device.data} is not a folder", f"devices[{i}].data")
         self._config = CellConfig(
-            name=self.name, devices=devices, gateway=self._gateway(names, security),
+            name=self.name, devices=devices, gateway=self._gateway(devices, security),
             supervisor=self._supervisor(names, security, base), security=security,
-            launcher=self.launcher.spec(), source=info.context["source"])
+            launcher=self.launcher.spec(), metrics=self.metrics.spec(),
+            foxglove=self.foxglove.spec(names), opcua=self.opcua.spec(names, base),
+            source=info.context["source"])
         _check_exposure(self._config)
         _check_ports(self._config)
         return self
 
-    def _gateway(self, names: list[str], security: SecuritySpec) -> GatewaySpec:
-        g = self.gateway
+    def _gateway(self, devices: tuple[DeviceSpec, ...], security: SecuritySpec) -> GatewaySpec:
+        g, names = self.gateway, [d.name for d in devices]
         device = g.device or names[0]
         if device not in names:
             raise problem(f"no device is named {device!r} (devices: {', '.join(names)})",
                           "gateway.device")
+        _tool_of(g.end_effector, devices[names.index(device)])
         return GatewaySpec(g.enabled, device, g.address, g.port, g.grpc_port,
-                           _client_token(g.token, security, "gateway.token", "operator"))
+                           _client_token(g.token, security, "gateway.token", "operator"),
+                           (*g.workstation_xyz, *map(math.radians, g.workstation_rpy_deg)),
+                           g.end_effector, g.length_units, g.angle_units)
 
     def _supervisor(self, names: list[str], security: SecuritySpec,
                     base: Path) -> SupervisorSpec:
         s = self.supervisor
-        shown = names if s.devices is None else s.devices
-        if not shown or not all(isinstance(n, str) for n in shown):
-            raise problem(f"expected a non-empty list of device names, got {shown!r}",
-                          "supervisor.devices")
-        for name in shown:
-            if name not in names:
-                raise problem(f"no device is named {name!r} (devices: {', '.join(names)})",
-                              "supervisor.devices")
+        shown = shown_devices(s.devices, names, "supervisor.devices")
         sign_in_tokens = s.sign_in_tokens or security.tokens or base / "var" / "tokens"
         if sign_in_tokens.exists() and not sign_in_tokens.is_dir():
             raise problem(f"{sign_in_tokens} is not a folder", "supervisor.sign_in_tokens")
-        return SupervisorSpec(s.enabled, s.address, s.port, tuple(dict.fromkeys(shown)),
+        return SupervisorSpec(s.enabled, s.address, s.port, shown,
                               _client_token(s.token, security, "supervisor.token", "viewer"),
                               sign_in_tokens, s.allowed_origins, s.sign_in_idle,
                               s.sign_in_max_age)
 
 
+def _tool_of(name: str, device: DeviceSpec) -> None:
+    """The gateway's end effector is "", "none" or a tool of its device's world."""
+    if name in ("", BARE):
+        return
+    tools = [tool.name for tool in load_cell(device.world).world.tools]
+    if name not in tools:
+        raise problem(f"{device.name}'s world has no tool named {name!r} (its tools: "
+                      f"{', '.join(tools) or 'none'}; or \"none\" for the bare flange, \"\" "
+                      f"for whatever is on it)", "gateway.end_effector")
+
+
 def _client_token(token: Path | None, security: SecuritySpec, key: str,
                   role: str) -> Path | None:
     """The token file a front end presents: its own key, else the security folder's `role`."""
-    _exists(token, key)
+    exists(token, key)
     if token is None and security.tokens is not None:
         token = security.tokens / f"{role}.tokens"
     return token
 
 
 def _check_exposure(config: CellConfig) -> None:
-    """The device servers' rule (server/tls.py), said here first, naming the key."""
+    """The device servers' rule (server/tls.py), said here first, naming the key, and the
+    bridges' (bridge_tables.py)."""
     from landscape.server.security.tls import is_loopback
     security = config.security
+    check_bridges(config)
     for index, device in enumerate(config.devices):
         if is_loopback(device.address) or security.insecure:
             continue
@@ -304,6 +301,13 @@ def _check_ports(config: CellConfig) -> None:
                               config.gateway.grpc_port))
     if config.supervisor.enabled:
         listeners.append(("supervisor.port", config.supervisor.address, config.supervisor.port))
+    for key, bridge in (("foxglove.port", config.foxglove), ("opcua.port", config.opcua)):
+        if bridge.enabled:
+            listeners.append((key, bridge.address, bridge.port))
+    if config.metrics.enabled:
+        count = len(config.devices) + 2
+        listeners += [(f"metrics.port (+{i})", config.metrics.address,
+                       config.metrics.port_of(i)) for i in range(count)]
     seen: list[tuple[str, str, int]] = []
     for key, address, port in listeners:
         if port == 0:

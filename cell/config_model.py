@@ -1,5 +1,6 @@
 """The parsed cell configuration (config.py reads the file): frozen dataclasses of its device
-servers, the CRCL gateway, the web supervisor, security and the launcher's policy."""
+servers, the CRCL gateway, the web supervisor, the bridges (Prometheus, Foxglove, OPC UA),
+security and the launcher's policy."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -28,6 +29,10 @@ class DeviceSpec:
     clock: str = "realtime"
     reset_settings: bool = False
     collision_margin: float = ServerConfig.collision_margin   # m (server/config.py)
+    # Where its arm's base stands in this cell, shared with the others: x, y, z (m), roll,
+    # pitch, yaw (rad); None: not given (displays set the arms side by side).
+    placement: tuple[float, ...] | None = None
+    cell: str = ""   # the shared cell's name
 
     @property
     def target(self) -> str:
@@ -37,7 +42,10 @@ class DeviceSpec:
 
 @dataclass(frozen=True)
 class GatewaySpec:
-    """The CRCL gateway in front of `device`. token: the token file it presents."""
+    """The CRCL gateway in front of `device`. token: the token file it presents. The
+    workstation (landscape.gateway.workstation): CRCL's frame in the robot's base frame (x, y,
+    z in m, roll, pitch, yaw in rad), the end effector the arm holds from InitCanon on ("":
+    as it is; "none": no tool) and the units a CRCL program starts in."""
 
     enabled: bool = True
     device: str = ""
@@ -45,6 +53,10 @@ class GatewaySpec:
     port: int = 64444
     grpc_port: int | None = None
     token: Path | None = None
+    workstation_frame: tuple[float, ...] = (0.0,) * 6
+    end_effector: str = ""
+    length_units: str = "meter"
+    angle_units: str = "radian"
 
 
 @dataclass(frozen=True)
@@ -95,6 +107,46 @@ class SecuritySpec:
 
 
 @dataclass(frozen=True)
+class MetricsSpec:
+    """/metrics of every service (Prometheus): the devices on port, port + 1, ..., then the
+    gateway and the supervisor (port 0: each any free one), on `address`."""
+
+    enabled: bool = True
+    address: str = "127.0.0.1"
+    port: int = 9464
+
+    def port_of(self, index: int) -> int:
+        """The index-th service's port: devices first, then the gateway, the supervisor."""
+        return 0 if self.port == 0 else self.port + index
+
+
+@dataclass(frozen=True)
+class FoxgloveSpec:
+    """The Foxglove bridge (WebSocket) showing `devices` at `rate_hz` samples a second."""
+
+    enabled: bool = False
+    address: str = "127.0.0.1"
+    port: int = 8765
+    rate_hz: float = 30.0
+    devices: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class OpcUaSpec:
+    """The OPC UA server exposing `devices`; off loopback it needs its certificate and key,
+    and users (a file of `<name> <SHA-256 of the password>`) or trusted client certificates."""
+
+    enabled: bool = False
+    address: str = "127.0.0.1"
+    port: int = 4840
+    devices: tuple[str, ...] = ()
+    users: Path | None = None
+    certificate: Path | None = None
+    key: Path | None = None
+    trusted_certs: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
 class LauncherSpec:
     """What the launcher does when a service dies ("no": stop the cell; "on-failure": start
     it again, at most max_restarts times), and how long a service may take to start and stop
@@ -114,6 +166,9 @@ class CellConfig:
     supervisor: SupervisorSpec
     security: SecuritySpec = field(default_factory=SecuritySpec)
     launcher: LauncherSpec = field(default_factory=LauncherSpec)
+    metrics: MetricsSpec = field(default_factory=MetricsSpec)
+    foxglove: FoxgloveSpec = field(default_factory=FoxgloveSpec)
+    opcua: OpcUaSpec = field(default_factory=OpcUaSpec)
     source: str = "<string>"
 
     def device(self, name: str) -> DeviceSpec:

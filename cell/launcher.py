@@ -26,7 +26,8 @@ from pathlib import Path
 from typing import TextIO
 
 from landscape.cell.config import CellConfig
-from landscape.cell.services import (ServiceSpec, device_service, gateway_service,
+from landscape.cell.services import (ServiceSpec, device_service, foxglove_service,
+                                     gateway_service, metrics_of, opcua_service,
                                      supervisor_missing, supervisor_service)
 from landscape.cell.tokens import make_tokens
 
@@ -148,8 +149,9 @@ class Cell:
         others stopped) if one does not."""
         config, workdir = self.config, Path.cwd()
         try:
-            for device in config.devices:
-                self._launch(device_service(device, config.security))
+            for index, device in enumerate(config.devices):
+                self._launch(device_service(device, config.security,
+                                            **metrics_of(config.metrics, index)))
             targets = {child.spec.name: self._target(child) for child in self.children}
             if config.gateway.enabled:
                 self._launch(gateway_service(config, targets, workdir))
@@ -160,6 +162,10 @@ class Cell:
                 else:
                     self._sign_in_tokens(config.supervisor.sign_in_tokens)
                     self._launch(supervisor_service(config, targets, workdir))
+            if config.foxglove.enabled:
+                self._launch(foxglove_service(config, targets, workdir))
+            if config.opcua.enabled:
+                self._launch(opcua_service(config, targets, workdir))
         except BaseException:
             self.stop()
             raise
@@ -222,8 +228,10 @@ class Cell:
         """The same service again; a device server on the port it had."""
         if child.spec.kind == "device server" and child.where:
             port = int(child.where.rsplit(":", 1)[1])
+            index = [d.name for d in self.config.devices].index(child.spec.name)
             child.spec = device_service(self.config.device(child.spec.name),
-                                        self.config.security, port)
+                                        self.config.security, port,
+                                        **metrics_of(self.config.metrics, index))
         self.out.say(f"starting {child.spec.name} again ({child.restarts} of "
                      f"{self.config.launcher.max_restarts})")
         child.start()

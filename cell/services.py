@@ -8,18 +8,22 @@ they really have (a port 0 becomes a real one).
 from __future__ import annotations
 
 import importlib.util
+import math
 import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from landscape.cell.config import CellConfig, DeviceSpec, SecuritySpec
+from landscape.cell.config import CellConfig, DeviceSpec, MetricsSpec, SecuritySpec
+from landscape.server.security.tls import is_loopback
 
 # The line each program prints once it listens; group 1 is where.
 READY = {
     "device server": re.compile(r"landscape device server listening on (\S+)"),
     "CRCL gateway": re.compile(r"CRCL gateway listening on (\S+)"),
     "web supervisor": re.compile(r"web supervisor on (\S+)"),
+    "Foxglove bridge": re.compile(r"Foxglove bridge on (\S+)"),
+    "OPC UA server": re.compile(r"OPC UA server on (\S+)"),
 }
 SUPERVISOR_MODULE = "landscape.supervisor"
 
@@ -41,9 +45,11 @@ def _python(module: str) -> list[str]:
     return [sys.executable, "-m", module]
 
 
-def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None = None) -> ServiceSpec:
+def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None = None,
+                   metrics_port: int | None = None,
+                   metrics_address: str = "127.0.0.1") -> ServiceSpec:
     """The device server; `port` overrides the configured one (a restart keeps the port it
-    had)."""
+    had); /metrics on `metrics_port` if given."""
     argv = [*_python("landscape.server"), "--address", device.address,
             "--port", str(device.port if port is None else port),
             "--paths", str(device.data / "paths.sqlite3"), "--clock", device.clock,
@@ -58,6 +64,11 @@ def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None 
         argv += ["--cell", str(device.world)]
     if device.reset_settings:
         argv.append("--reset-settings")
+    if device.placement is not None:
+        xyz, rpy = device.placement[:3], (math.degrees(a) for a in device.placement[3:])
+        # One word with "=": a value starting with "-" would read as an option.
+        argv += ["--placement=" + ",".join(f"{v!r}" for v in (*xyz, *rpy)),
+                 "--shared-cell=" + device.cell]
     if security.tls:
         argv += ["--tls-cert", str(security.cert), "--tls-key", str(security.key)]
         if security.mtls:
@@ -66,6 +77,8 @@ def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None 
         argv += ["--tokens", str(security.tokens)]
     if security.insecure:
         argv.append("--insecure")
+    if metrics_port is not None:
+        argv += ["--metrics-port", str(metrics_port), "--metrics-address", metrics_address]
     return ServiceSpec(device.name, "device server", argv, device.data,
                        note=f"{_transport(security)}; data {device.data}")
 
@@ -95,10 +108,76 @@ def gateway_service(config: CellConfig, targets: dict[str, str], workdir: Path) 
             "--host", gateway.address, "--port", str(gateway.port)]
     if gateway.grpc_port is not None:
         argv += ["--grpc-port", str(gateway.grpc_port)]
+    argv += ["--workstation-frame", " ".join(repr(v) for v in gateway.workstation_frame),
+             "--end-effector", gateway.end_effector, "--length-units", gateway.length_units,
+             "--angle-units", gateway.angle_units]
     if config.security.insecure:      # the gateway keeps off the network otherwise, as they do
         argv.append("--insecure")
     argv += client_arguments(config.security, gateway.token)
+    argv += _front_end_metrics(config, len(config.devices))
     return ServiceSpec("gateway", "CRCL gateway", argv, workdir, note=f"-> {gateway.device}")
+
+
+def _front_end_metrics(config: CellConfig, index: int) -> list[str]:
+    """/metrics of the gateway or the supervisor: off loopback only with insecure (neither
+    has TLS of its own for it), else on loopback."""
+    metrics = config.metrics
+    if not metrics.enabled:
+        return []
+    address = (metrics.address if is_loopback(metrics.address) or config.security.insecure
+               else "127.0.0.1")
+    return ["--metrics-port", str(metrics.port_of(index)), "--metrics-host", address]
+
+
+def metrics_of(metrics: MetricsSpec, index: int) -> dict:
+    """device_service's metrics arguments for the index-th device ({} when off)."""
+    if not metrics.enabled:
+        return {}
+    return {"metrics_port": metrics.port_of(index), "metrics_address": metrics.address}
+
+
+def _bridge_devices(names, targets: dict[str, str]) -> list[str]:
+    argv = []
+    for name in names:
+        argv += ["--device", f"{name}={targets[name]}"]
+    return argv
+
+
+def foxglove_service(config: CellConfig, targets: dict[str, str],
+                     workdir: Path) -> ServiceSpec:
+    """The Foxglove bridge, a watcher with the supervisor's (viewer) token."""
+    fox = config.foxglove
+    argv = [*_python("landscape.bridges.foxglove"), *_bridge_devices(fox.devices, targets),
+            "--host", fox.address, "--port", str(fox.port), "--rate", f"{fox.rate_hz:g}"]
+    if config.security.insecure:
+        argv.append("--insecure")
+    argv += client_arguments(config.security, _viewer_token(config))
+    return ServiceSpec("foxglove", "Foxglove bridge", argv, workdir,
+                       note=f"shows {', '.join(fox.devices)}; read-only")
+
+
+def opcua_service(config: CellConfig, targets: dict[str, str], workdir: Path) -> ServiceSpec:
+    """The OPC UA server, a watcher with the supervisor's (viewer) token."""
+    ua = config.opcua
+    argv = [*_python("landscape.bridges.opcua"), *_bridge_devices(ua.devices, targets),
+            "--cell", config.name, "--host", ua.address, "--port", str(ua.port)]
+    for flag, value in (("--users", ua.users), ("--certificate", ua.certificate),
+                        ("--key", ua.key)):
+        if value is not None:
+            argv += [flag, str(value)]
+    for path in ua.trusted_certs:
+        argv += ["--trusted-cert", str(path)]
+    argv += client_arguments(config.security, _viewer_token(config))
+    return ServiceSpec("opcua", "OPC UA server", argv, workdir,
+                       note=f"exposes {', '.join(ua.devices)}; read-only")
+
+
+def _viewer_token(config: CellConfig) -> Path | None:
+    """The bridges watch with a viewer's token (the supervisor's, or the security folder's)."""
+    if config.supervisor.token is not None:
+        return config.supervisor.token
+    tokens = config.security.tokens
+    return tokens / "viewer.tokens" if tokens is not None else None
 
 
 def supervisor_service(config: CellConfig, targets: dict[str, str],
@@ -114,6 +193,7 @@ def supervisor_service(config: CellConfig, targets: dict[str, str],
     for origin in supervisor.allowed_origins:
         argv += ["--allowed-origin", origin]
     argv += client_arguments(config.security, supervisor.token)
+    argv += _front_end_metrics(config, len(config.devices) + 1)
     return ServiceSpec("supervisor", "web supervisor", argv, workdir,
                        note=f"shows {', '.join(supervisor.devices)}; sign in with a token "
                             f"from {supervisor.sign_in_tokens / 'operator.tokens'}")

@@ -98,6 +98,11 @@ class DeviceCommands:
     def get_tool_offsets(self):
         return self._call(DEVICE, "GetToolOffsets", settings_pb2.GetToolOffsetsRequest())
 
+    def get_world_cartesian_frame(self):
+        """The world frame in the robot base frame, as SetWorldCartesianFrame set it."""
+        return self._call(DEVICE, "GetWorldCartesianFrame",
+                          settings_pb2.GetWorldCartesianFrameRequest())
+
     def get_robot_position(self):
         """Joints, and the tool tip in the world frame, with their units."""
         return self._call(DEVICE, "GetRobotPosition", settings_pb2.GetRobotPositionRequest())
@@ -112,19 +117,22 @@ class DeviceCommands:
     # ---- 3.4 single motions (non-blocking) ----
 
     def move_absolute(self, values: Sequence[float], frame: Frame, *, point_name: str = "",
-                      speed: float | None = None, motion: Motion | None = None):
+                      speed: float | None = None, motion: Motion | None = None,
+                      rates: motion_pb2.MoveRates | None = None):
         """Seed 3.4.1: move to `values` (joints for Frame.JOINT, else x y z roll pitch yaw).
-        speed: percent of maximum for this move only; motion: unset means Motion.JOINT."""
+        speed: percent of maximum for this move only; motion: unset means Motion.JOINT;
+        rates: this move's own accelerations and speed caps (the device's settings stay)."""
         return self._call(DEVICE, "MoveAbsolute", motion_pb2.MoveAbsoluteRequest(
             point_name=point_name, frame=Frame(frame), values=list(values), speed=speed,
-            motion_type=None if motion is None else Motion(motion)), started=True)
+            motion_type=None if motion is None else Motion(motion), rates=rates), started=True)
 
     def move_relative(self, values: Sequence[float], frame: Frame, *, point_name: str = "",
-                      speed: float | None = None, motion: Motion | None = None):
+                      speed: float | None = None, motion: Motion | None = None,
+                      rates: motion_pb2.MoveRates | None = None):
         """Seed 3.4.1: move by the offset `values` in `frame`."""
         return self._call(DEVICE, "MoveRelative", motion_pb2.MoveRelativeRequest(
             point_name=point_name, frame=Frame(frame), values=list(values), speed=speed,
-            motion_type=None if motion is None else Motion(motion)), started=True)
+            motion_type=None if motion is None else Motion(motion), rates=rates), started=True)
 
     def move_arc(self, arc: Sequence[float], goal: Sequence[float], frame: Frame, *,
                  offset: Offset = Offset.ABSOLUTE, point_name: str = "",
@@ -152,10 +160,12 @@ class DeviceCommands:
         return self._call(DEVICE, "PathClearPath", motion_pb2.PathClearPathRequest(
             path_name=path_name))
 
-    def path_move(self, path_name: str, number_of_cycles: int = 1):
-        """Seed 3.5.2: run the path `number_of_cycles` times (0: a dry run without aux commands)."""
+    def path_move(self, path_name: str, number_of_cycles: int = 1,
+                  rates: motion_pb2.MoveRates | None = None):
+        """Seed 3.5.2: run the path `number_of_cycles` times (0: a dry run without aux
+        commands); rates: this run's own accelerations and speed caps."""
         return self._call(DEVICE, "PathMove", motion_pb2.PathMoveRequest(
-            path_name=path_name, number_of_cycles=number_of_cycles), started=True)
+            path_name=path_name, number_of_cycles=number_of_cycles, rates=rates), started=True)
 
     # ---- 3.6 interruptions ----
 

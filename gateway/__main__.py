@@ -19,14 +19,20 @@ from pathlib import Path
 
 import grpc
 
+from landscape.bridges.metrics import endpoint as metrics_endpoint
 from landscape.client import Endpoint, credentials
+from landscape.gateway import metrics as gateway_metrics
 from landscape.gateway.device import CrclDevice
-from landscape.gateway.schemas import SchemaSet, default_directory
+from landscape.gateway.schemas import SchemaSet, default_directory, describe
 from landscape.gateway.server import DEFAULT_PORT, Gateway
 from landscape.gateway.session import GatewayOptions
 from landscape.gateway.status import DEFAULT_GRIPPER_STROKE
+from landscape.gateway.units import ANGLE, LENGTH
 from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
+from landscape.gateway.workstation import BARE, Workstation, pose_values
 from landscape.server.security.tls import is_loopback
+
+log = logging.getLogger("landscape.gateway")
 
 
 def arguments(argv=None) -> argparse.Namespace:
@@ -48,8 +54,9 @@ def arguments(argv=None) -> argparse.Namespace:
                         help="listen on non-loopback addresses all the same: whoever reaches "
                              "the gateway commands the arm (a network of your own only)")
     parser.add_argument("--schemas", default=None,
-                        help="folder of the CRCL XSDs (default: $LANDSCAPE_CRCL_SCHEMAS, else "
-                             "../shared/crcl/xsd if present); 'none' to skip schema validation")
+                        help="folder of NIST's CRCL XSDs (default: $LANDSCAPE_CRCL_SCHEMAS, else "
+                             "those `make install` put in .tools/crcl-schemas); 'none' to skip "
+                             "schema validation")
     parser.add_argument("--max-document", type=int, default=DEFAULT_MAX_DOCUMENT,
                         help="largest accepted document, bytes")
     parser.add_argument("--document-idle", type=float, default=DOCUMENT_IDLE,
@@ -57,10 +64,34 @@ def arguments(argv=None) -> argparse.Namespace:
                              "the connection is dropped")
     parser.add_argument("--gripper-stroke", type=float, default=DEFAULT_GRIPPER_STROKE,
                         help="the gripper's opening in m, for GripperStatus")
+    parser.add_argument("--workstation-frame", type=_frame, default=Workstation().frame,
+                        metavar='"X Y Z ROLL PITCH YAW"',
+                        help="CRCL's coordinate frame in the robot's base frame, m and rad "
+                             "(fixed-axis X-Y-Z); default: the base frame itself")
+    parser.add_argument("--end-effector", default="",
+                        help="the rack tool the arm holds from InitCanon on (fetched if need "
+                             f"be), or '{BARE}' for the bare flange; default: as it is")
+    parser.add_argument("--length-units", choices=LENGTH, default=Workstation.length_unit,
+                        help="the length unit a CRCL program starts in")
+    parser.add_argument("--angle-units", choices=ANGLE, default=Workstation.angle_unit,
+                        help="the angle unit a CRCL program starts in")
     parser.add_argument("--state-rate", type=float, default=100.0,
                         help="samples per second asked of the device's state stream")
     credentials.add_arguments(parser)
+    metrics_endpoint.add_arguments(parser)   # /metrics (gateway/metrics.py)
     return parser.parse_args(argv)
+
+
+def _frame(text: str) -> tuple[float, ...]:
+    try:
+        return pose_values(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def workstation(args: argparse.Namespace) -> Workstation:
+    return Workstation(args.workstation_frame, args.end_effector, args.length_units,
+                       args.angle_units)
 
 
 def schema_set(option: str | None) -> SchemaSet | None:
@@ -101,10 +132,14 @@ def grpc_credentials(args: argparse.Namespace) -> grpc.ServerCredentials | None:
 
 
 async def serve(args: argparse.Namespace, ready=None) -> None:
+    schemas = schema_set(args.schemas)
+    log.log(logging.INFO if schemas else logging.WARNING, "validating CRCL documents against %s",
+            describe(schemas))
+    log.info("workstation: %s", workstation(args).describe())
     device = CrclDevice(Endpoint(args.device, *credentials.from_arguments(args)), args.state_rate)
     await device.start()
-    options = GatewayOptions(schema_set(args.schemas), args.max_document, args.document_idle,
-                             args.gripper_stroke)
+    options = GatewayOptions(schemas, args.max_document, args.document_idle,
+                             args.gripper_stroke, workstation(args))
     gateway = await Gateway(device, options).serve(args.host, args.port)
     grpc_server = None
     if args.grpc_port is not None:
@@ -113,13 +148,15 @@ async def serve(args: argparse.Namespace, ready=None) -> None:
         grpc_server, grpc_port = await serve_grpc(device, options, host, args.grpc_port,
                                                   grpc_credentials(args))
         print(f"CRCL gRPC face listening on {host}:{grpc_port}", flush=True)
-    print(f"CRCL gateway listening on {args.host}:{gateway.port} "
-          f"(schemas: {options.schemas.directory if options.schemas else 'none'})", flush=True)
+    print(f"CRCL gateway listening on {args.host}:{gateway.port}", flush=True)
+    metrics = gateway_metrics.start(args, gateway)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     await stop.wait()
+    if metrics is not None:
+        metrics.close()
     await gateway.close()
     if grpc_server is not None:
         await grpc_server.stop(1.0)

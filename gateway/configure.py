@@ -3,17 +3,15 @@ from __future__ import annotations
 
 import asyncio
 
-import numpy as np
-
 from landscape.gateway import model as m
 from landscape.gateway.errors import CrclError
 from landscape.gateway.settings import DEFAULT_END_TOLERANCE, JOINTS, rate_si, tolerance_si
-from landscape.client import Pose
+from landscape.gateway.workstation import pose_values
 
-_RATE_FIELDS = {"TransSpeed": ("trans_speed", "length", "max_world_linear_velocity", "limits"),
-                "RotSpeed": ("rot_speed", "angle", "max_world_angular_velocity", "limits"),
-                "TransAccel": ("trans_accel", "length", "max_world_linear_accel", "accel_limits"),
-                "RotAccel": ("rot_accel", "angle", "max_world_angular_accel", "accel_limits")}
+_RATE_FIELDS = {"TransSpeed": ("trans_speed", "length", "linear_speed"),
+                "RotSpeed": ("rot_speed", "angle", "angular_speed"),
+                "TransAccel": ("trans_accel", "length", "linear_accel"),
+                "RotAccel": ("rot_accel", "angle", "angular_accel")}
 
 
 async def set_units(session, cmd: m.SetUnits) -> str:
@@ -22,17 +20,18 @@ async def set_units(session, cmd: m.SetUnits) -> str:
 
 
 async def set_rate(session, cmd: m.SetRate) -> str:
-    field, quantity, limit, limits = _RATE_FIELDS[cmd.QUANTITY]
+    field, quantity, limit = _RATE_FIELDS[cmd.QUANTITY]
     units = session.settings.units
     scale = units.length_si(1.0) if quantity == "length" else units.angle_si(1.0)
     rate = rate_si(cmd.rate, scale)
     if not (rate.absolute or rate.fraction or 0.0) > 0.0:
         raise CrclError(f"{cmd.QUANTITY} must be above 0")
     setattr(session.settings, field, rate)      # on the device before the next motion
-    maximum = getattr(getattr(session.control, limits), limit)
+    maximum = getattr(session.control.limits, limit)
     if rate.absolute is not None and rate.absolute > maximum:
         out = units.length_out if quantity == "length" else units.angle_out
-        return f"{cmd.QUANTITY} limited to the arm's maximum, {out(maximum):.6g}"
+        unit = f"{getattr(units, quantity)}/s{'^2' if 'Accel' in cmd.QUANTITY else ''}"
+        return f"{cmd.QUANTITY} limited to the arm's maximum, {out(maximum):.6g} {unit}"
     return f"{cmd.QUANTITY} set"
 
 
@@ -83,8 +82,7 @@ async def configure_status_report(session, cmd: m.ConfigureStatusReport) -> str:
     r = session.settings.reporting
     r.joints, r.pose, r.gripper = cmd.report_joints, cmd.report_pose, cmd.report_gripper
     r.settings, r.sensors, r.guards = cmd.report_settings, cmd.report_sensors, cmd.report_guards
-    return "status report configured" + (" (guards are not supported: none to report)"
-                                         if cmd.report_guards else "")
+    return "status report configured"
 
 
 MAX_DWELL = 86_400.0   # s
@@ -112,29 +110,28 @@ async def loop_block(session, cmd: m.Command) -> str:
 # ---- robot parameters: the device settings no CRCL command sets ----------------------------------
 
 def _pose_values(session, text: str) -> list[float]:
+    """x y z roll pitch yaw in the session's units -> SI."""
     try:
-        values = [float(v) for v in text.replace(",", " ").split()]
-    except ValueError:
-        values = []
-    if len(values) != 6 or not np.all(np.isfinite(values)):
-        raise CrclError(f"{text!r}: expected six numbers, x y z roll pitch yaw "
-                        f"(current length and angle units)")
+        values = pose_values(text)
+    except ValueError as error:
+        raise CrclError(f"{error} (current length and angle units)") from None
     units = session.settings.units
     return [units.length_si(v) for v in values[:3]] + [units.angle_si(v) for v in values[3:]]
 
 
 async def _tool_offset(session, value: str) -> None:
-    await session.control.robot.set_tool_offset(Pose(*_pose_values(session, value)))
+    await session.control.set_tool_offset(_pose_values(session, value))
 
 
 async def _workstation_frame(session, value: str) -> None:
-    await session.control.robot.set_world_cartesian_frame(Pose(*_pose_values(session, value)))
+    session.settings.frame = tuple(_pose_values(session, value))
 
 
-# name -> what it sets; values are "x y z roll pitch yaw" in the session's units.
+# name -> what it sets; values are "x y z roll pitch yaw" in the session's units. Both last
+# until the session ends: the frame is the session's own, the device's tool offset is put back.
 ROBOT_PARAMETERS = {
     "ToolOffset": _tool_offset,            # the controlled point in the flange frame
-    "WorkstationFrame": _workstation_frame,   # the workstation (world) frame in the robot base
+    "WorkstationFrame": _workstation_frame,   # CRCL's frame in the robot's base frame
 }
 
 

@@ -2,7 +2,13 @@
 errors read in a CRCL status."""
 from __future__ import annotations
 
+import contextlib
+
 from landscape.client.errors import CommandRefused, LandscapeError, NotImplementedByServer
+
+# The device's reasons for refusing a motion before anything moved (ErrorInfo.reason).
+_BEFORE_MOVING = {"UNREACHABLE": "is out of the arm's reach",
+                  "PARAM_OUT_OF_RANGE": "is out of a joint's range", "COLLISION": ""}
 
 
 class CrclError(Exception):
@@ -20,3 +26,20 @@ def describe(error: CrclError | LandscapeError) -> str:
         return f"{error.rpc or 'a call'} refused by the device ({error.code.name}{reason}): " \
                f"{error.message}"
     return str(error)
+
+
+@contextlib.contextmanager
+def refused_before_moving(point: str = ""):
+    """A motion the device refuses as out of reach, out of a joint's range or colliding
+    becomes a CrclError saying so first, and that nothing moved; `point` names what the
+    device's point index counts ("waypoint": a path's points after its start)."""
+    try:
+        yield
+    except CommandRefused as refused:
+        why = _BEFORE_MOVING.get(refused.reason)
+        if why is None:
+            raise
+        index = refused.metadata.get("index")
+        which = f"{point} {index}" if point and index else "the target"
+        said = f"{which} {why}" if why else "the motion would collide"
+        raise CrclError(f"{said}, nothing moved: {refused.message}") from None

@@ -1,6 +1,7 @@
 """The device's live state as CRCL reads it: a sample of the client core's state feed
-(landscape.client.state_feed: one StateService.StreamState per gateway, in the world frame,
-m and rad) as SI numpy arrays.
+(landscape.client.state_feed: one StateService.StreamState per gateway, in the robot's base
+frame, m and rad) as SI numpy arrays. Base, not the device's world: CRCL's workstation frame is
+each session's own (workstation.py), whatever any client set SetWorldCartesianFrame to.
 
 GetStatus is answered from the newest sample, never by a round trip per poll; while the stream
 is down, status says why and how old its last sample is, and motions fail rather than judge
@@ -14,18 +15,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from landscape.client.state_feed import Sample
+from landscape.gateway.device_units import DeviceUnits
 from landscape.v1 import state_service_pb2, types_pb2
-
-_LINEAR_M = {types_pb2.LINEAR_UNIT_INCHES: 0.0254, types_pb2.LINEAR_UNIT_FEET: 0.3048,
-             types_pb2.LINEAR_UNIT_METERS: 1.0, types_pb2.LINEAR_UNIT_CENTIMETERS: 0.01,
-             types_pb2.LINEAR_UNIT_MILLIMETERS: 0.001}
-_ANGULAR_RAD = {types_pb2.ANGULAR_UNIT_DEGREES: np.pi / 180.0, types_pb2.ANGULAR_UNIT_RADIANS: 1.0}
-
 
 @dataclass(frozen=True, eq=False)
 class LiveState:
     """One sample of the device, SI: joints rad (6,), rad/s (6,), N*m (6,) or empty; the tool
-    tip in the world frame as x, y, z (m), roll, pitch, yaw (rad). Each sample is its own
+    tip in the base frame as x, y, z (m), roll, pitch, yaw (rad). Each sample is its own
     (compared and hashed by identity: status.py keeps what it made of the newest ones)."""
 
     sequence: int
@@ -42,26 +38,18 @@ class LiveState:
     time: float = 0.0                     # unix s of the controller cycle it was taken in
 
 
-def _si(units: types_pb2.Units, joints, pose: types_pb2.Pose) -> tuple[np.ndarray, np.ndarray]:
-    """Joints (rad) and pose (m, rad) from values in `units`."""
-    scale_l = _LINEAR_M.get(units.linear, 1.0)
-    scale_a = _ANGULAR_RAD.get(units.angular, 1.0)
-    return (np.asarray(joints, dtype=float) * scale_a,
-            np.array([pose.x * scale_l, pose.y * scale_l, pose.z * scale_l,
-                      pose.roll * scale_a, pose.pitch * scale_a, pose.yaw * scale_a]))
-
-
 @functools.lru_cache(maxsize=8)
 def live_state(arrived: Sample) -> LiveState:
     """The sample in SI (the same object for the same sample: status.py keeps what it made of
     the newest ones)."""
     sample = arrived.message
-    joints, pose = _si(sample.units, sample.joint_positions, sample.tool_pose)
-    scale_a = _ANGULAR_RAD.get(sample.units.angular, 1.0)
+    units = DeviceUnits.of(sample.units)
     return LiveState(
-        sequence=sample.sequence, joint_positions=joints, tool_pose=pose,
+        sequence=sample.sequence,
+        joint_positions=np.asarray(sample.joint_positions, dtype=float) * units.radians,
+        tool_pose=np.array(units.pb_pose_si(sample.tool_pose)),
         device_state=sample.device_state,
-        joint_velocities=np.asarray(sample.joint_velocities) * scale_a,
+        joint_velocities=np.asarray(sample.joint_velocities) * units.radians,
         joint_torques=np.asarray(sample.joint_torques),
         command_id=sample.command_id, end_effector=sample.end_effector,
         end_effector_state=sample.end_effector_state,
@@ -69,9 +57,9 @@ def live_state(arrived: Sample) -> LiveState:
         time=arrived.time)
 
 
-def world_si(rate_hz: float) -> state_service_pb2.StreamStateRequest:
-    """The stream CRCL reads: `rate_hz` samples a second, the world frame, m and rad."""
+def base_si(rate_hz: float) -> state_service_pb2.StreamStateRequest:
+    """The stream CRCL reads: `rate_hz` samples a second, the base frame, m and rad."""
     return state_service_pb2.StreamStateRequest(
-        rate_hz=rate_hz, frame=types_pb2.REFERENCE_FRAME_WORLD_CARTESIAN_FRAME,
+        rate_hz=rate_hz, frame=types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME,
         units=types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS,
                               angular=types_pb2.ANGULAR_UNIT_RADIANS))

@@ -268,9 +268,13 @@ def _configure_joint_reports(c, element):
 
 
 def _configure_status_report(c, element):
+    """The 2021 revision's six flags, or the 2018 revision's first four (no sensors, no
+    guards to report)."""
     tags = ("ReportJointStatuses", "ReportPoseStatus", "ReportGripperStatus",
-            "ReportSettingsStatus", "ReportSensorsStatus", "ReportGuardsStatus")
+            "ReportSettingsStatus")
     values = [c.required(tag, xs_boolean) for tag in tags]
+    sensors = c.optional("ReportSensorsStatus", xs_boolean)
+    values += [bool(sensors), sensors is not None and c.required("ReportGuardsStatus", xs_boolean)]
     return dict(zip(("report_joints", "report_pose", "report_gripper", "report_settings",
                      "report_sensors", "report_guards"), values))
 

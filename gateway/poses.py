@@ -1,11 +1,14 @@
-"""CRCL poses (a point and the X and Z axes) <-> the device's x, y, z, roll, pitch, yaw.
+"""CRCL poses (a point and the X and Z axes) <-> the device's x, y, z, roll, pitch, yaw, and
+CRCL's workstation frame <-> the robot's base frame.
 
 The device's orientation is fixed-axis X-Y-Z, R = Rz(yaw) Ry(pitch) Rx(roll) (DESIGN.md
 section 6), pinocchio's rpy; CRCL's XAxis and ZAxis are the first and third columns of R.
-Values here are SI (m, rad); units.py converts at the edge.
+Values here are SI (m, rad); units.py converts at the edge. A frame is the six values of CRCL's
+frame in the base frame (workstation.py).
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -25,8 +28,9 @@ def rotation(x_axis: m.Vector, z_axis: m.Vector) -> np.ndarray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def to_device(pose: m.Pose, units: CrclUnits) -> np.ndarray:
-    """(6,) x, y, z (m), roll, pitch, yaw (rad) of a CRCL pose given in `units`."""
+def crcl_si(pose: m.Pose, units: CrclUnits) -> np.ndarray:
+    """(6,) x, y, z (m), roll, pitch, yaw (rad) of a CRCL pose given in `units` (in CRCL's
+    frame)."""
     p = pose.point
     rpy = pin.rpy.matrixToRpy(rotation(pose.x_axis, pose.z_axis))
     return np.array([units.length_si(p.x), units.length_si(p.y), units.length_si(p.z), *rpy])
@@ -42,6 +46,29 @@ def matrix(values: np.ndarray) -> np.ndarray:
 
 def from_matrix(t: np.ndarray) -> np.ndarray:
     return np.concatenate([t[:3, 3], pin.rpy.matrixToRpy(t[:3, :3])])
+
+
+@functools.lru_cache(maxsize=32)
+def frame_matrices(frame: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(CRCL's frame in the base, the base in CRCL's frame), 4x4 each, of a frame's values."""
+    there = matrix(np.array(frame, dtype=float))
+    return there, np.linalg.inv(there)
+
+
+def to_base(values: np.ndarray, frame: tuple[float, ...]) -> np.ndarray:
+    """(6,) SI pose in CRCL's frame -> the same pose in the robot's base frame."""
+    return from_matrix(frame_matrices(frame)[0] @ matrix(values))
+
+
+def to_workstation(values: np.ndarray, frame: tuple[float, ...]) -> np.ndarray:
+    """(6,) SI pose in the base frame -> the same pose in CRCL's frame."""
+    return from_matrix(frame_matrices(frame)[1] @ matrix(values))
+
+
+def point_to_base(point: np.ndarray, frame: tuple[float, ...]) -> np.ndarray:
+    """(3,) m in CRCL's frame -> in the base frame."""
+    there = frame_matrices(frame)[0]
+    return there[:3, :3] @ point + there[:3, 3]
 
 
 def axes(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

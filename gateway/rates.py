@@ -9,11 +9,12 @@ scale; the joints get the same percent of their maxima. So:
 - RotSpeed w and RotAccel alpha are the angular caps. The percent still scales the angular
   maximum, so rotation may come out slower than asked, never faster (spec V allows less).
 
-The session's rates reach the device when a motion needs them, just before it starts (only
-those that changed since last sent), not when a Set*Speed / Set*Accel sets them: a setting is
-no device round trip. Per-command rates (a PoseAndSetType, a waypoint) are set the same way
-for that command's motion and the session's put back once it has started: the device plans at
-the start.
+A motion carries its rates in its own request (move_rates: the session's, with the command's
+own from a PoseAndSetType or a waypoint): no setting of the device changes, and a MoveTo is one
+call. The device's guarded move (MoveReact) and its tool changes (GetTool, PutTool) take the
+device's settings: RatesFor sets the session's there just before (only those that changed
+since last sent), and the session's end puts the device's own back (device.py). A Set*Speed /
+Set*Accel is no device round trip.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ import asyncio
 
 from landscape.gateway import model as m
 from landscape.gateway.settings import SiRate, rate_si
-from landscape.v1 import types_pb2
+from landscape.v1 import motion_pb2, types_pb2
 
 MIN_PERCENT = 0.1            # the device needs a percent above 0
 PERCENT_SPEED = ("SetSpeed", types_pb2.SPEED_TYPE_PERCENT_SPEED)
@@ -37,48 +38,39 @@ def percent(value: float, maximum: float) -> float:
 
 
 def speed_percent(session, rate: SiRate | None = None) -> float:
-    v_max = session.control.limits.max_world_linear_velocity
+    v_max = session.control.limits.linear_speed
     return percent((rate or session.settings.trans_speed).value(v_max), v_max)
 
 
 def accel_percent(session, rate: SiRate | None = None) -> float:
-    a_max = session.control.accel_limits.max_world_linear_accel
+    a_max = session.control.limits.linear_accel
     return percent((rate or session.settings.trans_accel).value(a_max), a_max)
 
 
 def rot_speed(session, rate: SiRate | None = None) -> float:
-    return (rate or session.settings.rot_speed).value(
-        session.control.limits.max_world_angular_velocity)
+    return (rate or session.settings.rot_speed).value(session.control.limits.angular_speed)
 
 
 def rot_accel(session, rate: SiRate | None = None) -> float:
-    return (rate or session.settings.rot_accel).value(
-        session.control.accel_limits.max_world_angular_accel)
+    return (rate or session.settings.rot_accel).value(session.control.limits.angular_accel)
 
 
 def session_rates(session) -> dict[tuple[str, int], float]:
-    """The device settings that carry the session's rates."""
-    limits, accel_limits = session.control.limits, session.control.accel_limits
+    """The device settings that carry the session's rates (SI, or percent)."""
+    limits = session.control.limits
     return {PERCENT_SPEED: speed_percent(session),
-            LINEAR_SPEED: limits.max_world_linear_velocity,
+            LINEAR_SPEED: limits.linear_speed,
             ANGULAR_SPEED: rot_speed(session),
             PERCENT_ACCEL: accel_percent(session),
-            LINEAR_ACCEL: accel_limits.max_world_linear_accel,
+            LINEAR_ACCEL: limits.linear_accel,
             ANGULAR_ACCEL: rot_accel(session)}
 
 
 async def push(session, wanted: dict[tuple[str, int], float]) -> None:
-    """These device settings, each sent only if it differs from what was sent last."""
-    control = session.control
-    for (rpc, kind), value in wanted.items():
-        if control.pushed.get((rpc, kind)) == value:
-            continue
-        control.pushed.pop((rpc, kind), None)   # unknown until the device says yes
-        if rpc == "SetSpeed":
-            await control.robot.set_speed(value, kind)
-        else:
-            await control.robot.set_acceleration(value, kind)
-        control.pushed[(rpc, kind)] = value
+    """These device settings, each sent only if it differs from what was sent last (the
+    session's Control puts them back as they were when the session ends)."""
+    for rate, value in wanted.items():
+        await session.control.set_rate(rate, value)
 
 
 async def push_rates(session) -> None:
@@ -99,6 +91,19 @@ class RatesFor:
     async def __aexit__(self, *exc):
         if self.overrides:
             await asyncio.shield(push_rates(self.session))
+
+
+def move_rates(session, overrides: dict[tuple[str, int], float] | None = None
+               ) -> motion_pb2.MoveRates:
+    """A motion's own MoveRates: the session's rates with `overrides` (motion_rates'), in the
+    device's units. The speed percent goes in the request's speed (or a path point's)."""
+    wanted = {**session_rates(session), **(overrides or {})}
+    units = session.control.units
+    return motion_pb2.MoveRates(
+        accel_percent=wanted[PERCENT_ACCEL], linear_speed=units.length(wanted[LINEAR_SPEED]),
+        angular_speed=units.angle(wanted[ANGULAR_SPEED]),
+        linear_accel=units.length(wanted[LINEAR_ACCEL]),
+        angular_accel=units.angle(wanted[ANGULAR_ACCEL]))
 
 
 def pose_rates(session, pose: m.Pose) -> tuple[SiRate | None, ...]:

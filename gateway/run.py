@@ -68,6 +68,9 @@ class Client:
     def send(self, data: bytes) -> None:
         self.sock.sendall(data)
 
+    def close(self) -> None:
+        self.sock.close()
+
     def status(self, command_id: int) -> tuple[int, str, str]:
         """(CommandID, CommandState, StateDescription) from a GetStatus."""
         self.send(_get_status(command_id))
@@ -114,6 +117,14 @@ def run(path: Path, address: str, poll: float = 0.005, timeout: float = 300.0,
     report = report or (lambda progress: print(progress, file=out, flush=True))
     commands = instances(path)
     client = Client(address, timeout)
+    try:
+        return _run(client, commands, poll, timeout, report)
+    finally:
+        client.close()         # its session ends now, failed or not: the lock is free
+
+
+def _run(client: Client, commands, poll: float, timeout: float, report) -> int:
+    """Each command in turn, to its end; ProgramFailed at the first error."""
     for index, (command, document) in enumerate(commands):
         started = time.monotonic()
         client.send(document)

@@ -1,10 +1,17 @@
-"""Validation against the official CRCL schemas, read from a directory at run time.
+"""Validation against NIST's CRCL schemas, read from a folder at run time.
 
-The schema files are NIST's (../shared/crcl/xsd); they are never copied into the repository.
-The gateway works without them (its typed parser checks every command), and is strictly
-conformant with them when they are configured. Each instance is validated against the schema of
-its root element; `xsi:noNamespaceSchemaLocation` hints in documents are ignored (never
-fetched).
+`make tools` installs them: Maven fetches NIST's crcl4java-base 1.8 from Maven Central and the
+Makefile unpacks its five XSDs into .tools/crcl-schemas (never committed). That is the default
+folder; `--schemas DIR` or $LANDSCAPE_CRCL_SCHEMAS names another (NIST's 2021 revision from
+usnistgov/crcl, say). The gateway works without them (its typed parser checks every command)
+and is strictly conformant with them when they are there; it says at start which it uses.
+
+Two revisions are in use: crcl4java-base 1.8 carries the 2018 one, which NIST's Java client
+speaks; the 2021 one adds guards, sensors, grippers' and parameters' reporting, loop blocks
+and joint tolerances, and renames SettingsStatus's PoseTolerance to EndPoseTolerance. A
+SchemaSet knows which it holds, so statuses are written in that revision (status.py). Each
+instance is validated against the schema of its root element; `xsi:noNamespaceSchemaLocation`
+hints in documents are ignored (never fetched).
 """
 from __future__ import annotations
 
@@ -13,13 +20,16 @@ from pathlib import Path
 
 from lxml import etree
 
-# Where the project keeps NIST's schemas beside the repository (see ../shared/crcl/README.md).
-SHARED_SCHEMAS = Path(__file__).resolve().parents[2] / "shared" / "crcl" / "xsd"
 SCHEMAS_ENV = "LANDSCAPE_CRCL_SCHEMAS"
+# Where `make tools` puts them, in the checkout this package runs from (an editable install).
+INSTALLED = Path(__file__).resolve().parents[1] / ".tools" / "crcl-schemas"
+INSTALL_HINT = "`make tools` installs NIST's (crcl4java-base 1.8 from Maven Central)"
+NEWEST = 2021
 
 ROOT_SCHEMAS = {"CRCLCommandInstance": "CRCLCommandInstance.xsd",
                 "CRCLProgram": "CRCLProgramInstance.xsd",
                 "CRCLStatus": "CRCLStatus.xsd"}
+_XS = "{http://www.w3.org/2001/XMLSchema}"
 
 
 class SchemaInvalid(Exception):
@@ -27,15 +37,15 @@ class SchemaInvalid(Exception):
 
 
 def default_directory() -> Path | None:
-    """$LANDSCAPE_CRCL_SCHEMAS, else ../shared/crcl/xsd beside the checkout, if present."""
+    """$LANDSCAPE_CRCL_SCHEMAS, else the schemas `make tools` installed, if they are there."""
     configured = os.environ.get(SCHEMAS_ENV)
     if configured:
         return Path(configured)
-    return SHARED_SCHEMAS if (SHARED_SCHEMAS / "CRCLCommands.xsd").is_file() else None
+    return INSTALLED if (INSTALLED / "CRCLCommands.xsd").is_file() else None
 
 
 class SchemaSet:
-    """The three instance schemas of a directory, compiled once."""
+    """The three instance schemas of a folder, compiled once, and their revision."""
 
     def __init__(self, directory: str | Path):
         self.directory = Path(directory)
@@ -48,6 +58,17 @@ class SchemaSet:
             if not path.is_file():
                 raise FileNotFoundError(f"CRCL schema {path} not found")
             self._schemas[root] = etree.XMLSchema(etree.parse(str(path), parser))
+        primitives = etree.parse(str(self.directory / "DataPrimitives.xsd"), parser)
+        self.revision = 2021 if primitives.find(
+            f"{_XS}complexType[@name='GuardType']") is not None else 2018
+
+    def describe(self) -> str:
+        """For the start-up line: where they are, and what their revision accepts."""
+        if self.revision >= NEWEST:
+            return f"NIST's CRCL schemas in {self.directory} (2021 revision)"
+        return (f"NIST's CRCL schemas in {self.directory} (2018 revision, as crcl4java 1.8: "
+                f"documents with the 2021 revision's guards, sensors, gripper and parameter "
+                f"reports, loop blocks or joint tolerances are refused)")
 
     def validate(self, tree: etree._ElementTree) -> None:
         """Raises SchemaInvalid with the first error (line and element) if the tree breaks
@@ -61,3 +82,11 @@ class SchemaSet:
             error = schema.error_log[0]
             raise SchemaInvalid(f"line {error.line}: {error.message} "
                                 f"(against {ROOT_SCHEMAS[root.tag]})")
+
+
+def describe(schemas: SchemaSet | None) -> str:
+    """What the gateway validates against, for its start-up line."""
+    if schemas is None:
+        return ("NO SCHEMAS: documents are checked by the gateway's own parser only, not "
+                f"against NIST's CRCL schemas ({INSTALL_HINT}, or give --schemas DIR)")
+    return schemas.describe()

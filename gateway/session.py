@@ -13,8 +13,10 @@
 - Before InitCanon, and after EndCanon, commands other than InitCanon are errors (EndCanon
   and StopMotion before InitCanon have nothing to do, and are done).
 - InitCanon takes the device's lock for this session (one session at a time holds it), turns
-  the drives on and resets units and settings; EndCanon stops, turns the drives off and
-  releases. A connection that ends lets the device's disconnect handler do the same.
+  the drives on, starts the session's settings from the cell's workstation (its frame and
+  units, workstation.py) and has the arm hold the cell's end effector; EndCanon stops, turns
+  the drives off, puts back what the session set on the device and releases. A connection
+  that ends does the same (device.py), the device's disconnect handler at the last.
 - A lock lost (the device ended the session: its keep-alives stopped arriving, the server
   stopped) ends the running command, and those queued, in CRCL_Error naming the loss and the
   device's reason; every later status says so, until InitCanon takes the lock again (never
@@ -30,17 +32,19 @@ from dataclasses import dataclass
 
 from landscape.client import LandscapeError, SessionEnded
 from landscape.gateway import model as m
-from landscape.gateway import parse, status, xmlsafe
+from landscape.gateway import guards, parse, status, xmlsafe
 from landscape.gateway.device import Control, CrclDevice
 from landscape.gateway.errors import CrclError, describe
 from landscape.gateway.live import live_state
+from landscape.gateway.guards import GuardReport
 from landscape.gateway.handlers import HANDLERS, immediate
-from landscape.gateway.rates import push_rates
 from landscape.gateway.program import expand
-from landscape.gateway.schemas import SchemaInvalid, SchemaSet
+from landscape.gateway.schemas import NEWEST, SchemaInvalid, SchemaSet
 from landscape.gateway.settings import CrclSettings
 from landscape.gateway.status import DONE, ERROR, WORKING, CommandRecord
+from landscape.gateway.tooling import hold_end_effector
 from landscape.gateway.wire import DEFAULT_MAX_DOCUMENT, DOCUMENT_IDLE
+from landscape.gateway.workstation import Workstation
 from landscape.v1 import types_pb2
 
 log = logging.getLogger(__name__)
@@ -54,6 +58,13 @@ class GatewayOptions:
     max_document: int = DEFAULT_MAX_DOCUMENT
     document_idle: float = DOCUMENT_IDLE    # s a started document may wait for more bytes
     gripper_stroke: float = status.DEFAULT_GRIPPER_STROKE
+    workstation: Workstation = Workstation()
+
+    @property
+    def revision(self) -> int:
+        """The CRCL schemas' revision statuses are written in: the configured one's, else
+        the newest."""
+        return self.schemas.revision if self.schemas is not None else NEWEST
 
 
 class CrclSession:
@@ -76,6 +87,7 @@ class CrclSession:
         self.motion_start: asyncio.Future | None = None   # a motion call in flight
         self._dropped: asyncio.Future | None = None       # closing a lost control
         self.motion_ended = 0.0    # unix s the last device motion ended (its done event)
+        self.guard_report: GuardReport | None = None   # the last guarded command's
         self.listeners: list = []           # called with no argument when the record changes
 
     # ---- documents -------------------------------------------------------------------------
@@ -143,7 +155,8 @@ class CrclSession:
         feed = self.device.feed
         live = live_state(feed.latest) if feed.latest is not None else None
         return status.build(self.record, next(self._status_ids), self.settings, live,
-                            feed.stale(), self.options.gripper_stroke)
+                            feed.stale(), self.options.gripper_stroke, self.options.revision,
+                            self.guard_report)
 
     # ---- running commands ---------------------------------------------------------------------
 
@@ -244,8 +257,7 @@ class CrclSession:
     async def execute(self, command: m.Command) -> str | None:
         """Carry out one command; returns a description for its Done status."""
         if command.guards:
-            raise CrclError("guards (sensor limits on a command) are not supported by this "
-                            "gateway; send the command without Guard elements")
+            guards.refuse(command)       # unless the device can watch them (a MoveTo's)
         if isinstance(command, m.InitCanon):
             return await self.init_canon()
         if self.control is None and self.lost:
@@ -263,16 +275,20 @@ class CrclSession:
         if self.control is None:
             control = self.control = await self.device.take_control(self.name, self.peer)
             control.robot.session.add_end_listener(lambda lost: self._ended(control, lost))
+        workstation = self.options.workstation
         try:
             await self.control.prepare()
-            self.settings = CrclSettings()
+            self.settings = CrclSettings(units=workstation.units, frame=workstation.frame)
+            self.guard_report = None
             await self.device.feed.watch(self, ())
-            await push_rates(self)
+            tool = await hold_end_effector(self, workstation.end_effector)
         except BaseException:
             await self.drop_control()
             raise
         self.ended, self.lost = False, ""
-        return "session started: lock held, drives on, default units"
+        units = self.settings.units
+        return (f"session started: lock held, drives on, {units.length} and {units.angle}"
+                f"{', ' + tool if tool else ''}")
 
     def _ended(self, control: Control, lost: SessionEnded | None) -> None:
         """The device session of `control` ended: lost, unless this client closed it."""
@@ -288,7 +304,7 @@ class CrclSession:
         self.lost = f"the lock is lost: {lost}; InitCanon takes it again"
         log.warning("%s: %s", self.name, self.lost)
         control, self.control = self.control, None
-        self._dropped = asyncio.ensure_future(control.close())   # its session has ended
+        self._dropped = asyncio.ensure_future(self.device.end(control))   # it has ended
         self._queue.clear()
         if self._running is not None and not self._running.done():
             self._running.cancel()
@@ -314,7 +330,7 @@ class CrclSession:
     async def drop_control(self) -> None:
         control, self.control = self.control, None
         if control is not None:
-            await control.close()
+            await self.device.end(control)
 
     async def close(self) -> None:
         """The connection ended."""

@@ -1,8 +1,10 @@
 """What one CRCL session has set, in SI, and what it asked status to report.
 
-InitCanon starts from these defaults (spec section VI for the units; the rates are the
+InitCanon starts from these defaults (the units and the workstation frame are the cell's,
+workstation.py: the spec's meter and radian unless the cell says otherwise; the rates are the
 device's cautious defaults: a quarter of the maximum speed, half the maximum acceleration; the
-end tolerances DEFAULT_END_TOLERANCE and DEFAULT_JOINT_TOLERANCE).
+end tolerances DEFAULT_END_TOLERANCE and DEFAULT_JOINT_TOLERANCE). They are the session's
+alone: nothing here is stored on the device.
 """
 from __future__ import annotations
 
@@ -86,6 +88,7 @@ class Reporting:
 @dataclass
 class CrclSettings:
     units: CrclUnits = CrclUnits()
+    frame: tuple[float, ...] = (0.0,) * 6     # CRCL's frame in the base: x y z m, rpy rad
     trans_speed: SiRate = SiRate(fraction=0.25)
     rot_speed: SiRate = SiRate(fraction=0.25)
     trans_accel: SiRate = SiRate(fraction=0.5)

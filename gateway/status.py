@@ -17,7 +17,9 @@ from lxml import etree
 
 from landscape.gateway import poses
 from landscape.gateway.settings import CrclSettings, SiRate, ToleranceSi
+from landscape.gateway.guards import GuardReport
 from landscape.gateway.live import LiveState
+from landscape.gateway.schemas import NEWEST
 from landscape.gateway.units import CrclUnits
 
 XSI = "http://www.w3.org/2001/XMLSchema-instance"
@@ -62,46 +64,56 @@ def _vector(parent, tag: str, values, names: str = "IJK") -> None:
         _add(element, name, number(value))
 
 
+def _pose(parent, tag: str, values, units: CrclUnits) -> None:
+    """A PoseType of SI values (in CRCL's frame), its Point in `units`."""
+    point, x_axis, z_axis = poses.axes(values)
+    element = _add(parent, tag)
+    _vector(element, "Point", [units.length_out(v) for v in point], names="XYZ")
+    _vector(element, "XAxis", x_axis)
+    _vector(element, "ZAxis", z_axis)
+
+
 _HEAD = f"<?xml version='1.0' encoding='UTF-8'?>\n<CRCLStatus xmlns:xsi=\"{XSI}\">".encode()
 _TAIL = b"</CRCLStatus>"
 
 
 def build(record: CommandRecord, status_id: int, settings: CrclSettings,
           live: LiveState | None, stale: str = "",
-          gripper_stroke: float = DEFAULT_GRIPPER_STROKE) -> bytes:
+          gripper_stroke: float = DEFAULT_GRIPPER_STROKE, revision: int = NEWEST,
+          guards: GuardReport | None = None) -> bytes:
     """The CRCLStatus document, with its XML declaration, as UTF-8 bytes. `stale`: why the
-    live state is not the device's present state (none, or old), added to StateDescription."""
+    live state is not the device's present state (none, or old), added to StateDescription.
+    `revision`: of the schemas it is written for (2018 has no sensors and names the end
+    tolerance PoseTolerance). `guards`: the last guarded command's, for GuardsStatuses."""
     root = etree.Element("CRCLStatus")       # holds the parts made anew each time
     _command_status(root, record, status_id, stale)
     report = settings.reporting
     arm = b""
     if live is not None:
-        arm = _arm(live, settings.units, report.pose, tuple(sorted(
+        arm = _arm(live, settings.units, settings.frame, report.pose, tuple(sorted(
             report.joint_reports.items())) if report.joints else ())
         if report.gripper and live.end_effector and live.end_effector not in settings.grippers_disabled:
             _gripper(root, live, settings, gripper_stroke)
     if report.settings:
-        _settings_status(root, settings)
-    if report.sensors and live is not None:
+        _settings_status(root, settings, revision)
+    if report.sensors and live is not None and revision >= NEWEST:
         _sensors(root, settings, live)
+    if report.guards and guards is not None and revision >= NEWEST:
+        _guards(root, settings.units, guards)
     parts = [etree.tostring(element) for element in root]
     return b"".join((_HEAD, parts[0], arm, *parts[1:], _TAIL))
 
 
 @functools.lru_cache(maxsize=16)
-def _arm(live: LiveState, units: CrclUnits, pose: bool,
+def _arm(live: LiveState, units: CrclUnits, frame: tuple[float, ...], pose: bool,
          joint_reports: tuple[tuple[int, tuple[bool, bool, bool]], ...]) -> bytes:
-    """JointStatuses and PoseStatus of one sample, as reported: made once per sample and
-    report, however many clients poll it (the bulk of a status)."""
+    """JointStatuses and PoseStatus (in CRCL's `frame`) of one sample, as reported: made once
+    per sample and report, however many clients poll it (the bulk of a status)."""
     root = etree.Element("CRCLStatus")
     if joint_reports:
         _joint_statuses(root, units, joint_reports, live)
     if pose:
-        point, x_axis, z_axis = poses.axes(live.tool_pose)
-        element = _add(_add(root, "PoseStatus"), "Pose")
-        _vector(element, "Point", [units.length_out(v) for v in point], names="XYZ")
-        _vector(element, "XAxis", x_axis)
-        _vector(element, "ZAxis", z_axis)
+        _pose(_add(root, "PoseStatus"), "Pose", poses.to_workstation(live.tool_pose, frame), units)
     return b"".join(etree.tostring(element) for element in root)
 
 
@@ -191,7 +203,7 @@ def _rate_relative(parent, tag: str, rate: SiRate) -> None:
         _add(_add(parent, f"{tag}Relative"), "Fraction", number(rate.fraction))
 
 
-def _settings_status(root, s: CrclSettings) -> None:
+def _settings_status(root, s: CrclSettings, revision: int) -> None:
     units = s.units
     element = _add(root, "SettingsStatus")
     _add(element, "AngleUnitName", units.angle)
@@ -202,7 +214,8 @@ def _settings_status(root, s: CrclSettings) -> None:
     _tolerance(element, "IntermediatePoseTolerance", s.intermediate_tolerance, s)
     _add(element, "LengthUnitName", units.length)
     _add(element, "MotionCoordinated", "true" if s.coordinated else "false")
-    _tolerance(element, "EndPoseTolerance", s.end_tolerance, s)
+    _tolerance(element, "EndPoseTolerance" if revision >= NEWEST else "PoseTolerance",
+               s.end_tolerance, s)
     _parameters(element, "RobotParameterSetting",
                 {k: v for k, v in s.robot_parameters.items() if k in s.reported_parameters})
     # Schema order: RotAccelAbsolute, RotAccelRelative, RotSpeedAbsolute, RotSpeedRelative, ...
@@ -214,7 +227,7 @@ def _settings_status(root, s: CrclSettings) -> None:
     for tag, rate in (("TransAccel", s.trans_accel), ("TransSpeed", s.trans_speed)):
         _rate(element, tag, rate, units.length_out)
         _rate_relative(element, tag, rate)
-    if s.joint_tolerances:
+    if s.joint_tolerances and revision >= NEWEST:
         tolerances = _add(element, "JointTolerances")
         for joint, value in sorted(s.joint_tolerances.items()):
             setting = _add(tolerances, "Setting")
@@ -241,6 +254,23 @@ def _sensors(root, settings: CrclSettings, live: LiveState) -> None:
             _add(sensor, tag, number(units.force_out(value)))
         for tag, value in zip(("Tx", "Ty", "Tz"), values[3:]):
             _add(sensor, tag, number(units.torque_out(value)))
+
+
+def _guards(root, units: CrclUnits, report: GuardReport) -> None:
+    element = _add(root, "GuardsStatuses")
+    for guard in report.guards:
+        written = _add(element, "Guard")
+        _add(written, "SensorID", guard.sensor_id)
+        if guard.sub_field is not None:
+            _add(written, "SubField", guard.sub_field)
+        _add(written, "LimitType", guard.limit_type)
+        _add(written, "LimitValue", number(guard.limit_value))
+    _add(element, "TriggerCount", str(report.trigger_count))
+    _add(element, "TriggerStopTimeMicros", str(report.stop_time_us))
+    if report.value is not None:
+        _add(element, "TriggerValue", number(report.value))
+    if report.pose is not None:
+        _pose(element, "TriggerPose", report.pose, units)
 
 
 def _sensor(parent, tag: str, name: str, live: LiveState):

@@ -22,12 +22,13 @@ import pinocchio as pin
 
 from landscape.gateway import model as m
 from landscape.gateway import poses
-from landscape.gateway.errors import CrclError
-from landscape.gateway.motions import SETTLE_TIMEOUT, present
+from landscape.gateway.device_units import DeviceUnits
+from landscape.gateway.errors import CrclError, describe
+from landscape.gateway.motions import SETTLE_TIMEOUT, present, run_motion
 from landscape.gateway.rates import push_rates
 from landscape.gateway.status import is_vacuum
-from landscape.client import LandscapeError
-from landscape.v1 import types_pb2
+from landscape.gateway.workstation import BARE
+from landscape.client import Frame, LandscapeError
 
 TOOL_CHANGER_OUTPUT = "toolchanger_lock"    # the cell's output: 1 couples, 0 releases
 MAIN_FUNCTION = 1                           # bit 0 of ActivateTool's bit field
@@ -37,9 +38,6 @@ AXIS_REACH = 0.002           # m off the plate's axis
 ANGLE_REACH = np.radians(3.0)   # rad between the flange's and the plate's orientation
 ON_STATES = ("closed", "suction_on", "holding")   # the device's tool states, function on
 OFF_STATES = ("open", "off")                       # and off
-_LENGTH_M = {types_pb2.LINEAR_UNIT_METERS: 1.0, types_pb2.LINEAR_UNIT_MILLIMETERS: 0.001,
-             types_pb2.LINEAR_UNIT_CENTIMETERS: 0.01, types_pb2.LINEAR_UNIT_INCHES: 0.0254,
-             types_pb2.LINEAR_UNIT_FEET: 0.3048}
 
 
 async def _tool(session) -> tuple[str, str]:
@@ -60,25 +58,28 @@ async def _changer(session, couple: bool) -> None:
     raise CrclError(f"the cell has no {TOOL_CHANGER_OUTPUT!r} output: no tool changer")
 
 
+def _matrix(pose) -> np.ndarray:
+    """4x4 of a landscape.v1 Pose in m and rad (the cell's description is in SI)."""
+    return poses.matrix(np.array([pose.x, pose.y, pose.z, pose.roll, pose.pitch, pose.yaw]))
+
+
 async def _slots(session) -> dict[str, np.ndarray]:
-    """Each rack tool's plate in its slot (4x4, world, m). A tool on the flange has no place in
-    the cell's description: its slot is the one last seen (the gateway's device remembers them)."""
+    """Each rack tool's plate in its slot (4x4, base frame, m). A tool on the flange has no
+    place in the cell's description: its slot is the one last seen (the gateway's device
+    remembers them)."""
     cell = await session.control.robot.get_cell_description()
-    session.device.slots.update({body.name: poses.matrix(np.array(
-        [body.pose.x, body.pose.y, body.pose.z, body.pose.roll, body.pose.pitch, body.pose.yaw]))
-        for body in cell.bodies if body.kind == body.KIND_TOOL and not body.attached_to})
+    world_to_base = np.linalg.inv(_matrix(cell.base))
+    session.device.slots.update({body.name: world_to_base @ _matrix(body.pose)
+                                 for body in cell.bodies
+                                 if body.kind == body.KIND_TOOL and not body.attached_to})
     return session.device.slots
 
 
 async def _flange(session) -> np.ndarray:
-    """The flange now (4x4, world, m): the controlled point less the tool offset."""
+    """The flange now (4x4, base frame, m): the controlled point less the tool offset."""
     live = await present(session)
     reply = await session.control.robot.get_tool_offsets()
-    o, scale = reply.offset, _LENGTH_M.get(reply.units.linear, 1.0)
-    angles = np.array([o.roll, o.pitch, o.yaw])
-    if reply.units.angular == types_pb2.ANGULAR_UNIT_DEGREES:
-        angles = np.radians(angles)
-    offset = poses.matrix(np.array([o.x * scale, o.y * scale, o.z * scale, *angles]))
+    offset = poses.matrix(np.array(DeviceUnits.of(reply.units).pb_pose_si(reply.offset)))
     return poses.matrix(live.tool_pose) @ np.linalg.inv(offset)
 
 
@@ -97,6 +98,38 @@ def _docking(flange: np.ndarray, plate: np.ndarray) -> float | None:
     if lateral > AXIS_REACH or turned > ANGLE_REACH or not -SLOT_REACH <= along <= DOCK_REACH:
         return None
     return max(along, 0.0)
+
+
+async def hold_end_effector(session, wanted: str) -> str:
+    """InitCanon: the arm holds the cell's end effector (workstation.py): another tool on the
+    flange goes back to its slot (PutTool) and this one is fetched (GetTool), then the arm
+    returns to where it stood (a joint move), so a program starts from where it was sent, not
+    from above the rack. "" leaves the flange as it is, BARE empties it. Returns what was
+    done; CrclError naming why not."""
+    target = "" if wanted == BARE else wanted
+    tool, _ = await _tool(session)
+    if not wanted or tool == target:
+        return ""
+    slots = await _slots(session)
+    if target and target not in slots:
+        raise CrclError(f"the cell's end effector {target!r} is no tool of this cell's rack "
+                        f"({', '.join(slots) or 'it has none'})")
+    await _ready_to_move(session)
+    control, done = session.control, []
+    stood = control.units.joints((await present(session)).joint_positions)
+    try:
+        if tool:
+            await control.robot.put_tool(tool)
+            done.append(f"the {tool} put back in the rack")
+        if target:
+            await control.robot.get_tool(target)
+            done.append(f"the {target} fetched from the rack")
+        await run_motion(session, lambda: control.robot.move_absolute(
+            stood, Frame.JOINT, point_name="CRCL InitCanon: back from the rack"))
+    except (LandscapeError, CrclError) as refused:
+        raise CrclError(f"the arm cannot hold the cell's end effector ({wanted}): "
+                        f"{describe(refused)}") from None
+    return ", ".join(done)
 
 
 async def close_tool_changer(session, cmd: m.CloseToolChanger) -> str:
@@ -170,7 +203,8 @@ async def set_end_effector_parameters(session, cmd: m.SetEndEffectorParameters) 
 
 async def enable_gripper(session, cmd: m.EnableGripper) -> str:
     if cmd.options:
-        raise CrclError("gripper options are not supported")
+        names = ", ".join(o.name for o in cmd.options)
+        raise CrclError(f"GripperOption ({names}): landscape.v1 tools take no options")
     session.settings.grippers_disabled.discard(cmd.gripper_name)
     return f"gripper {cmd.gripper_name} reported"
 
@@ -181,12 +215,31 @@ async def disable_gripper(session, cmd: m.DisableGripper) -> str:
 
 
 async def enable_sensor(session, cmd: m.EnableSensor) -> str:
-    if cmd.options:
-        raise CrclError("sensor options are not supported")
+    """Reported in SensorStatuses from now on; SensorOption tare=true zeroes it first at its
+    present reading (the device's vendor command "tare <sensor>")."""
+    tare = False
+    for option in cmd.options:
+        if option.name != "tare" or option.value not in ("true", "false"):
+            raise CrclError(f"SensorOption {option.name}={option.value!r}: the one option is "
+                            f"tare (true: zero the sensor at its present reading, or false)")
+        tare = option.value == "true"
     # The gateway's one state stream carries it from now on, once the device has accepted it.
     await _watch(session, session.settings.sensors | {cmd.sensor_id})
     session.settings.sensors.add(cmd.sensor_id)
-    return f"sensor {cmd.sensor_id} reported"
+    if tare:
+        await session.control.robot.send_command(f"tare {cmd.sensor_id}")
+        await _fresh_sample(session.device.feed)
+    return f"sensor {cmd.sensor_id} reported{', tared' if tare else ''}"
+
+
+async def _fresh_sample(feed) -> None:
+    """Until a sample taken after now is there for GetStatus: the second one to arrive (the
+    first may have been on its way)."""
+    for _ in range(2):
+        newest = feed.latest.message.sequence if feed.latest is not None else -1
+        if await feed.until(lambda s: s.message.sequence > newest, SETTLE_TIMEOUT) is None:
+            raise CrclError(f"no state from the device within {SETTLE_TIMEOUT:g} s: "
+                            f"{feed.stale() or 'the stream is stalled'}")
 
 
 async def disable_sensor(session, cmd: m.DisableSensor) -> str:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import sys
+import dataclasses
 import threading
 from dataclasses import dataclass
 
@@ -16,7 +17,10 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
+from landscape.bridges.metrics.endpoint import (MetricsEndpoint, MetricsExposed, MetricsTLS,
+                                                new_registry, serve_metrics)
 from landscape.server.events import alarms
+from landscape.server.metrics import DeviceMetrics
 from landscape.server.api import services
 from landscape.server.security import tls
 from landscape.server.security.audit import AuditLog
@@ -35,12 +39,14 @@ from landscape.server.security.interceptor import SecurityInterceptor
 from landscape.server.api.servicers.device import DeviceServicer
 from landscape.server.api.servicers.digital_io import DigitalIOServicer
 from landscape.server.api.servicers.events import EventServicer
+from landscape.server.api.servicers.recording import RecordingServicer
 from landscape.server.api.guard import Dispatch
 from landscape.server.api.servicers.session import SessionServicer
 from landscape.server.api.servicers.state import StateServicer
 from landscape.server.api.state_stream import StateHub
 from landscape.server.workcell.assembly import Workcell, build_workcell
 from landscape.robot.cell import load_cell
+from landscape.robot.cell_model import Pose
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +93,8 @@ class RunningServer:
     limits: StreamLimits
     runner: _LoopThread
     security: SecurityInterceptor
+    metrics: MetricsEndpoint | None = None
+    device_metrics: DeviceMetrics | None = None
 
     @property
     def target(self) -> str:
@@ -115,6 +123,9 @@ class RunningServer:
         self.link.stop()
         self.runner.close()
         self.security.close()
+        if self.metrics is not None:
+            self.metrics.close()
+            self.device_metrics.close()
 
     def wait(self) -> None:
         self.runner.run(self.server.wait_for_termination(), timeout=None)
@@ -135,8 +146,15 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     # thread computes too, and pays for every hand-over (bench_lockstep: 12 % slower at 0.2).
     sys.setswitchinterval(0.001 if config.clock == "lockstep" else 0.0002)
     bus = EventBus()
+    device: Device | None = None
+    metrics = None if config.metrics_port is None else DeviceMetrics(
+        new_registry(), cycle_samples=lambda seen: link.cycle_samples(seen),
+        cycle_pid=lambda: link.cycle_pid,
+        state=lambda: _device_state(device),
+        sessions=lambda: device.sessions.count(), streams=lambda kind: limits.open(kind),
+        subscribers=lambda: bus.subscriber_count, queues=lambda: _queues(dispatch, security))
     security = _security_layer(config.security, report=lambda severity, message: bus.alarm(
-        severity, alarms.AUDIT, message))
+        severity, alarms.AUDIT, message), timing=metrics and metrics.rpc_timing)
     runner = _LoopThread()
     try:
         server, port = runner.run(_bind(config, security))
@@ -145,7 +163,9 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         security.close()
         raise
     cell = load_cell(config.cell)
-    device: Device | None = None
+    if config.placement is not None:
+        cell = dataclasses.replace(cell, shared_cell=config.shared_cell, placement=Pose(
+            config.placement[:3], config.placement[3:]))
     link = ControllerLink(config.clock, config.cell,
                           on_message=lambda msg: device and device.on_cycle_message(msg),
                           on_lost=lambda why: device and device.controller_lost(why),
@@ -163,7 +183,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         if config.start_device:
             device.start()
         health_servicer = runner.run(_start(server, device, workcell, bus, hub, dispatch,
-                                            limits))
+                                            limits, cell.recorder.path))
     except BaseException:
         device.close()
         workcell.close()
@@ -175,12 +195,53 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     running = RunningServer(server, health_servicer, port, config.address, bus, device, workcell,
                             link, hub, dispatch, limits, runner, security)
     device.on_health = running.set_serving
+    if metrics is not None:
+        try:
+            running.metrics = _serve_metrics(config, metrics, device, bus)
+        except BaseException:
+            running.stop(grace=None)
+            raise
+        running.device_metrics = metrics
     return running
 
 
-def _security_layer(security: SecurityConfig, report) -> SecurityInterceptor:
+def _serve_metrics(config: ServerConfig, metrics: DeviceMetrics, device: Device,
+                   bus: EventBus) -> MetricsEndpoint:
+    """/metrics on, with the planner timed and the bus watched; StartupError if it cannot."""
+    motions = device.motions
+    motions.planner = metrics.time_planning(motions.planner, ("move", "arc"))
+    motions.planning = metrics.time_planning(motions.planning, ("run",))
+    metrics.watch(bus)
+    security = config.security
+    tls = (MetricsTLS(security.tls_cert, security.tls_key, security.tls_ca if security.mtls
+                      else None) if security.tls_enabled else None)
+    try:
+        return serve_metrics(metrics.registry, config.metrics_address, config.metrics_port,
+                             tls, security.insecure)
+    except MetricsExposed as error:
+        raise StartupError(str(error)) from None
+    except OSError as error:
+        raise StartupError(f"cannot serve /metrics on {config.metrics_address}:"
+                           f"{config.metrics_port}: {error.strerror}; choose another with "
+                           f"--metrics-port") from None
+
+
+def _device_state(device: Device) -> tuple[str, bool]:
+    status = device.status()
+    return status.state.value, status.estop
+
+
+def _queues(dispatch: Dispatch, security: SecurityInterceptor) -> dict[str, int]:
+    depths = dispatch.in_flight()
+    if security.audit is not None:
+        depths["audit"] = security.audit.backlog
+    return depths
+
+
+def _security_layer(security: SecurityConfig, report, timing=None) -> SecurityInterceptor:
     """Tokens, audit log and rate limit as configured; StartupError naming what is wrong.
-    `report` (severity, message): the audit log's troubles (audit.py)."""
+    `report` (severity, message): the audit log's troubles (audit.py); `timing`: the RPC
+    latency metric's hook, if /metrics is on."""
     try:
         tokens = TokenStore.load(security.tokens) if security.tokens else None
     except TokenFileError as error:
@@ -196,7 +257,7 @@ def _security_layer(security: SecurityConfig, report) -> SecurityInterceptor:
     except OSError as error:
         raise StartupError(f"cannot write the audit log {security.audit_log}: "
                            f"{error.strerror}; choose another with --audit-log") from None
-    return SecurityInterceptor(tokens, audit, rate)
+    return SecurityInterceptor(tokens, audit, rate, timing)
 
 
 async def _bind(config: ServerConfig,
@@ -223,7 +284,7 @@ async def _bind(config: ServerConfig,
     return server, port
 
 
-async def _start(server, device, workcell, bus, hub, dispatch, limits):
+async def _start(server, device, workcell, bus, hub, dispatch, limits, recording: str):
     hub.attach(asyncio.get_running_loop())
     servicers = {
         services.DEVICE: DeviceServicer(device, workcell, hub, dispatch, limits),
@@ -231,6 +292,7 @@ async def _start(server, device, workcell, bus, hub, dispatch, limits):
         services.EVENTS: EventServicer(device, bus, dispatch, limits),
         services.SESSIONS: SessionServicer(device, dispatch, limits),
         services.STATE: StateServicer(device, hub, dispatch, limits),
+        services.RECORDINGS: RecordingServicer(device, recording, dispatch, limits),
     }
     for spec, servicer in servicers.items():
         spec.add_to_server(servicer, server)

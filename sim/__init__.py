@@ -6,6 +6,7 @@ generator, for tests and benchmarks.
 
 Owns: the simulated cell: its physics, its world, its panel.
 Runs in: the cycle process (or, on the lock-step clock, a thread of the server).
-May import: landscape.robot, numpy, pybullet, mcap; never landscape.server. Nothing imports it
+May import: landscape.robot, numpy, pybullet, mcap, foxglove-sdk (the recorder's schemas);
+never landscape.server. Nothing imports it
 but by name, through landscape.robot.backends.
 """

@@ -375,7 +375,7 @@ class SimulatedCS8(Controller):
 
         spec = self.cell.recorder
         self._recorder = Recorder(spec.path, spec.every_nth, spec.max_seconds, 6,
-                                  cycle_time=self.cycle_time)
+                                  cycle_time=self.cycle_time, arm=self.cell.arm)
         return Status.OK
 
     def rec_start(self) -> Status:

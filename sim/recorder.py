@@ -14,6 +14,14 @@ File layout (readable by Foxglove and other MCAP viewers): JSON messages with JS
 one message of each per recorded cycle, log_time = publish_time = the cycle's time stamp in ns
 (simulated time for the simulator, so the file starts near t = 0), and a metadata record
 "landscape.recorder" with joint_count, joint_names, every_nth, cycle_time.
+
+Given the arm, the file is also what Foxglove draws in 3D, in its own well-known schemas
+(protobuf, from foxglove-sdk: the same the live bridge serves, bridges/foxglove/):
+
+- `/tf`: `foxglove.FrameTransforms`, every link in its parent (robot/link_frames.py) from
+  the measured joints, at most 50 a second (what a 3D view shows; the plots have every cycle);
+- `/robot_description`: the arm's URDF once, at the first cycle, as `{data: str}` (the shape
+  Foxglove's URDF layer reads from a topic).
 """
 from __future__ import annotations
 
@@ -27,6 +35,9 @@ import numpy as np
 
 COMMAND_TOPIC = "/joint_command"
 STATE_TOPIC = "/joint_state"
+TF_TOPIC = "/tf"
+DESCRIPTION_TOPIC = "/robot_description"
+TF_PERIOD_NS = 20_000_000   # /tf at most every 20 ms of the recording
 METADATA_NAME = "landscape.recorder"
 
 _FIELDS = ("cmd_pos", "cmd_vel", "fbk_pos", "fbk_vel", "fbk_torque")
@@ -49,6 +60,10 @@ _COMMAND_SCHEMA = {
     "title": "landscape.JointCommand", "type": "object",
     "properties": {**_HEADER, "position": _array("rad"), "velocity": _array("rad/s")},
 }
+DESCRIPTION_SCHEMA = {
+    "title": "landscape.RobotDescription", "type": "object",
+    "properties": {"data": {"type": "string", "description": "the arm as URDF"}},
+}
 _STATE_SCHEMA = {
     "title": "landscape.JointState", "type": "object",
     "properties": {**_HEADER, "position": _array("rad"), "velocity": _array("rad/s"),
@@ -63,7 +78,8 @@ class Recorder:
     first cycle after `start`. max_seconds: longest recording, in seconds of cycle time; the
     buffers hold ceil(max_seconds / (cycle_time * every_nth)) samples. joint_count: n, the
     length of every joint array passed to `append`. cycle_time (s) only sizes the buffers and
-    is written to the file's metadata; joint_names default to joint_1 .. joint_n.
+    is written to the file's metadata; joint_names default to joint_1 .. joint_n. arm (an
+    ArmModel): also write its links' transforms and URDF (module docstring).
 
     Life cycle: `start` clears and starts a recording, `stop` ends it, `store` writes what the
     last recording holds (also while it is still running, or empty if none was ever started).
@@ -73,7 +89,7 @@ class Recorder:
 
     def __init__(self, path: str, every_nth: int = 1, max_seconds: float = 60.0,
                  joint_count: int = 6, *, cycle_time: float = 0.004,
-                 joint_names: list[str] | None = None):
+                 joint_names: list[str] | None = None, arm=None):
         if every_nth < 1:
             raise ValueError("every_nth must be >= 1")
         if max_seconds <= 0 or cycle_time <= 0:
@@ -82,6 +98,7 @@ class Recorder:
         self.every_nth = int(every_nth)
         self.max_seconds = float(max_seconds)
         self.cycle_time = float(cycle_time)
+        self.arm = arm
         self.joint_names = list(joint_names) if joint_names else [
             f"joint_{i + 1}" for i in range(joint_count)]
         if len(self.joint_names) != joint_count:
@@ -188,6 +205,7 @@ class Recorder:
 
         cmd_channel = channel(COMMAND_TOPIC, _COMMAND_SCHEMA)
         state_channel = channel(STATE_TOPIC, _STATE_SCHEMA)
+        scene = _Scene(writer, self.arm, channel) if self.arm is not None else None
         writer.add_metadata(METADATA_NAME, {
             "joint_count": str(len(self.joint_names)),
             "joint_names": json.dumps(self.joint_names),
@@ -207,6 +225,38 @@ class Recorder:
                                sequence=seq, data=json.dumps(cmd).encode())
             writer.add_message(channel_id=state_channel, log_time=ns, publish_time=ns,
                                sequence=seq, data=json.dumps(state).encode())
+            if scene is not None:
+                scene.add(seq, ns, fbk_pos)
+
+
+class _Scene:
+    """The 3D side of a recording: the URDF once, then every link's transform per cycle."""
+
+    def __init__(self, writer, arm, channel):
+        from foxglove.messages import FrameTransforms   # only a store with an arm pays for it
+
+        from landscape.robot.arm import urdf
+        from landscape.robot.link_frames import LinkFrames
+        self.writer, self.frames, self.urdf = writer, LinkFrames.for_arm(arm), urdf(arm)
+        schema = FrameTransforms.get_schema()
+        schema_id = writer.register_schema(name=schema.name, encoding=schema.encoding,
+                                           data=bytes(schema.data))
+        self.tf = writer.register_channel(topic=TF_TOPIC, message_encoding=schema.encoding,
+                                          schema_id=schema_id)
+        self.description = channel(DESCRIPTION_TOPIC, DESCRIPTION_SCHEMA)
+        self.due = None    # the time of the next /tf, ns
+        self.count = 0
+
+    def add(self, seq: int, ns: int, joints: list[float]) -> None:
+        if seq == 0:
+            self.writer.add_message(channel_id=self.description, log_time=ns, publish_time=ns,
+                                    sequence=0, data=json.dumps({"data": self.urdf}).encode())
+        if self.due is not None and ns < self.due:
+            return
+        self.due = ns + TF_PERIOD_NS
+        self.writer.add_message(channel_id=self.tf, log_time=ns, publish_time=ns,
+                                sequence=self.count, data=self.frames.messages(joints, ns).encode())
+        self.count += 1
 
 
 def _rows(data: dict[str, np.ndarray]):

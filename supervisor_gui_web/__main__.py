@@ -8,9 +8,10 @@ import logging
 import signal
 import socket
 
+from landscape.bridges.metrics.endpoint import options as metrics_options
 from landscape.client import credentials
 from landscape.server.security.auth import TokenStore
-from landscape.supervisor import app
+from landscape.supervisor import app, metrics
 from landscape.supervisor.config import (DEFAULT_DISPLAY_RATE_HZ, DEFAULT_HOST, DEFAULT_PORT,
                                          DashboardConfig, parse_device)
 from landscape.supervisor.origins import own_origins
@@ -69,8 +70,9 @@ def _loopback(host: str) -> bool:
                    for info in socket.getaddrinfo(host, None))
 
 
-async def serve(config: DashboardConfig) -> None:
+async def serve(config: DashboardConfig, metrics_on=None) -> None:
     running = await app.start(config)
+    endpoint = metrics.start(metrics_on) if metrics_on else None
     print(f"web supervisor on {running.url}", flush=True)
     print(f"sign in with a token from {config.sign_in_tokens} (operator.tokens to command, "
           f"viewer.tokens to watch)", flush=True)
@@ -87,12 +89,15 @@ async def serve(config: DashboardConfig) -> None:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     await stop.wait()
+    if endpoint is not None:
+        endpoint.close()
     await running.stop()
 
 
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    asyncio.run(serve(parse_args(argv)))
+    metrics_on, argv = metrics_options(argv)   # --metrics-port, --metrics-host
+    asyncio.run(serve(parse_args(argv), metrics_on))
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # Being reshaped on other branches of issue 26 (the client core; the supervisor's page): their
 # private reach-throughs are theirs to remove; checked here once those branches are merged.
 CHECKED = ("server", "robot", "sim", "cell", "gateway", "client", "supervisor_gui_web", "bench",
-           "examples", "setup.py")
+           "examples", "bridges", "setup.py")
 
 
 def test_the_import_rules_hold():
@@ -38,7 +38,7 @@ def test_no_module_touches_another_s_private_names():
 
 def test_every_package_says_what_it_owns_and_may_import():
     silent = []
-    for top in ("server", "robot", "sim"):
+    for top in ("server", "robot", "sim", "bridges"):
         for init in sorted((ROOT / top).rglob("__init__.py")):
             doc = ast.get_docstring(ast.parse(init.read_text())) or ""
             if "Owns" not in doc or "May import" not in doc:

@@ -59,7 +59,7 @@ def make_run_cell(folder: Path):
     once the launcher says the cell is up, then stops it as Ctrl-C does and checks that it
     stopped cleanly."""
     text = resources.files("landscape.cell").joinpath("cells/local.toml").read_text()
-    for port in ("50051", "64444", "8080"):
+    for port in ("50051", "64444", "8080", "9464"):   # 9464: /metrics
         assert re.search(rf"^port = {port}\b", text, flags=re.M), port
         text = re.sub(rf"^port = {port}\b", "port = 0", text, flags=re.M)
     (folder / "cell.toml").write_text(text)

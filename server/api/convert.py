@@ -13,7 +13,7 @@ from landscape.server.api import request_bounds
 from landscape.server.events import bus as events
 from landscape.server.errors import OutOfRange, ParamError
 from landscape.server.planning.path_planning import PointSpec, at_point
-from landscape.server.device.motion_settings import Kind
+from landscape.server.device.motion_settings import Kind, MotionSettings
 from landscape.server.device.states import State
 from landscape.server.planning.targets import Frame
 from landscape.robot.units import AngularUnit, LinearUnit, Units
@@ -71,6 +71,24 @@ def rate_to_si(kind: Kind, value: float, units: Units) -> float:
     if kind is Kind.ANGULAR:
         return float(units.angle_to_si(value))
     return float(value)
+
+
+# MoveRates' fields: what each sets, as SetSpeed or SetAcceleration of that kind would.
+_MOVE_RATES = {"accel_percent": (Kind.PERCENT, False), "linear_speed": (Kind.LINEAR, True),
+               "angular_speed": (Kind.ANGULAR, True), "linear_accel": (Kind.LINEAR, False),
+               "angular_accel": (Kind.ANGULAR, False)}
+
+
+def move_settings(settings: MotionSettings, request) -> MotionSettings:
+    """The device's settings with a motion request's own rates (its MoveRates), each checked
+    as its Set command would check it: for that motion alone, the device's stay."""
+    if not request.HasField("rates"):
+        return settings
+    for name, (kind, speed) in _MOVE_RATES.items():
+        if request.rates.HasField(name):
+            value = rate_to_si(kind, getattr(request.rates, name), settings.units)
+            settings = settings.with_speed(kind, value) if speed else settings.with_accel(kind, value)
+    return settings
 
 
 def units_to_pb(units: Units) -> types_pb2.Units:
@@ -308,6 +326,11 @@ def _operator_message(d: events.OperatorMessage):
     return "operator_message", event_service_pb2.OperatorMessage(text=d.text, source=d.source)
 
 
+def _alarm_acknowledged(d: events.AlarmAcknowledged):
+    return "alarm_acknowledged", event_service_pb2.AlarmAcknowledged(
+        alarm_sequence=d.alarm_sequence, by=d.by, client=d.client, on_behalf_of=d.on_behalf_of)
+
+
 def _events_lost(d: events.EventsLost):
     return "events_lost", event_service_pb2.EventsLost(first_sequence=d.first_sequence,
                                         last_sequence=d.last_sequence)
@@ -318,7 +341,7 @@ _DETAILS = {
     events.CommandEvent: _command, events.Alarm: _alarm, events.StateChange: _state_change,
     events.DigitalIOSignal: _digital_io, events.RsvpRequest: _rsvp_request,
     events.RsvpAnswer: _rsvp_answer, events.OperatorMessage: _operator_message,
-    events.EventsLost: _events_lost,
+    events.AlarmAcknowledged: _alarm_acknowledged, events.EventsLost: _events_lost,
 }
 
 

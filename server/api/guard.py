@@ -1,6 +1,7 @@
 """Every RPC behind the device's state table, on the server's event loop (grpc.aio).
 
-`guarded(spec)` wraps each RPC a servicer class defines:
+`guarded(spec)` wraps each RPC a servicer class defines (itself, or a mixin it inherits: a
+servicer grows by modules of its own):
 
 1. Admission, on the event loop: the request's bounds (request_bounds.py), the state table
    (states.py) and the lease refuse the call (INVALID_ARGUMENT / OUT_OF_RANGE,
@@ -69,9 +70,20 @@ class Dispatch:
         self.reads = ThreadPoolExecutor(reads, thread_name_prefix="read")
         self.panel = ThreadPoolExecutor(panel, thread_name_prefix="panel")
         self.parse = ThreadPoolExecutor(1, thread_name_prefix="parse")
+        self.lanes = {"commands": self.commands, "immediate": self.immediate,
+                      "reads": self.reads, "panel": self.panel, "parse": self.parse}
+        self._in_flight = dict.fromkeys(self.lanes.values(), 0)
 
     async def run(self, pool: ThreadPoolExecutor, func, *args):
-        return await asyncio.get_running_loop().run_in_executor(pool, func, *args)
+        self._in_flight[pool] += 1   # on the event loop only: no lock
+        try:
+            return await asyncio.get_running_loop().run_in_executor(pool, func, *args)
+        finally:
+            self._in_flight[pool] -= 1
+
+    def in_flight(self) -> dict[str, int]:
+        """Calls running or queued per lane (a queue depth of /metrics)."""
+        return {name: self._in_flight[pool] for name, pool in self.lanes.items()}
 
     def shutdown(self) -> None:
         for pool in (self.commands, self.immediate, self.reads, self.panel, self.parse):
@@ -176,7 +188,8 @@ def guarded(spec):
     """Class decorator for a servicer of `spec` with `device`, `dispatch` and `limits`."""
     def decorate(cls):
         for method in spec.descriptor.methods:
-            body = cls.__dict__.get(method.name) or _missing(f"{spec.full_name}.{method.name}")
+            body = (_defined(cls, spec.servicer_base, method.name)
+                    or _missing(f"{spec.full_name}.{method.name}"))
             if inspect.isasyncgenfunction(body) or inspect.iscoroutinefunction(body):
                 wrapped = _stream(method.name, body, method.server_streaming)
             elif method.client_streaming or method.server_streaming:
@@ -187,6 +200,17 @@ def guarded(spec):
             setattr(cls, method.name, wrapped)
         return cls
     return decorate
+
+
+def _defined(cls, base: type, name: str):
+    """The body `cls` or one of its mixins (servicers/*.py) defines for `name`; the generated
+    `base` (whose every method answers UNIMPLEMENTED) does not count."""
+    for klass in cls.__mro__:
+        if klass is base:
+            return None
+        if name in klass.__dict__:
+            return klass.__dict__[name]
+    return None
 
 
 def _as_async(body, streaming_response: bool):

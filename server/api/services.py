@@ -12,7 +12,7 @@ import grpc
 
 from landscape.v1 import (device_service_pb2, device_service_pb2_grpc, digital_io_service_pb2,
                           digital_io_service_pb2_grpc, event_service_pb2, event_service_pb2_grpc,
-                          session_service_pb2, session_service_pb2_grpc, state_service_pb2,
+                          recording_service_pb2, recording_service_pb2_grpc, session_service_pb2, session_service_pb2_grpc, state_service_pb2,
                           state_service_pb2_grpc)
 
 
@@ -70,5 +70,6 @@ DIGITAL_IO = ServiceSpec("DigitalIOService", digital_io_service_pb2, digital_io_
 EVENTS = ServiceSpec("EventService", event_service_pb2, event_service_pb2_grpc)
 SESSIONS = ServiceSpec("SessionService", session_service_pb2, session_service_pb2_grpc)
 STATE = ServiceSpec("StateService", state_service_pb2, state_service_pb2_grpc)
+RECORDINGS = ServiceSpec("RecordingService", recording_service_pb2, recording_service_pb2_grpc)
 
-ALL = (DEVICE, DIGITAL_IO, EVENTS, SESSIONS, STATE)
+ALL = (DEVICE, DIGITAL_IO, EVENTS, SESSIONS, STATE, RECORDINGS)

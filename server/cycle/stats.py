@@ -112,6 +112,15 @@ class StatsRing:
         self._m[:] = 0.0
 
     # -- reader side
+    def since(self, seen: int) -> tuple[int, int, int, np.ndarray, np.ndarray]:
+        """(cycles, overruns, missed, period, late): the counters now, and the periods and
+        lateness of the cycles after the first `seen` that the window still holds (/metrics
+        bins them, server/metrics.py)."""
+        cycles, overruns, missed = (int(x) for x in self._c)
+        first = max(seen, cycles - self.window)
+        slots = np.arange(first, cycles) % self.window
+        return cycles, overruns, missed, self._p[slots], self._l[slots]
+
     def snapshot(self, cycle_time: float) -> CycleStats:
         cycles, overruns, missed = (int(x) for x in self._c)
         n = min(cycles, self.window)

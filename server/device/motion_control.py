@@ -30,6 +30,7 @@ from landscape.server.cycle.run_arrays import pack_run
 from landscape.server.cycle.shared_array import SharedArrays
 from landscape.server.device import states
 from landscape.server.device.state_machine import MANUAL_OFF, StateMachine
+from landscape.server.device.motion_settings import MotionSettings
 from landscape.server.device.states import State
 from landscape.server.device.stored_settings import SettingsKeeper
 from landscape.server.errors import ControllerFailure, ManualControlMode, NotFound, WrongState
@@ -109,12 +110,24 @@ class MotionControl:
         return self.link.sample().command
 
     def move(self, command: str, point_name: str, frame: Frame, values: np.ndarray,
-             relative: bool, straight: bool, speed_percent: float | None) -> str:
+             relative: bool, straight: bool, speed_percent: float | None,
+             settings: MotionSettings | None = None) -> str:
         """Seed 3.4.1 moveAbsolute / moveRelative: plan, then start; values in SI (joints rad;
-        x, y, z m and roll, pitch, yaw rad). Nothing moves if planning fails."""
-        trajectory = self.planner.move(self.planning_start(), self.settings.current, frame,
-                                       values, relative, straight, speed_percent)
-        return self.start(command, point_name, [trajectory])
+        x, y, z m and roll, pitch, yaw rad); `settings`: this move's (default: the device's).
+        Nothing moves if planning fails."""
+        trajectory = self.plan_move(frame, values, relative, straight, speed_percent, settings,
+                                    f"{command} {point_name}".strip())
+        return self.start(command, point_name, [trajectory], checked=True)
+
+    def plan_move(self, frame: Frame, values: np.ndarray, relative: bool, straight: bool,
+                  speed_percent: float | None, settings: MotionSettings | None = None,
+                  what: str = "the move"):
+        """move()'s trajectory, planned and checked against the cell (`what` names it in a
+        collision), not started (SolvePose); raises what move() would refuse with."""
+        trajectory = self.planner.move(self.planning_start(), settings or self.settings.current,
+                                       frame, values, relative, straight, speed_percent)
+        self.check_collisions([trajectory], what)
+        return trajectory
 
     def move_arc(self, point_name: str, frame: Frame, via: np.ndarray, goal: np.ndarray,
                  relative: bool, speed_percent: float | None) -> str:
@@ -143,13 +156,15 @@ class MotionControl:
             raise WrongState(f"path {name!r} is running; stop and abort it first")
         self.paths.delete(name)
 
-    def path_move(self, name: str, cycles: int) -> str:
-        """Seed 3.5.2 pathMove: `cycles` passes; 0 is a dry run without aux commands."""
+    def path_move(self, name: str, cycles: int, settings: MotionSettings | None = None) -> str:
+        """Seed 3.5.2 pathMove: `cycles` passes; 0 is a dry run without aux commands;
+        `settings`: this run's (default: the device's)."""
         path = self.paths.get(name)
         if path is None:
             raise NotFound(f"no path named {name!r}")
         trajectories = self.planning.run("plan_path_run", path, self.planning_start(),
-                                         self.settings.current, cycles, f"PathMove {name}")
+                                         settings or self.settings.current, cycles,
+                                         f"PathMove {name}")
         tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
         aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
                                       if p.aux_commands}

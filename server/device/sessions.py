@@ -98,6 +98,10 @@ class SessionRegistry:
         log.info("session %s opened by '%s'", session.id, session.client_name)
         return session
 
+    def count(self) -> int:
+        """Sessions open now."""
+        return len(self._sessions)
+
     def get(self, session_id: str) -> Session | None:
         with self._lock:
             return self._sessions.get(session_id)

@@ -71,6 +71,7 @@ RULES: dict[str, Rule] = {
     "GetMaxVelocities": _read("3.3.1"),
     "GetMaxAccelerations": _read("3.3.1"),
     "GetToolOffsets": _read("3.3.1"),
+    "GetWorldCartesianFrame": _read("3.3.1"),
     "GetRobotPosition": _read("3.3.1"),
     "GetMotionControlState": _read("3.3.1"),
     "GetTagId": _read("3.3.1"),
@@ -104,6 +105,11 @@ RULES: dict[str, Rule] = {
     "GetDeviceState": _read("-"),
     "GetRobotDescription": _read("-"),
     "GetCellDescription": _read("-"),
+    # stored paths read back
+    "ListPaths": _read("3.5.1"),
+    "GetPath": _read("3.5.1"),
+    # plan-only: MoveAbsolute's planning and checks, nothing started
+    "SolvePose": _read("3.4.1"),
     # The operator panel: no lease (the e-stop works whoever holds the lock); admin only.
     "OperatePanel": _read("-"),
     # 4 DIGITAL_IO
@@ -114,9 +120,13 @@ RULES: dict[str, Rule] = {
     # 2 client IDL
     "Subscribe": _read("2.1"),
     "PostMessage": _cmd(ALL, "2.1"),
+    # an operator's, without the lease (auth.py); recorded in the audit
+    "AcknowledgeAlarm": _read("2.1"),
     "Connect": _read("2.2"),
     # live state
     "StreamState": _read("-"),
+    # the controller recorder's stored file (LLI s7.4 5.5), read-only
+    "FetchRecording": _read("-"),
 }
 
 

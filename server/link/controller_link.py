@@ -135,6 +135,16 @@ class ControllerLink:
     def stats(self):
         return self._clock.stats() if hasattr(self._clock, "stats") else None
 
+    def cycle_samples(self, seen: int):
+        """The cycles after the first `seen` (StatsRing.since), None on a clock without
+        statistics (lock-step)."""
+        return self._clock.cycle_samples(seen) if hasattr(self._clock, "cycle_samples") else None
+
+    @property
+    def cycle_pid(self) -> int | None:
+        """The cycle process's id, None on the lock-step clock (a thread of this process)."""
+        return getattr(self._clock, "pid", None)
+
     # -- life
     def restart(self) -> None:
         """A fresh controller after a loss (the dead one is stopped first)."""

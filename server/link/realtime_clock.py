@@ -187,6 +187,10 @@ class RealTimeClock:
         """Timing figures so far (read from shared memory; costs the cycle nothing)."""
         return self._stats.snapshot(self._cycle_time or float("nan"))
 
+    def cycle_samples(self, seen: int):
+        """The cycles after the first `seen` (stats.StatsRing.since); costs the cycle nothing."""
+        return self._stats.since(seen)
+
     def reset_stats(self) -> None:
         """Start the figures afresh (e.g. after a warm-up)."""
         self.call(cp.RESET_STATS)

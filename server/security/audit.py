@@ -105,6 +105,11 @@ class AuditLog:
     def healthy(self) -> bool:
         return self._problem is None
 
+    @property
+    def backlog(self) -> int:
+        """Records waiting for the writer (a queue depth of /metrics)."""
+        return self._queue.qsize()
+
     async def write_ahead(self, record: Record, result: str) -> None:
         """Write `record` and return once it is in the file; AuditUnavailable if it cannot be
         (nothing was written). The event loop goes on meanwhile."""

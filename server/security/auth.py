@@ -74,7 +74,9 @@ class TokenFileError(ValueError):
 
 # RPCs whose state rule makes them read-only but which act on the device or its people.
 _ADMIN = {"OperatePanel", "Reset"}
-_OPERATOR = {"Connect", "SendCommand", "Lock"}
+# FetchRecording: a file off the device's disk, for those who command the cell (audited).
+# AcknowledgeAlarm: no lease (anyone commanding the cell may), but audited and named.
+_OPERATOR = {"Connect", "SendCommand", "Lock", "FetchRecording", "AcknowledgeAlarm"}
 _PUBLIC_SERVICES = {"grpc.health.v1.Health"}
 # Anyone watching the cell may stop it; releasing the e-stop is an operator's; the rest of the
 # panel (the door) an admin's.

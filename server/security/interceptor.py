@@ -22,12 +22,17 @@ servicers/guard.py) sees it:
    authentication is written once per address per interval with its count (refusal_tally.py).
 
 The health service passes untouched: probes need no secret.
+
+With /metrics on, it also times every unary call by method and status (`timing`, given by the
+server's metrics, server/metrics.py); without, nothing is timed.
 """
 from __future__ import annotations
 
 import asyncio
 import inspect
 import logging
+import time
+from collections.abc import Callable
 from collections import Counter
 
 import grpc
@@ -37,6 +42,7 @@ from landscape.server.security.audit import AuditLog, Record
 from landscape.server.security.auth import (Identity, Role, RoleTooLow, TokenStore, Unauthenticated,
                                    front_end, required_role)
 from landscape.server.errors import CommandError, ResourceExhausted
+from landscape.server.api.caller import CALLER, Caller
 from landscape.server.api.stream_caps import CLIENT, peer_address
 from landscape.server.log_text import printable
 from landscape.server.security.rate_limit import RateLimiter
@@ -96,6 +102,7 @@ class _Call:
             client, size = f"{self.address} {via}", via
         self.record.who, self.record.role = self.identity.name, self.identity.role.label
         CLIENT.set(client)      # this call's task: the guard's stream caps see it
+        CALLER.set(Caller(self.identity.name, via, on_behalf_of))   # and servicers naming it
         message = request if hasattr(request, "ListFields") else None
         needs = required_role(self.method, message)
         if self.identity.role < needs:
@@ -168,14 +175,17 @@ class _Call:
 
 class SecurityInterceptor(grpc.aio.ServerInterceptor):
     def __init__(self, tokens: TokenStore | None = None, audit: AuditLog | None = None,
-                 rate: RateLimiter | None = None):
-        self.tokens, self.audit, self.rate = tokens, audit, rate
+                 rate: RateLimiter | None = None,
+                 timing: Callable[[str, str, float], None] | None = None):
+        """timing(method, status, seconds): each unary call's duration, if given."""
+        self.tokens, self.audit, self.rate, self.timing = tokens, audit, rate, timing
         self._tally = RefusalTally(self._write_refusals)
 
     @property
     def idle(self) -> bool:
-        """Nothing to check, limit or write: the server need not install it."""
-        return self.tokens is None and self.audit is None and self.rate is None
+        """Nothing to check, limit, write or time: the server need not install it."""
+        return (self.tokens is None and self.audit is None and self.rate is None
+                and self.timing is None)
 
     def close(self) -> None:
         """Write the refusals still counted, and close the audit log."""
@@ -215,6 +225,8 @@ class SecurityInterceptor(grpc.aio.ServerInterceptor):
         else:
             wrapped = self._unary(method, role, handler.stream_unary
                                   if handler.request_streaming else handler.unary_unary)
+            if self.timing is not None:
+                wrapped = self._timed(method, wrapped)
             make = (grpc.stream_unary_rpc_method_handler if handler.request_streaming
                     else grpc.unary_unary_rpc_method_handler)
         return make(wrapped, handler.request_deserializer, handler.response_serializer)
@@ -233,6 +245,21 @@ class SecurityInterceptor(grpc.aio.ServerInterceptor):
             finally:
                 if record.audited:
                     record.write(record.outcome(_unexpected(failure)))
+        return call
+
+    def _timed(self, method: str, behavior):
+        name, timing = method.rsplit("/", 1)[-1], self.timing
+
+        async def call(request, context):
+            started, failure = time.perf_counter(), None
+            try:
+                return await behavior(request, context)
+            except BaseException as exc:
+                failure = exc
+                raise
+            finally:
+                timing(name, status_name(context, _unexpected(failure)),
+                       time.perf_counter() - started)
         return call
 
     def _streaming(self, method: str, role: Role, behavior):
@@ -256,6 +283,16 @@ class SecurityInterceptor(grpc.aio.ServerInterceptor):
                 if record.audited:
                     record.write(record.outcome(_unexpected(failure)))
         return stream
+
+
+def status_name(context, failure: BaseException | None) -> str:
+    """The status a call ended with: its context's (an abort), else OK or how it failed."""
+    code = context.code()
+    if code is not None and code != grpc.StatusCode.OK and code != 0:
+        return code.name if isinstance(code, grpc.StatusCode) else str(code)
+    if failure is None:
+        return "OK"
+    return "CANCELLED" if isinstance(failure, asyncio.CancelledError) else "UNKNOWN"
 
 
 def _unexpected(exc: BaseException | None) -> BaseException | None:

@@ -2,6 +2,7 @@
 file and the key."""
 from __future__ import annotations
 
+import math
 import shutil
 from pathlib import Path
 
@@ -31,6 +32,20 @@ def test_the_built_in_default_is_one_arm_the_gateway_and_the_supervisor_on_loopb
     assert argv[argv.index("--audit-log") + 1] == str(tmp_path / "var" / "arm1" / "audit.log")
 
 
+def test_the_gateway_is_given_the_cells_workstation(tmp_path):
+    config = parse_config("[gateway]\nworkstation_xyz = [-0.9, -1.0, 0.21]\n"
+                          "workstation_rpy_deg = [0, 0, 90]\nend_effector = 'gripper'\n"
+                          "length_units = 'millimeter'\nangle_units = 'degree'", "<t>", tmp_path)
+    argv = gateway_service(config, {"arm1": "127.0.0.1:50051"}, tmp_path).argv
+    frame = [float(v) for v in argv[argv.index("--workstation-frame") + 1].split()]
+    assert frame == pytest.approx([-0.9, -1.0, 0.21, 0.0, 0.0, math.pi / 2])   # m and rad
+    assert argv[argv.index("--end-effector") + 1] == "gripper"
+    assert argv[argv.index("--length-units") + 1] == "millimeter"
+    assert argv[argv.index("--angle-units") + 1] == "degree"
+    from landscape.gateway.__main__ import arguments, workstation
+    assert workstation(arguments(argv[argv.index("--device"):])).frame == pytest.approx(frame)
+
+
 def test_the_supervisor_signs_people_in_from_var_tokens_and_shows_its_keys(tmp_path):
     config = parse_config("[supervisor]\nallowed_origins = ['HTTPS://Panel.lan:443']\n"
                           "sign_in_idle = 600", "<t>", tmp_path)
@@ -56,6 +71,9 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     assert "--token-file" in gateway
     server = device_service(config.devices[1], config.security).argv
     assert "--tokens" in server and "--tls-cert" in server
+    # Both arms stand in the one cell: the servers are told where.
+    assert [d.placement for d in config.devices] == [(0.0,) * 6, (0.0, 2.5, 0.0, 0.0, 0.0, 0.0)]
+    assert "--placement=0.0,2.5,0.0,0.0,0.0,0.0" in server and "--shared-cell=lan" in server
     # The supervisor: people sign in with the devices' tokens; its own feeds are a viewer's.
     assert config.supervisor.sign_in_tokens == tmp_path / "var" / "tokens"
     assert config.supervisor.token == tmp_path / "var" / "tokens" / "viewer.tokens"
@@ -77,6 +95,8 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
      r"collision_margin: expected a number above 0 and at most 0\.1, got 0"),
     ("[[devices]]\nname = 'a'\ncollision_margin = 0.5",
      r"collision_margin: expected a number above 0 and at most 0\.1, got 0\.5"),
+    ("[[devices]]\nname = 'a'\nplacement_xyz = [1, 2]",
+     r"devices\[0\]\.placement_xyz: expected a list of 3 numbers, got \[1, 2\]"),
     ("[gateway]\ndevice = 'arm9'", r"gateway\.device: no device is named 'arm9'"),
     ("[supervisor]\ndevices = []",
      r"supervisor\.devices: expected a non-empty list of device names, got \[\]"),
@@ -96,6 +116,13 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     ("[security.rate_limits]\ncli = 0",
      r"security\.rate_limits\.cli: expected a number above 0, got 0"),
     ("name = [", r"<t>: not valid TOML"),
+    ("[gateway]\nend_effector = 'spanner'",
+     r"gateway\.end_effector: arm1's world has no tool named 'spanner' \(its tools: gripper, "
+     r"vacuum; or \"none\""),
+    ("[gateway]\nlength_units = 'mm'",
+     r"gateway\.length_units: expected one of meter, millimeter, inch; got 'mm'"),
+    ("[gateway]\nworkstation_rpy_deg = [0, 90]",
+     r"gateway\.workstation_rpy_deg: expected a list of 3 numbers, got \[0, 90\]"),
 ])
 def test_errors_name_the_file_and_the_key(text, message, tmp_path):
     with pytest.raises(CellConfigError, match=message):

@@ -8,22 +8,28 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from crcl_support import RawClient, RunningGateway, field  # noqa: E402
+from crcl_support import XSD, RawClient, RunningGateway, field  # noqa: E402
+from landscape.gateway.workstation import Workstation  # noqa: E402
 from grpc_proxy import GrpcProxy  # noqa: E402
 
 
 @pytest.fixture
-def gateway(server):
-    running = RunningGateway(server.target)
+def gateway(request, server):
+    """The gateway validating against the folder a module names in CRCL_SCHEMAS (NIST's 2021
+    revision, for the commands it adds), else the installed schemas (crcl4java's 2018); its
+    workstation is the module's CRCL_WORKSTATION, else the robot base with units as CRCL's."""
+    running = RunningGateway(server.target, schemas=getattr(request.module, "CRCL_SCHEMAS", XSD),
+                             workstation=getattr(request.module, "CRCL_WORKSTATION",
+                                                 Workstation()))
     yield running
     running.close()
 
 
 @pytest.fixture
 def client(gateway):
-    """A CRCL client in a session (its InitCanon done). Modules that need one before InitCanon
-    define their own."""
-    c = RawClient(gateway.port)
+    """A CRCL client in a session (its InitCanon done), checking every status against the
+    gateway's schemas. Modules that need one before InitCanon define their own."""
+    c = RawClient(gateway.port, schemas=gateway.schemas)
     assert field(c.run("InitCanon", 1), "CommandState") == "CRCL_Done"
     yield c
     c.close()

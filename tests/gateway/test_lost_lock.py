@@ -114,7 +114,7 @@ def test_a_screw_past_the_point_bound_is_refused_before_anything_is_computed(cli
     refused = client.run("MoveScrew", 2, "<AxialDistanceScrew>0</AxialDistanceScrew>"
                                          "<Turn>1000</Turn>")
     assert field(refused, "CommandState") == "CRCL_Error"
-    assert "at most 10000" in field(refused, "StateDescription")
+    assert "at most 2000" in field(refused, "StateDescription")
 
 
 def test_every_device_call_names_the_gateway_and_the_crcl_peer(proxied):
@@ -123,7 +123,7 @@ def test_every_device_call_names_the_gateway_and_the_crcl_peer(proxied):
     by_method = {}
     for method, metadata in proxy.metadata:
         by_method.setdefault(method, []).append(metadata)
-    for method in ("Connect", "Lock", "Activate", "SetUnits"):
+    for method in ("Connect", "Lock", "Activate", "GetUnits"):
         for metadata in by_method[method]:
             assert metadata.get("landscape-client") == "crcl-gateway", method
             assert urllib.parse.unquote(metadata["landscape-on-behalf-of"]) == peer, method

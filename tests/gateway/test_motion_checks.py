@@ -118,3 +118,34 @@ def test_move_screw_ends_within_the_tolerance_its_start_position_gives(client):
     assert point(screw) == pytest.approx((0.5, 0.0, 0.61), abs=1e-4)
     plain = client.run("MoveTo", 4, MOVE.format("true") + pose(0.5, 0.05, 0.6))
     assert "beyond the tolerance 1e-12" in field(plain, "StateDescription")
+
+
+def _calls_of(proxy, action) -> dict:
+    before = dict(proxy.calls)
+    action()
+    return {k: v - before.get(k, 0) for k, v in proxy.calls.items() if v != before.get(k, 0)}
+
+
+OWN_RATES = ("<Coordinated>true</Coordinated>"
+             '<TransSpeed xsi:type="TransSpeedAbsoluteType"><Setting>0.3</Setting></TransSpeed>'
+             '<RotSpeed xsi:type="RotSpeedAbsoluteType"><Setting>0.4</Setting></RotSpeed>'
+             '<TransAccel xsi:type="TransAccelRelativeType"><Fraction>0.3</Fraction></TransAccel>'
+             '<RotAccel xsi:type="RotAccelAbsoluteType"><Setting>2</Setting></RotAccel>')
+
+
+def test_a_move_to_is_one_device_call_with_its_own_rates_or_the_sessions(proxied):
+    """Issue 27 item 6: no settings round trips (nor stored settings) around a motion."""
+    proxy, _, client = proxied
+    done = lambda status: field(status, "CommandState") == "CRCL_Done"  # noqa: E731
+    assert _calls_of(proxy, lambda: done(client.run(
+        "MoveTo", 2, MOVE.format("true") + pose(0.5, 0.1, 0.6)))) == {"MoveAbsolute": 1}
+    own = pose(0.5, -0.1, 0.6).replace("</ZAxis></EndPosition>", f"</ZAxis>{OWN_RATES}"
+                                       "</EndPosition>").replace("<EndPosition>",
+                                                                 '<EndPosition xsi:type='
+                                                                 '"PoseAndSetType">')
+    status = []
+    assert _calls_of(proxy, lambda: status.append(client.run(
+        "MoveTo", 3, MOVE.format("true") + own))) == {"MoveAbsolute": 1}
+    assert done(status[0]), status[0]
+    assert _calls_of(proxy, lambda: client.run(
+        "MoveTo", 4, MOVE.format("false") + pose(0.5, 0.1, 0.6))) == {"MoveAbsolute": 1}

@@ -8,33 +8,51 @@ from landscape.gateway import parse, xmlsafe
 from landscape.gateway.handlers import HANDLERS, SESSION_COMMANDS
 from landscape.gateway.schemas import SchemaInvalid, SchemaSet
 
-from crcl_support import EXAMPLES, XSD, command, pose, needs_examples
+from crcl_support import EXAMPLES, XSD, XSD_2021, command, needs_examples, needs_xsd, pose
 
-INVALID = "commandConfigureStatusReport.xml"   # lacks ReportSensorsStatus (2021 schemas)
+# A 2018 document (ConfigureStatusReport without the 2021 revision's sensor and guard flags):
+# valid against crcl4java's schemas, not against the 2021 ones; the gateway reads both.
+OLD_FORM = "commandConfigureStatusReport.xml"
 DOCUMENTS = sorted(p for p in EXAMPLES.glob("*.xml") if not p.name.startswith(("status", "crcl4")))
-needs_xsd = pytest.mark.skipif(XSD is None, reason="the CRCL schemas (../shared/crcl/xsd) are absent")
+needs_2021 = pytest.mark.skipif(XSD_2021 is None,
+                                reason="NIST's 2021 CRCL schemas (../shared/crcl/xsd) are absent")
 
 
 @needs_examples
 @pytest.mark.parametrize("path", DOCUMENTS, ids=lambda p: p.name)
 def test_every_example_command_and_program_is_parsed(path):
-    tree = xmlsafe.parse(path.read_bytes())
-    if path.name == INVALID:
-        with pytest.raises(parse.CrclParseError, match=r"line 5: <CRCLCommand>: expected "
-                                                        r"<ReportSensorsStatus>"):
-            parse.document(tree)
-        return
-    document = parse.document(tree)
+    document = parse.document(xmlsafe.parse(path.read_bytes()))
     commands = document.commands if isinstance(document, m.Program) else [document.command]
     assert commands and all(c.command_id >= 0 for c in commands)
 
 
+def test_a_2018_status_report_configuration_reports_no_sensors_and_no_guards():
+    flags = "".join(f"<{tag}>true</{tag}>" for tag in (
+        "ReportJointStatuses", "ReportPoseStatus", "ReportGripperStatus", "ReportSettingsStatus"))
+    read = parse.document(xmlsafe.parse(command("ConfigureStatusReport", 3, flags))).command
+    assert read.report_settings and not read.report_sensors and not read.report_guards
+    with pytest.raises(parse.CrclParseError, match="expected <ReportGuardsStatus>, it ends"):
+        parse.document(xmlsafe.parse(command("ConfigureStatusReport", 3, flags +
+                                             "<ReportSensorsStatus>true</ReportSensorsStatus>")))
+
+
 @needs_xsd
+@needs_examples
 @pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.xml")), ids=lambda p: p.name)
-def test_the_schemas_agree_with_the_typed_parser_on_the_examples(path):
+def test_every_example_is_valid_against_the_installed_schemas(path):
     schemas = SchemaSet(XSD)
+    assert schemas.revision == 2018     # crcl4java-base 1.8's
+    schemas.validate(xmlsafe.parse(path.read_bytes()))
+
+
+@needs_2021
+@needs_examples
+@pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.xml")), ids=lambda p: p.name)
+def test_the_2021_schemas_refuse_only_the_2018_status_report_configuration(path):
+    schemas = SchemaSet(XSD_2021)
+    assert schemas.revision == 2021
     tree = xmlsafe.parse(path.read_bytes())
-    if path.name == INVALID:
+    if path.name == OLD_FORM:
         with pytest.raises(SchemaInvalid, match="line 5: .*ReportSensorsStatus"):
             schemas.validate(tree)
     else:
@@ -63,16 +81,24 @@ def test_every_command_type_has_a_handler():
     assert set(m.COMMAND_TYPES.values()) == set(HANDLERS) | set(SESSION_COMMANDS)
 
 
-@needs_xsd
-def test_the_model_has_every_command_type_of_the_schema():
+def _command_types(directory) -> set[str]:
     from lxml import etree
     xs = "{http://www.w3.org/2001/XMLSchema}"
-    schema = etree.parse(str(XSD / "CRCLCommands.xsd"))
-    derived = {t.get("name") for t in schema.iter(f"{xs}complexType")
-               if t.get("abstract") != "true" and any(
-                   e.get("base") in ("MiddleCommandType", "CRCLCommandType")
-                   for e in t.iter(f"{xs}extension"))}
-    assert derived == set(m.COMMAND_TYPES)
+    schema = etree.parse(str(directory / "CRCLCommands.xsd"))
+    return {t.get("name") for t in schema.iter(f"{xs}complexType")
+            if t.get("abstract") != "true" and any(
+                e.get("base") in ("MiddleCommandType", "CRCLCommandType")
+                for e in t.iter(f"{xs}extension"))}
+
+
+@needs_2021
+def test_the_model_has_every_command_type_of_the_2021_schema():
+    assert _command_types(XSD_2021) == set(m.COMMAND_TYPES)
+
+
+@needs_xsd
+def test_the_model_has_every_command_type_of_the_installed_schema():
+    assert _command_types(XSD) <= set(m.COMMAND_TYPES)
 
 
 @pytest.mark.parametrize("body, message", [

@@ -13,7 +13,7 @@ from lxml import etree
 
 from landscape.gateway.run import ProgramFailed, run
 
-from crcl_support import EXAMPLES, reachable_program, needs_examples
+from crcl_support import EXAMPLES, needs_examples, program, reachable_program
 
 
 def test_a_reachable_program_runs_to_completion_with_progress_per_command(gateway, tmp_path):
@@ -56,7 +56,7 @@ def test_the_example_program_without_tool_commands_fails_where_the_arm_cannot_re
     path = tmp_path / "moves-only.xml"
     tree.write(str(path))
     with pytest.raises(ProgramFailed, match=r"command 6 \(MoveThroughTo, CommandID 8\) failed: "
-                                            r"PathLoad refused .*not reachable"):
+                                            r"waypoint 1 is out of the arm's reach, nothing moved"):
         run(path, f"127.0.0.1:{gateway.port}", out=io.StringIO())
 
 
@@ -64,7 +64,7 @@ def test_the_example_program_without_tool_commands_fails_where_the_arm_cannot_re
 @ALL
 def test_program_all_stops_at_its_first_command(gateway, example):
     with pytest.raises(ProgramFailed, match=r"command 1 \(ActuateJoints, CommandID 2\) failed: "
-                                            r"joint 3: force/torque control"):
+                                            r"JointForceTorque on joint 3"):
         run(EXAMPLES / example, f"127.0.0.1:{gateway.port}", out=io.StringIO())
 
 
@@ -103,3 +103,20 @@ def test_the_readmes_example_program_runs(gateway):
     example = Path(__file__).resolve().parents[2] / "examples" / "05_crcl_program.xml"
     assert run(example, f"127.0.0.1:{gateway.port}", out=out) == 9
     assert all("CRCL_Done" in line for line in out.getvalue().splitlines()), out.getvalue()
+
+
+def test_a_failed_run_frees_the_lock_for_the_next_at_once(gateway, tmp_path):
+    """The runner closes its connection however the program ends, and the gateway's next
+    session waits for the last one's end: a program run right after a failed one starts."""
+    failing = tmp_path / "failing.xml"
+    failing.write_bytes(program([("MoveTo", "<MoveStraight>false</MoveStraight>"
+                                            "<EndPosition><Point><X>2.5</X><Y>1</Y><Z>1</Z>"
+                                            "</Point><XAxis><I>1</I><J>0</J><K>0</K></XAxis>"
+                                            "<ZAxis><I>0</I><J>0</J><K>-1</K></ZAxis>"
+                                            "</EndPosition>")]))
+    good = tmp_path / "good.xml"
+    good.write_bytes(reachable_program())
+    for _ in range(3):
+        with pytest.raises(ProgramFailed, match="out of the arm's reach"):
+            run(failing, f"127.0.0.1:{gateway.port}", out=io.StringIO())
+        assert run(good, f"127.0.0.1:{gateway.port}", out=io.StringIO()) == 13

@@ -8,8 +8,10 @@ import pytest
 
 from support import cell_file, start_server
 
-from crcl_support import RawClient, RunningGateway, field, pose
+from crcl_support import XSD_2021, RawClient, RunningGateway, field, pose
 from test_gateway import MOVE, point
+
+CRCL_SCHEMAS = XSD_2021       # EnableSensor and DisableSensor are the 2021 revision's
 
 SECOND_LASER = """
 [sensors.side_laser]
@@ -54,7 +56,7 @@ def test_the_feed_watches_what_any_connection_enabled_until_it_closes(gateway, c
     client.run("EnableSensor", 2, "<SensorID>force_sensor</SensorID>")
     client.run("EndCanon", 3)                 # status keeps reporting the sensor it enabled
     assert field(client.status(), "ForceTorqueSensorStatus") is not None
-    other = RawClient(gateway.port)
+    other = RawClient(gateway.port, schemas=XSD_2021)
     try:
         other.run("InitCanon", 1)
         other.run("EnableSensor", 2, "<SensorID>laser_standoff_sensor</SensorID>")
@@ -75,14 +77,14 @@ def test_the_feed_watches_what_any_connection_enabled_until_it_closes(gateway, c
 @pytest.fixture
 def laser_cell(tmp_path):
     server = start_server(cell=cell_file(tmp_path, {"# The recorder": SECOND_LASER + "\n# The recorder"}))
-    gateway = RunningGateway(server.target)
+    gateway = RunningGateway(server.target, schemas=XSD_2021)
     yield gateway
     gateway.close()
     server.stop(grace=None)
 
 
 def test_a_sensor_the_state_stream_cannot_carry_is_refused_and_the_feed_goes_on(laser_cell):
-    client = RawClient(laser_cell.port)
+    client = RawClient(laser_cell.port, schemas=XSD_2021)
     try:
         client.run("InitCanon", 1)
         refused = client.run("EnableSensor", 2, "<SensorID>side_laser</SensorID>")

@@ -13,7 +13,7 @@ EXPECTED = {
         "Lock", "Release", "Activate", "Deactivate",
         "SetSpeed", "SetAcceleration", "SetToolOffset", "SetWorldCartesianFrame", "SetUnits",
         "GetUnits", "GetVelocities", "GetAccelerations", "GetMaxVelocities", "GetMaxAccelerations",
-        "GetToolOffsets", "GetRobotPosition", "GetMotionControlState", "GetTagId",
+        "GetToolOffsets", "GetWorldCartesianFrame", "GetRobotPosition", "GetMotionControlState", "GetTagId",
         "MoveRelative", "MoveAbsolute", "MoveArc",
         "PathLoad", "PathClearPath", "PathMove",
         "StopMotion", "ResumeMotion", "AbortMotion",
@@ -21,17 +21,18 @@ EXPECTED = {
         "GetEndEffectorState", "GetTool", "PutTool", "ActivateTool", "DeactivateTool",
         "SendCommand",
         "Jog", "Reset", "GetDeviceState", "GetRobotDescription", "OperatePanel",
-        "GetCellDescription",
+        "GetCellDescription", "ListPaths", "GetPath", "SolvePose",
     ],
     services.DIGITAL_IO: ["SetDigitalIO", "GetDigitalIO", "SignalDigitalIO", "ListDigitalIO"],
-    services.EVENTS: ["Subscribe", "PostMessage"],
+    services.EVENTS: ["Subscribe", "PostMessage", "AcknowledgeAlarm"],
     services.SESSIONS: ["Connect"],
     services.STATE: ["StreamState"],
 }
 
 # (client streaming, server streaming)
 STREAMING = {"PathLoad": (True, False), "Jog": (True, True), "Subscribe": (False, True),
-             "Connect": (True, True), "StreamState": (False, True)}
+             "Connect": (True, True), "StreamState": (False, True),
+             "GetPath": (False, True)}
 
 
 @pytest.mark.parametrize("spec", list(EXPECTED), ids=lambda s: s.name)

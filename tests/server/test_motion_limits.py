@@ -1,14 +1,19 @@
 """The set Cartesian speeds and accelerations (seed 3.2.1) as a straight or arc move meets them,
-through gRPC on the simulated arm (lock-step clock), measured on the recorder's commanded
-joint positions turned into tool-tip poses."""
+and a move's or a path run's own (MoveRates, an extension: for that motion alone, the device's
+settings unchanged; issue 27 item 6), through gRPC on the simulated arm (lock-step clock),
+measured on the recorder's commanded joint positions turned into tool-tip poses."""
 from __future__ import annotations
 
 import math
 
+import grpc
 import numpy as np
 import pytest
 
+from landscape.client import Frame, TagPoint
 from landscape.v1 import motion_pb2, settings_pb2, types_pb2
+
+from support import error_info
 
 
 BASE = types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME
@@ -98,3 +103,56 @@ def test_angular_speed_and_acceleration_cap_a_reorientation(arm):
     print(f"peak tool rate {rate.max():.5f} rad/s, acceleration {accel.max():.4f} rad/s^2")
     assert 0.4 * 0.99 <= rate.max() <= 0.4 * (1 + 1e-6)
     assert 1.5 * 0.95 <= accel.max() <= 1.5 * (1 + 1e-4)
+
+
+# ---- MoveRates: a motion's own --------------------------------------------------------------
+
+def _settings(arm) -> tuple:
+    speeds = arm.device.GetVelocities(settings_pb2.GetVelocitiesRequest())
+    accels = arm.device.GetAccelerations(settings_pb2.GetAccelerationsRequest())
+    return (speeds.percent_velocity, speeds.world_linear_velocity, speeds.world_angular_velocity,
+            accels.percent_accel, accels.world_linear_accel, accels.world_angular_accel)
+
+
+def test_a_moves_own_rates_hold_it_and_leave_the_devices_settings(arm):
+    set_speed(arm, types_pb2.SPEED_TYPE_PERCENT_SPEED, 60)
+    before = _settings(arm)
+    speed, accel = linear_profile(recorded_move(arm, line(
+        arm, 0.4, rates=motion_pb2.MoveRates(linear_speed=0.15, accel_percent=100,
+                                             linear_accel=0.5))))
+    print(f"own rates: peak {speed.max():.4f} m/s, {accel.max():.4f} m/s^2")
+    assert 0.15 * 0.99 <= speed.max() <= 0.15 * (1 + 1e-6)
+    assert accel.max() <= 0.5 * (1 + 1e-6)
+    assert _settings(arm) == before
+    speed, _ = linear_profile(recorded_move(arm, line(arm, -0.4)))   # the device's again
+    assert speed.max() > 0.3
+
+
+def test_a_rate_out_of_its_bounds_is_refused_naming_it_and_nothing_moves(arm):
+    joints = arm.joints().copy()
+    with pytest.raises(grpc.RpcError) as refused:
+        arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+            frame=BASE, values=[0.5, 0.1, 0.6, 3.14159, 0, 0], motion_type=STRAIGHT,
+            rates=motion_pb2.MoveRates(angular_speed=1e3)))
+    assert refused.value.code() is grpc.StatusCode.OUT_OF_RANGE
+    assert "angular speed must be at least" in refused.value.details()
+    assert error_info(refused.value).metadata["field"] == "angular_speed"
+    assert arm.joints() == pytest.approx(joints, abs=1e-9)
+
+
+def test_a_path_run_carries_its_own_rates(arm):
+    set_speed(arm, types_pb2.SPEED_TYPE_PERCENT_SPEED, 60)
+    before = _settings(arm)
+    tip = arm.tip()[:3, 3]
+    points = [[*tip, 3.14159265, 0.0, 3.14159265], [tip[0], tip[1] + 0.4, tip[2],
+                                                    3.14159265, 0.0, 3.14159265]]
+    header = motion_pb2.PathHeader(path_name="slow", frame=BASE, motion_type=STRAIGHT,
+                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA,
+                                   number_of_points=2)
+    arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=[
+        TagPoint(p).to_pb(Frame.BASE) for p in points])]))
+    speed, _ = linear_profile(recorded_move(arm, lambda: arm.device.PathMove(
+        motion_pb2.PathMoveRequest(path_name="slow",
+                                   rates=motion_pb2.MoveRates(linear_speed=0.1)))))
+    assert 0.1 * 0.99 <= speed.max() <= 0.1 * (1 + 1e-6)
+    assert _settings(arm) == before

@@ -34,13 +34,15 @@ ACTIVE = {State.RESTING, State.MOVING, State.PAUSED}
 READS = ["GetUnits", "GetVelocities", "GetAccelerations", "GetMaxVelocities",
          "GetMaxAccelerations", "GetToolOffsets", "GetRobotPosition", "GetMotionControlState",
          "GetTagId",                                              # 3.3.1 state neutral
+         "GetWorldCartesianFrame",                                # 3.3.1's, for 3.2.1's set
          "GetSensorReading",                                      # 3.7.1 state independent
          "GetEndEffectorState",                                   # 3.8.1 state independent
          "GetDigitalIO", "SignalDigitalIO", "SendCommand",        # 4.1 state independent
          "Subscribe", "Connect",                                  # 2.1, 2.2 state independent
          # Extensions, read-only (OperatePanel is the person at the cell: no lease, any state).
          "GetDeviceState", "GetRobotDescription", "GetCellDescription", "OperatePanel",
-         "ListDigitalIO", "StreamState"]
+         "ListDigitalIO", "StreamState",
+         "FetchRecording"]                 # the recorder's stored file (LLI s7.4 5.5)
 # The seed's headings put every motion command in "Active" (3.4.1, 3.5.2) but its text for
 # moveReact (3.7.2) says "valid only in the Resting State": one motion at a time, so a command
 # that starts a motion needs the arm at rest (DESIGN.md 4: Resting --move--> Moving).

@@ -7,11 +7,15 @@ from __future__ import annotations
 
 import asyncio
 
+import numpy as np
+
 from landscape.server.api import cell_view, convert, services
 from landscape.server.device.device import Device
 from landscape.server.errors import ControllerFailure, Stopped
 from landscape.server.planning.process import StreamRef
 from landscape.server.api.guard import blocking, guarded, lease_of
+from landscape.server.api.servicers.paths import PathReads
+from landscape.server.api.servicers.pose_solving import PoseSolving
 from landscape.server.planning.targets import Frame
 from landscape.robot.units import Units, pose_matrix
 from landscape.server.workcell.assembly import Workcell
@@ -23,7 +27,7 @@ JOG_END_TIMEOUT = 5.0   # s for a jogging arm to come to rest once its stream en
 
 
 @guarded(services.DEVICE)
-class DeviceServicer(services.DEVICE.servicer_base):
+class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
     def __init__(self, device: Device, workcell: Workcell, hub, dispatch, limits):
         self.device, self.workcell, self.hub = device, workcell, hub
         self.dispatch, self.limits = dispatch, limits
@@ -126,6 +130,12 @@ class DeviceServicer(services.DEVICE.servicer_base):
             ret_val=convert.ok(), offset=convert.matrix_to_pose(s.tool_offset, s.units),
             units=convert.units_to_pb(s.units))
 
+    def GetWorldCartesianFrame(self, request, context):
+        s = self.device.settings
+        return settings_pb2.GetWorldCartesianFrameResponse(
+            ret_val=convert.ok(), frame=convert.matrix_to_pose(s.world_frame, s.units),
+            units=convert.units_to_pb(s.units))
+
     def GetRobotPosition(self, request, context):
         joints, world, units = self._position()
         return settings_pb2.GetRobotPositionResponse(
@@ -155,7 +165,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
         frame = convert.enum_value(convert.FRAMES, request.frame, "frame")
         values = convert.move_values(frame, request.values, self.device.settings.units)
         command_id = self.device.motions.move(command, request.point_name, frame, values, relative,
-                                      convert.motion_type(request), convert.optional_speed(request))
+                                      convert.motion_type(request), convert.optional_speed(request),
+                                      convert.move_settings(self.device.settings, request))
         return convert.started(command_id)
 
     def MoveArc(self, request, context):
@@ -204,7 +215,8 @@ class DeviceServicer(services.DEVICE.servicer_base):
     def PathMove(self, request, context):
         cycles = request.number_of_cycles if request.HasField("number_of_cycles") else 1
         return motion_pb2.PathMoveResponse(
-            ret_val=convert.started(self.device.motions.path_move(request.path_name, cycles)))
+            ret_val=convert.started(self.device.motions.path_move(
+                request.path_name, cycles, convert.move_settings(self.device.settings, request))))
 
     # ---- 3.6 interruptions ----
     # Stops are sent to the cycle from the event loop, at once; only the wait for the arm to
@@ -353,12 +365,16 @@ class DeviceServicer(services.DEVICE.servicer_base):
 
     def GetCellDescription(self, request, context):
         scene = self.device.collisions
-        base = scene.cell.base
+        cell = scene.cell
+        base = pose_matrix(cell.base.xyz, cell.base.rpy)
+        placement = cell.placement
+        world_in_cell = None if placement is None else convert.matrix_to_pose(
+            pose_matrix(placement.xyz, placement.rpy) @ np.linalg.inv(base), Units())
         return control_pb2.GetCellDescriptionResponse(
-            ret_val=convert.ok(), cell_name=scene.cell.name,
-            base=convert.matrix_to_pose(pose_matrix(base.xyz, base.rpy), Units()),
-            floor=scene.cell.world.floor,
-            bodies=[convert.cell_body_to_pb(body) for body in cell_view.bodies(scene)])
+            ret_val=convert.ok(), cell_name=cell.name, base=convert.matrix_to_pose(base, Units()),
+            floor=cell.world.floor,
+            bodies=[convert.cell_body_to_pb(body) for body in cell_view.bodies(scene)],
+            world_in_cell=world_in_cell, shared_cell=cell.shared_cell)
 
     def GetRobotDescription(self, request, context):
         arm = self.device.arm

@@ -1,0 +1,3 @@
+from landscape.bridges.foxglove.server import main
+
+main()

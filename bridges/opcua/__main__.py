@@ -1,0 +1,3 @@
+from landscape.bridges.opcua.server import main
+
+main()
