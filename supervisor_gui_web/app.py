@@ -111,7 +111,6 @@ async def _websocket(request: web.Request) -> web.WebSocketResponse:
     sign_ins.page_opened(person)
     for hub in hubs.values():
         hub.join(outbox)
-    calls.acks.join(outbox)
     sender = asyncio.create_task(_send(ws, outbox))
     reader = asyncio.create_task(_receive(ws, person, sign_ins, console))
     signed_out = asyncio.create_task(person.ended.wait())
@@ -130,7 +129,6 @@ async def _websocket(request: web.Request) -> web.WebSocketResponse:
         sign_ins.page_closed(person)
         for hub in hubs.values():
             hub.leave(outbox)
-        calls.acks.leave(outbox)
         outbox.close()
         await console.close()   # ends this page's sessions: the device's disconnect handler runs
         await sender

@@ -18,8 +18,8 @@ of a new press opens the stream; a message of a press whose stream has ended (re
 by the device's deadman, aborted, failed) or of a press older than the newest is refused and
 never reaches the device: a late or repeated message cannot start the arm again.
 
-The supervisor's own calls ("supervisor/...": alarms acknowledged, control handed over between
-people signed in here) go to supervisor_calls.py; the console tells its control desk when
+The supervisor's own calls ("supervisor/...": control handed over between people signed in
+here) go to supervisor_calls.py; the console tells its control desk when
 its lock starts and ends.
 
 Every call runs in its own task, so a StopMotion never waits behind an Activate in progress.

@@ -1,7 +1,7 @@
 """The supervisor's own calls, beside the landscape.v1 contract: what the backend does among
-the people signed in to it and the device contract does not offer (docs/page.md).
+the people signed in to it and the device contract does not offer (docs/page.md). Alarms
+are acknowledged on the device (EventService.AcknowledgeAlarm), like any call of the page.
 
-    supervisor/AcknowledgeAlarms  {"keys": ["<sequence>@<time>", ...]}   alarm_acks.py
     supervisor/RequestControl     {}        ask this supervisor's lock holder for the lock
     supervisor/AnswerControl      {"give": true | false}   the holder hands over or declines
     supervisor/CancelControlRequest {}                                     handover.py
@@ -16,7 +16,6 @@ import grpc
 
 from landscape.server.security.auth import Role
 from landscape.supervisor import wire
-from landscape.supervisor.alarm_acks import AlarmAcks
 from landscape.supervisor.handover import CONTROL, ControlDesk, HandoverRefused
 from landscape.supervisor.wire import Refused
 from landscape.v1 import types_pb2
@@ -58,7 +57,6 @@ class SupervisorCalls:
 
     def __init__(self):
         self.desk = ControlDesk()
-        self.acks = AlarmAcks()
 
     @staticmethod
     def handles(name) -> bool:
@@ -67,15 +65,13 @@ class SupervisorCalls:
     async def call(self, page: ConsolePage, role: Role, device: str, name: str, request) -> dict:
         """The reply to one call of `page`; Refused says why not."""
         method = name.removeprefix(PREFIX)
-        if method not in ("AcknowledgeAlarms", "RequestControl", "AnswerControl", "CancelControlRequest"):
+        if method not in ("RequestControl", "AnswerControl", "CancelControlRequest"):
             raise Refused(grpc.StatusCode.UNIMPLEMENTED, f"{name!r} is not a call of the supervisor")
         if role < Role.OPERATOR:
             raise Refused(grpc.StatusCode.PERMISSION_DENIED,
                           f"{method} needs the operator role; you are signed in as {role.label}")
         request = request if isinstance(request, dict) else {}
         try:
-            if method == "AcknowledgeAlarms":
-                return {"acknowledged": self.acks.acknowledge(device, request.get("keys"), page.name)}
             if method == "RequestControl":
                 self.desk.request(device, page)
             elif method == "CancelControlRequest":

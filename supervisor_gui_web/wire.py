@@ -21,8 +21,8 @@ The feeds the backend keeps for every browser arrive under their own RPC names
 DeviceService/GetCellDescription, the cell around the arm: device_hub.py).
 Nothing here is a second schema: "reply" and "status" are protobuf's own JSON mapping.
 
-Beside the contract, the supervisor's own calls among the people signed in to it (alarms
-acknowledged, control handed over: supervisor_calls.py) use the same frames under names
+Beside the contract, the supervisor's own calls among the people signed in to it (control
+handed over: supervisor_calls.py) use the same frames under names
 "supervisor/<Name>", with plain JSON objects as their "request" and "reply" (`note`).
 """
 from __future__ import annotations

@@ -138,10 +138,9 @@ export class Device {
     ctx.changed('status');
   }
 
-  // The supervisor's own frames about this device: alarms acknowledged, control requests.
+  // The supervisor's own frames about this device: control requests.
   supervisor(method, reply) {
-    if (method === 'Acknowledged') this.alarms.acknowledged(reply.acks || []);
-    else if (method === 'Control') this.handover?.notice(reply);
+    if (method === 'Control') this.handover?.notice(reply);
   }
 
   // The tool tip's offset in the flange frame (SI), as GetToolOffsets says; none: zero.
