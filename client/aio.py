@@ -247,12 +247,21 @@ class AsyncRobot(DeviceCommands):
         """`async for` a JogResponse per message of one Jog stream, whose JogRequests the
         caller makes and paces (a program relaying someone's jog: each button press its own
         stream); the stream ends when `requests` does."""
-        call = self._stub(DEVICE).Jog(requests, metadata=self._metadata())
+        async for reply in self.invoke_stream(DEVICE, "Jog", requests):
+            yield reply
+
+    async def invoke_stream(self, service: str, rpc: str, request,
+                            timeout: float | None = None) -> AsyncIterator:
+        """`async for` each reply of a streaming call of the contract (GetPath; Jog, whose
+        `request` is an async iterable of requests); the client's exceptions when it fails;
+        with `timeout` (s) the whole stream must end within it."""
+        call = getattr(self._stub(service), rpc)(request, metadata=self._metadata(),
+                                                  timeout=timeout)
         try:
             async for reply in call:
                 yield reply
         except grpc.aio.AioRpcError as error:
-            raise await self._refusal(error, "Jog") from None
+            raise await self._refusal(error, rpc) from None
         finally:
             call.cancel()
 

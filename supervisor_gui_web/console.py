@@ -155,6 +155,14 @@ class Console:
         elif rpc.kind == "client_stream":
             request = iter([wire.parse_request(rpc.request_class, r)
                             for r in body.get("requests", ())])
+        elif rpc.kind == "server_stream":   # each reply a frame, then the end's status
+            request = wire.parse_request(rpc.request_class, body.get("request"))
+            async for reply in side.robot.invoke_stream(SERVICES[rpc.service], rpc.method.name,
+                                                        request, timeout=CALL_TIMEOUT_S):
+                self._send(hub.name, rpc.name, call_id, reply=reply)
+            self._send(hub.name, rpc.name, call_id,
+                       status=wire.status(grpc.StatusCode.OK, "stream ended"))
+            return
         else:
             raise Refused(grpc.StatusCode.UNIMPLEMENTED, f"{rpc.name} is a stream the page cannot open")
         if rpc.name == LOCK:

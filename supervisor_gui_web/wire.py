@@ -14,7 +14,8 @@ Every WebSocket frame is a JSON object about one message of one RPC of one devic
                         ("requests": [...] for a client-streaming RPC; "cancel": true ends a stream
                          the browser opened: the session, a jog. Every frame of a stream carries
                          the id of its first: a jog press's frames share one, and each press has
-                         a fresh id, larger than any before it: console.py)
+                         a fresh id, larger than any before it: console.py. A server-streaming
+                         call (GetPath) is answered by a frame a reply, then a status, code 0)
 
 The feeds the backend keeps for every browser arrive under their own RPC names
 (StateService/StreamState, EventService/Subscribe, the read-only gets of the status, and

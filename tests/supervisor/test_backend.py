@@ -19,6 +19,7 @@ from google.rpc import error_details_pb2
 
 from dashboard_support import (CONNECT, DEVICE, PageClient, open_page, run_with_page,
                                signed_in_http)
+from landscape.client import Frame, Robot, TagPoint
 from landscape.server.app import serve
 from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.server.device.states import State
@@ -376,3 +377,25 @@ def test_an_unanswered_question_times_out_on_the_device_and_the_backend_sends_no
     late = [r.getMessage() for r in caplog.records if "no such question waits" in r.getMessage()]
     assert not late
     assert server.device.state is State.ERROR   # "stay": the default kept it there
+
+
+def test_a_server_stream_is_relayed_a_frame_a_reply_then_its_end(people, server):
+    """GetPath, server-streaming: each of the device's replies a frame under the call's id,
+    then status 0; an unknown path is the device's refusal, as it gave it."""
+    with Robot(server.target, "script") as robot, robot.control(activate=False):
+        robot.path_load("two", [TagPoint([0.1, 0, 1.5, 0, 1.5, 0], tag_name="a"),
+                                TagPoint([0.2, 0, 1.5, 0, 1.5, 0])], Frame.JOINT)
+
+    async def body(page, dashboard):
+        call_id = await page.send(DEVICE + "GetPath", {"pathName": "two"})
+        end = await page.until(lambda f: f.get("id") == call_id and "status" in f)
+        assert end["status"]["code"] == 0
+        replies = [f["reply"] for f in page.frames if f.get("id") == call_id and "reply" in f]
+        assert replies[0]["path"]["numberOfPoints"] == 2
+        points = [p for reply in replies for p in reply["points"]]
+        assert [p["jointValues"][0] for p in points] == [0.1, 0.2]
+        assert points[0]["tagName"] == "a"
+        refused = await page.call(DEVICE + "GetPath", {"pathName": "none"})
+        assert refused["status"]["code"] == 3, refused
+        assert refused["status"]["details"][0]["reason"] == "NOT_FOUND"
+    run_with_page(server, body, people)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from dashboard_support import Page
-from landscape.client import Robot
+from landscape.client import Frame, Robot, TagPoint
 from landscape.server.device.states import State
 from support import wait_until
 
@@ -206,6 +206,37 @@ def test_paths_are_listed_and_previewed_in_3d_before_they_run(chromium, two_arm_
     page.page.locator(".status-row[data-device='arm2'] .arm-name").click()
     page.expect(page.page.locator("#path-list li")).to_have_count(0)
     assert _dots(page) == 0 and _dots(page, "arm2") == 0
+    page.close()
+
+
+def test_the_devices_stored_paths_are_listed_and_read_for_the_preview(chromium, dashboard,
+                                                                       cell_server):
+    """Issue 28: the list is the device's (ListPaths), whoever stored the path: a script's path
+    is listed with its count of points, and its preview reads the points from the device
+    (GetPath, resolved to joints) and stands the ghost at the first; a path another client
+    clears leaves the list when the panel is opened again."""
+    first, second = [0.5, -0.2, 1.3, 0, 1.2, 0], [0.9, 0.1, 1.1, 0.2, 1.0, 0]
+    with Robot(cell_server.target, "script") as robot, robot.control(activate=False):
+        robot.path_load("theirs", [TagPoint(first, tag_name="p1"), TagPoint(second)],
+                        Frame.JOINT)
+    page = Page(chromium, dashboard)
+    theirs = page.page.locator("#path-list li", has_text="theirs")
+    page.expect(theirs).to_contain_text("2 points (read when previewed), joints; stored on the device")
+    page.expect(page.page.locator("#path-list-source")).to_contain_text("stored on the device")
+    still = _joints(cell_server)
+    theirs.locator(".path-preview").click()
+    page.expect(theirs).to_contain_text("2 points, joints; stored on the device")
+    page.page.wait_for_function("() => window.armViews.arm1.ghost.visible", timeout=10_000)
+    assert _dots(page) == 2
+    assert _ghost(page)["joints"] == pytest.approx(first, abs=1e-9)
+    assert _joints(cell_server) == pytest.approx(still, abs=1e-6)         # a preview moves nothing
+    page.expect(page.page.locator("#path-progress .tag")).to_have_text(["p1"])
+    with Robot(cell_server.target, "script") as robot, robot.control(activate=False):
+        robot.path_clear_path("theirs")
+    panel = page.page.locator("details.panel > summary", has_text="Paths")
+    panel.click()   # folded, then opened: the list is read again
+    panel.click()
+    page.expect(theirs).to_have_count(0)
     page.close()
 
 

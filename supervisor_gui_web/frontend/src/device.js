@@ -62,6 +62,7 @@ export class Device {
     this.ctx.model.robotType = description.robotType || '?';
     if (this.ctx.model.cell && !this.ctx.model.cell.refused) this.arm.setCell(this.ctx.model.cell);
     this.ctx.changed('robot');
+    this.paths.refresh();   // the device answers: its stored paths
   }
 
   // One frame of the backend about this device.
