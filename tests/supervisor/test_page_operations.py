@@ -39,10 +39,10 @@ def _move_in_joints(page: Page, server, device: str) -> None:
     before = _joints(server)
     for i, value in enumerate(GOAL):
         page.page.fill(f"#move-v{i}", str(value))
+    page.shows("move-preview", "Ghost arm: the goal as the device solves it")
     ghost = _ghost(page, device)
     assert ghost["joints"] == pytest.approx(GOAL, abs=1e-9)      # the goal, before any move
     assert _joints(server) == pytest.approx(before, abs=1e-6)    # nothing moved
-    page.shows("move-preview", "Ghost arm: the goal")
     page.screenshot(f"move-ghost-{device}")
     page.click("btn-move")
     page.shows("st-state", "moving")
@@ -65,7 +65,7 @@ def test_move_to_a_cartesian_goal_from_the_current_pose(chromium, dashboard, cel
     page.expect(page.page.locator("#move-v2")).not_to_have_value("", timeout=10_000)
     z = float(page.page.input_value("#move-v2"))
     page.page.fill("#move-v2", f"{z - 0.05:.4f}")                 # 5 cm down
-    page.shows("move-preview", "solved on this page from the arm's present configuration")
+    page.shows("move-preview", "the goal as the device solves it")   # SolvePose
     ghost = _ghost(page)
     before = _joints(cell_server)
     assert np.abs(np.array(ghost["joints"]) - before).max() > 0.005   # the ghost is elsewhere
@@ -76,6 +76,21 @@ def test_move_to_a_cartesian_goal_from_the_current_pose(chromium, dashboard, cel
     wait_until(lambda: _joints(cell_server) == pytest.approx(ghost["joints"], abs=3e-3), timeout=10)
     with Robot(cell_server.target, "reader") as robot:
         assert robot.get_robot_position().world_position.z == pytest.approx(z - 0.05, abs=1e-3)
+    page.close()
+
+
+def test_a_goal_the_device_would_refuse_has_no_ghost_and_says_why(chromium, dashboard,
+                                                                   cell_server):
+    """Issue 28: the ghost is the device's answer (SolvePose); a pose beyond reach gets none,
+    and the device's reason, before anything is sent to move."""
+    page = Page(chromium, dashboard)
+    page.page.select_option("#move-frame", "REFERENCE_FRAME_BASE_CARTESIAN_FRAME")
+    page.click("btn-move-from-current")
+    page.shows("move-preview", "the goal as the device solves it")
+    page.page.fill("#move-v2", "5")                               # 5 m up: beyond reach
+    page.shows("move-preview", "No preview: the device would refuse this move:")
+    assert not page.page.evaluate(GHOST, "arm1")["visible"]
+    assert cell_server.device.state is State.UNLOCKED              # asked as a viewer may
     page.close()
 
 

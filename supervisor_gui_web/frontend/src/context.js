@@ -33,12 +33,10 @@ export class DeviceContext {
   changed(what) { for (const listener of this.listeners) listener(what); }
 
   // A unary (or client-streaming: streamed) call of `rpc` ("Activate" or a full name). Resolves
-  // with the reply (a server-streaming call, `replies`: the list of them), or with null after
-  // showing the refusal.
+  // with the reply, or with null after showing the refusal.
   async command(rpc, request = {}, options = {}) {
     const name = rpc.includes('/') ? rpc : DEVICE + rpc;
     try {
-      if (options.replies) return await this.link.collect(this.device, name, request);
       return await this.link.call(this.device, name, request, options);
     } catch (error) {
       if (!(error instanceof Refused)) throw error;
