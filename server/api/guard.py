@@ -1,6 +1,7 @@
 """Every RPC behind the device's state table, on the server's event loop (grpc.aio).
 
-`guarded(spec)` wraps each RPC a servicer class defines:
+`guarded(spec)` wraps each RPC a servicer class defines (itself, or a mixin it inherits: a
+servicer grows by modules of its own):
 
 1. Admission, on the event loop: the request's bounds (request_bounds.py), the state table
    (states.py) and the lease refuse the call (INVALID_ARGUMENT / OUT_OF_RANGE,
@@ -187,7 +188,8 @@ def guarded(spec):
     """Class decorator for a servicer of `spec` with `device`, `dispatch` and `limits`."""
     def decorate(cls):
         for method in spec.descriptor.methods:
-            body = cls.__dict__.get(method.name) or _missing(f"{spec.full_name}.{method.name}")
+            body = (_defined(cls, spec.servicer_base, method.name)
+                    or _missing(f"{spec.full_name}.{method.name}"))
             if inspect.isasyncgenfunction(body) or inspect.iscoroutinefunction(body):
                 wrapped = _stream(method.name, body, method.server_streaming)
             elif method.client_streaming or method.server_streaming:
@@ -198,6 +200,17 @@ def guarded(spec):
             setattr(cls, method.name, wrapped)
         return cls
     return decorate
+
+
+def _defined(cls, base: type, name: str):
+    """The body `cls` or one of its mixins (servicers/*.py) defines for `name`; the generated
+    `base` (whose every method answers UNIMPLEMENTED) does not count."""
+    for klass in cls.__mro__:
+        if klass is base:
+            return None
+        if name in klass.__dict__:
+            return klass.__dict__[name]
+    return None
 
 
 def _as_async(body, streaming_response: bool):

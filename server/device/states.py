@@ -105,6 +105,9 @@ RULES: dict[str, Rule] = {
     "GetDeviceState": _read("-"),
     "GetRobotDescription": _read("-"),
     "GetCellDescription": _read("-"),
+    # stored paths read back
+    "ListPaths": _read("3.5.1"),
+    "GetPath": _read("3.5.1"),
     # The operator panel: no lease (the e-stop works whoever holds the lock); admin only.
     "OperatePanel": _read("-"),
     # 4 DIGITAL_IO

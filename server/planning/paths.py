@@ -233,6 +233,11 @@ class PathLibrary(Mapping):
     def __len__(self) -> int:
         return len(self._paths)
 
+    def snapshot(self) -> tuple[dict[str, StoredPath], list[str]]:
+        """The paths by name and the names of the unreadable ones, as they are now (safe
+        beside a PathLoad on another thread: each copy is one step)."""
+        return dict(self._paths), sorted(set(self._unreadable))
+
     def put(self, path: StoredPath) -> None:
         self._store.put(path)   # first: if the write fails, memory keeps the old path too
         self._paths[path.name] = path

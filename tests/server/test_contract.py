@@ -21,7 +21,7 @@ EXPECTED = {
         "GetEndEffectorState", "GetTool", "PutTool", "ActivateTool", "DeactivateTool",
         "SendCommand",
         "Jog", "Reset", "GetDeviceState", "GetRobotDescription", "OperatePanel",
-        "GetCellDescription",
+        "GetCellDescription", "ListPaths", "GetPath",
     ],
     services.DIGITAL_IO: ["SetDigitalIO", "GetDigitalIO", "SignalDigitalIO", "ListDigitalIO"],
     services.EVENTS: ["Subscribe", "PostMessage"],
@@ -31,7 +31,8 @@ EXPECTED = {
 
 # (client streaming, server streaming)
 STREAMING = {"PathLoad": (True, False), "Jog": (True, True), "Subscribe": (False, True),
-             "Connect": (True, True), "StreamState": (False, True)}
+             "Connect": (True, True), "StreamState": (False, True),
+             "GetPath": (False, True)}
 
 
 @pytest.mark.parametrize("spec", list(EXPECTED), ids=lambda s: s.name)
