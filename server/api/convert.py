@@ -326,6 +326,11 @@ def _operator_message(d: events.OperatorMessage):
     return "operator_message", event_service_pb2.OperatorMessage(text=d.text, source=d.source)
 
 
+def _alarm_acknowledged(d: events.AlarmAcknowledged):
+    return "alarm_acknowledged", event_service_pb2.AlarmAcknowledged(
+        alarm_sequence=d.alarm_sequence, by=d.by, client=d.client, on_behalf_of=d.on_behalf_of)
+
+
 def _events_lost(d: events.EventsLost):
     return "events_lost", event_service_pb2.EventsLost(first_sequence=d.first_sequence,
                                         last_sequence=d.last_sequence)
@@ -336,7 +341,7 @@ _DETAILS = {
     events.CommandEvent: _command, events.Alarm: _alarm, events.StateChange: _state_change,
     events.DigitalIOSignal: _digital_io, events.RsvpRequest: _rsvp_request,
     events.RsvpAnswer: _rsvp_answer, events.OperatorMessage: _operator_message,
-    events.EventsLost: _events_lost,
+    events.AlarmAcknowledged: _alarm_acknowledged, events.EventsLost: _events_lost,
 }
 
 

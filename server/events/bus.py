@@ -1,7 +1,8 @@
 """The device's event bus: one ordered stream of events and alarms (seed section 2, DESIGN 8).
 
 The device core publishes through the helpers of `EventBus` (`command`, `alarm`,
-`state_change`, `digital_io`, `rsvp_request`, `rsvp_answer`) from any thread; every
+`state_change`, `digital_io`, `rsvp_request`, `rsvp_answer`, `operator_message`,
+`alarm_acknowledged`) from any thread; every
 subscriber sees the same events in the same order, each numbered by `sequence` (1, 2, 3, ...
 per bus). Pure Python: the gRPC servicer converts these records to and from the wire.
 
@@ -31,8 +32,9 @@ from collections.abc import Callable, Iterator, Sequence
 
 # The records are the bus's vocabulary: importable from here as well.
 from landscape.server.events.records import (  # noqa: F401
-    _PUBLISHED, PHASE_EVENT_IDS, Alarm, CommandEvent, Detail, DigitalIOSignal, Event, EventsLost,
-    OperatorMessage, Phase, RsvpAnswer, RsvpRequest, Severity, StateChange, _check)
+    _PUBLISHED, PHASE_EVENT_IDS, Alarm, AlarmAcknowledged, CommandEvent, Detail, DigitalIOSignal,
+    Event, EventsLost, OperatorMessage, Phase, RsvpAnswer, RsvpRequest, Severity, StateChange,
+    _check)
 
 DEFAULT_HISTORY = 10_000   # events kept for resuming subscribers
 DEFAULT_BUFFER = 1_024     # events a subscriber may fall behind before it loses some
@@ -270,6 +272,13 @@ class EventBus:
         """A message for the operator; data: [text, source]."""
         return self.publish("operator_message", (text, source), OperatorMessage(text, source))
 
+    def alarm_acknowledged(self, alarm_sequence: int, by: str, client: str = "",
+                           on_behalf_of: str = "") -> Event:
+        """An alarm was acknowledged; data: [alarm_sequence, by, client, on_behalf_of]."""
+        detail = AlarmAcknowledged(alarm_sequence, by, client, on_behalf_of)
+        return self.publish("alarm_acknowledged", (str(alarm_sequence), by, client, on_behalf_of),
+                            detail)
+
     def publish(self, event_id: str, data: Sequence[str], detail: Detail) -> Event:
         """Number, stamp, keep and fan out one event. Prefer the typed helpers above."""
         _check(isinstance(detail, _PUBLISHED), f"cannot publish a {type(detail).__name__}")
@@ -283,6 +292,14 @@ class EventBus:
             for subscriber in self._subscribers:
                 subscriber.offer(event, self._clock)
         return event
+
+    def kept(self, sequence: int) -> Event | None:
+        """The event numbered `sequence` while the history keeps it, else None."""
+        with self._lock:
+            if not self._history:
+                return None
+            index = sequence - self._history[0].sequence
+            return self._history[index] if 0 <= index < len(self._history) else None
 
     # Subscribing.
 

@@ -1,6 +1,6 @@
 """The records of the device's event stream (seed section 2, DESIGN 8), mirroring
 landscape.v1 event_service.proto: a command's phases, alarms, state changes, digital-I/O
-signals, RSVP questions and answers, operator messages, and lost events. Pure Python; the bus
+signals, RSVP questions and answers, operator messages, acknowledged alarms, and lost events. Pure Python; the bus
 (events.py) numbers and fans them out, convert.py puts them on the wire.
 """
 from __future__ import annotations
@@ -115,6 +115,17 @@ class OperatorMessage:
 
 
 @dataclass(frozen=True, slots=True)
+class AlarmAcknowledged:
+    """The alarm published as event `alarm_sequence` was acknowledged: `by` whom (the
+    caller's token name, or its address with tokens off), through which front end (`client`)
+    and for whom (`on_behalf_of`), as the caller's identity headers say."""
+    alarm_sequence: int
+    by: str
+    client: str = ""
+    on_behalf_of: str = ""
+
+
+@dataclass(frozen=True, slots=True)
 class EventsLost:
     """Events first_sequence..last_sequence (inclusive) that this subscriber will not get."""
     first_sequence: int
@@ -122,10 +133,10 @@ class EventsLost:
 
 
 Detail = (CommandEvent | Alarm | StateChange | DigitalIOSignal | RsvpRequest | RsvpAnswer
-          | OperatorMessage | EventsLost)
+          | OperatorMessage | AlarmAcknowledged | EventsLost)
 # What the device publishes; EventsLost is made by the bus for one subscriber only.
 _PUBLISHED = (CommandEvent, Alarm, StateChange, DigitalIOSignal, RsvpRequest, RsvpAnswer,
-              OperatorMessage)
+              OperatorMessage, AlarmAcknowledged)
 
 
 @dataclass(frozen=True, slots=True)

@@ -75,7 +75,8 @@ class TokenFileError(ValueError):
 # RPCs whose state rule makes them read-only but which act on the device or its people.
 _ADMIN = {"OperatePanel", "Reset"}
 # FetchRecording: a file off the device's disk, for those who command the cell (audited).
-_OPERATOR = {"Connect", "SendCommand", "Lock", "FetchRecording"}
+# AcknowledgeAlarm: no lease (anyone commanding the cell may), but audited and named.
+_OPERATOR = {"Connect", "SendCommand", "Lock", "FetchRecording", "AcknowledgeAlarm"}
 _PUBLIC_SERVICES = {"grpc.health.v1.Health"}
 # Anyone watching the cell may stop it; releasing the e-stop is an operator's; the rest of the
 # panel (the door) an admin's.

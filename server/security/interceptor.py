@@ -42,6 +42,7 @@ from landscape.server.security.audit import AuditLog, Record
 from landscape.server.security.auth import (Identity, Role, RoleTooLow, TokenStore, Unauthenticated,
                                    front_end, required_role)
 from landscape.server.errors import CommandError, ResourceExhausted
+from landscape.server.api.caller import CALLER, Caller
 from landscape.server.api.stream_caps import CLIENT, peer_address
 from landscape.server.log_text import printable
 from landscape.server.security.rate_limit import RateLimiter
@@ -101,6 +102,7 @@ class _Call:
             client, size = f"{self.address} {via}", via
         self.record.who, self.record.role = self.identity.name, self.identity.role.label
         CLIENT.set(client)      # this call's task: the guard's stream caps see it
+        CALLER.set(Caller(self.identity.name, via, on_behalf_of))   # and servicers naming it
         message = request if hasattr(request, "ListFields") else None
         needs = required_role(self.method, message)
         if self.identity.role < needs:

@@ -24,7 +24,7 @@ EXPECTED = {
         "GetCellDescription", "ListPaths", "GetPath",
     ],
     services.DIGITAL_IO: ["SetDigitalIO", "GetDigitalIO", "SignalDigitalIO", "ListDigitalIO"],
-    services.EVENTS: ["Subscribe", "PostMessage"],
+    services.EVENTS: ["Subscribe", "PostMessage", "AcknowledgeAlarm"],
     services.SESSIONS: ["Connect"],
     services.STATE: ["StreamState"],
 }

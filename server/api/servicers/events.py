@@ -13,15 +13,18 @@ from landscape.server import errors
 from landscape.server.events import bus as events
 from landscape.server.api.convert import event_to_proto
 from landscape.server.api.guard import guarded
+from landscape.server.api.servicers.alarms import AlarmAcknowledging
+from landscape.server.events.acknowledgements import Acknowledgements
 from landscape.v1 import event_service_pb2 as pb
 
 
 @guarded(services.EVENTS)
-class EventServicer(services.EVENTS.servicer_base):
+class EventServicer(AlarmAcknowledging, services.EVENTS.servicer_base):
     def __init__(self, device, bus: events.EventBus, dispatch, limits,
                  shared_conversions: int = 1024):
         self.device, self.dispatch, self.limits = device, dispatch, limits
         self._bus = bus
+        self.acknowledgements = Acknowledgements(bus)
         # Every subscriber sends the same events: convert each once (~13 us), not once per
         # subscriber. The cached messages are only ever serialized, never changed.
         self._response = functools.lru_cache(maxsize=shared_conversions)(_response)
