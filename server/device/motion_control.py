@@ -115,9 +115,19 @@ class MotionControl:
         """Seed 3.4.1 moveAbsolute / moveRelative: plan, then start; values in SI (joints rad;
         x, y, z m and roll, pitch, yaw rad); `settings`: this move's (default: the device's).
         Nothing moves if planning fails."""
+        trajectory = self.plan_move(frame, values, relative, straight, speed_percent, settings,
+                                    f"{command} {point_name}".strip())
+        return self.start(command, point_name, [trajectory], checked=True)
+
+    def plan_move(self, frame: Frame, values: np.ndarray, relative: bool, straight: bool,
+                  speed_percent: float | None, settings: MotionSettings | None = None,
+                  what: str = "the move"):
+        """move()'s trajectory, planned and checked against the cell (`what` names it in a
+        collision), not started (SolvePose); raises what move() would refuse with."""
         trajectory = self.planner.move(self.planning_start(), settings or self.settings.current,
                                        frame, values, relative, straight, speed_percent)
-        return self.start(command, point_name, [trajectory])
+        self.check_collisions([trajectory], what)
+        return trajectory
 
     def move_arc(self, point_name: str, frame: Frame, via: np.ndarray, goal: np.ndarray,
                  relative: bool, speed_percent: float | None) -> str:

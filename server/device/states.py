@@ -108,6 +108,8 @@ RULES: dict[str, Rule] = {
     # stored paths read back
     "ListPaths": _read("3.5.1"),
     "GetPath": _read("3.5.1"),
+    # plan-only: MoveAbsolute's planning and checks, nothing started
+    "SolvePose": _read("3.4.1"),
     # The operator panel: no lease (the e-stop works whoever holds the lock); admin only.
     "OperatePanel": _read("-"),
     # 4 DIGITAL_IO

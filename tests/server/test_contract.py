@@ -21,7 +21,7 @@ EXPECTED = {
         "GetEndEffectorState", "GetTool", "PutTool", "ActivateTool", "DeactivateTool",
         "SendCommand",
         "Jog", "Reset", "GetDeviceState", "GetRobotDescription", "OperatePanel",
-        "GetCellDescription", "ListPaths", "GetPath",
+        "GetCellDescription", "ListPaths", "GetPath", "SolvePose",
     ],
     services.DIGITAL_IO: ["SetDigitalIO", "GetDigitalIO", "SignalDigitalIO", "ListDigitalIO"],
     services.EVENTS: ["Subscribe", "PostMessage", "AcknowledgeAlarm"],

@@ -376,7 +376,7 @@ def test_every_rpc_of_the_contract_needs_a_role_and_health_none():
                                                                             "Reset"}
     assert roles["MoveAbsolute"] is roles["Lock"] is roles["Connect"] is Role.OPERATOR
     assert roles["GetRobotPosition"] is roles["StreamState"] is roles["Subscribe"] is Role.VIEWER
-    assert roles["ListPaths"] is roles["GetPath"] is Role.VIEWER
+    assert roles["ListPaths"] is roles["GetPath"] is roles["SolvePose"] is Role.VIEWER
     assert roles["AcknowledgeAlarm"] is Role.OPERATOR
     assert Role.PUBLIC not in roles.values()
     assert required_role("/grpc.health.v1.Health/Check") is Role.PUBLIC

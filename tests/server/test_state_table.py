@@ -45,6 +45,7 @@ READS = ["GetUnits", "GetVelocities", "GetAccelerations", "GetMaxVelocities",
          "FetchRecording",                 # the recorder's stored file (LLI s7.4 5.5)
          "ListPaths", "GetPath",           # the stored paths (3.5.1) read back
          "AcknowledgeAlarm",               # 2.1's alarms, acknowledged: an operator's, no lease
+         "SolvePose",                      # 3.4.1's planning, nothing moves
          ]
 # The seed's headings put every motion command in "Active" (3.4.1, 3.5.2) but its text for
 # moveReact (3.7.2) says "valid only in the Resting State": one motion at a time, so a command

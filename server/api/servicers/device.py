@@ -13,6 +13,7 @@ from landscape.server.errors import ControllerFailure, Stopped
 from landscape.server.planning.process import StreamRef
 from landscape.server.api.guard import blocking, guarded, lease_of
 from landscape.server.api.servicers.paths import PathReads
+from landscape.server.api.servicers.pose_solving import PoseSolving
 from landscape.server.planning.targets import Frame
 from landscape.robot.units import Units, pose_matrix
 from landscape.server.workcell.assembly import Workcell
@@ -24,7 +25,7 @@ JOG_END_TIMEOUT = 5.0   # s for a jogging arm to come to rest once its stream en
 
 
 @guarded(services.DEVICE)
-class DeviceServicer(PathReads, services.DEVICE.servicer_base):
+class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
     def __init__(self, device: Device, workcell: Workcell, hub, dispatch, limits):
         self.device, self.workcell, self.hub = device, workcell, hub
         self.dispatch, self.limits = dispatch, limits
