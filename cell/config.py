@@ -84,14 +84,22 @@ class DeviceTable(Table):
     clock: string(CLOCKS) = "realtime"
     reset_settings: flag = False
     collision_margin: number(above=0.0, high=MAX_COLLISION_MARGIN) = ServerConfig.collision_margin
+    # Its arm's base in the cell's frame (m, deg), shared with the other arms; either key
+    # places it (the other is zeros).
+    placement_xyz: vector(3) | None = None
+    placement_rpy_deg: vector(3) | None = None
 
-    def spec(self, index: int, base: Path) -> DeviceSpec:
+    def spec(self, index: int, base: Path, cell: str = "") -> DeviceSpec:
         name = self.name or f"arm{index + 1}"
+        placed = self.placement_xyz is not None or self.placement_rpy_deg is not None
         return DeviceSpec(
             name=name, address=self.address, port=50051 + index if self.port is None else self.port,
             host=self.host or ("127.0.0.1" if _is_wildcard(self.address) else self.address),
             world=self.world, data=self.data or base / "var" / name, clock=self.clock,
-            reset_settings=self.reset_settings, collision_margin=self.collision_margin)
+            reset_settings=self.reset_settings, collision_margin=self.collision_margin,
+            placement=(*(self.placement_xyz or (0.0,) * 3),
+                       *map(math.radians, self.placement_rpy_deg or (0.0,) * 3)) if placed else None,
+            cell=cell)
 
 
 class SecurityTable(Table):
@@ -205,7 +213,8 @@ class ConfigFile(Table):
     @model_validator(mode="after")
     def _a_cell(self, info: ValidationInfo):
         base, security = info.context["base"], self.security.spec()
-        devices = tuple(d.spec(i, base) for i, d in enumerate(self.devices or [DeviceTable()]))
+        devices = tuple(d.spec(i, base, self.name)
+                        for i, d in enumerate(self.devices or [DeviceTable()]))
         names = [d.name for d in devices]
         for i, device in enumerate(devices):
             if names.count(device.name) > 1:

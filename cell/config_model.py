@@ -29,6 +29,10 @@ class DeviceSpec:
     clock: str = "realtime"
     reset_settings: bool = False
     collision_margin: float = ServerConfig.collision_margin   # m (server/config.py)
+    # Where its arm's base stands in this cell, shared with the others: x, y, z (m), roll,
+    # pitch, yaw (rad); None: not given (displays set the arms side by side).
+    placement: tuple[float, ...] | None = None
+    cell: str = ""   # the shared cell's name
 
     @property
     def target(self) -> str:

@@ -8,6 +8,7 @@ they really have (a port 0 becomes a real one).
 from __future__ import annotations
 
 import importlib.util
+import math
 import re
 import sys
 from dataclasses import dataclass
@@ -63,6 +64,11 @@ def device_service(device: DeviceSpec, security: SecuritySpec, port: int | None 
         argv += ["--cell", str(device.world)]
     if device.reset_settings:
         argv.append("--reset-settings")
+    if device.placement is not None:
+        xyz, rpy = device.placement[:3], (math.degrees(a) for a in device.placement[3:])
+        # One word with "=": a value starting with "-" would read as an option.
+        argv += ["--placement=" + ",".join(f"{v!r}" for v in (*xyz, *rpy)),
+                 "--shared-cell=" + device.cell]
     if security.tls:
         argv += ["--tls-cert", str(security.cert), "--tls-key", str(security.key)]
         if security.mtls:

@@ -200,3 +200,8 @@ class Cell:
     sensors: tuple[SensorSpec, ...]
     recorder: RecorderSpec
     source: str = "<string>"
+    # Where base_link stands in a cell shared with other arms (the launcher's cell file, not
+    # this world file: [[devices]] placement_xyz, placement_rpy_deg), and that cell's name;
+    # None: the arm is placed nowhere beyond its own world.
+    placement: Pose | None = None
+    shared_cell: str = ""

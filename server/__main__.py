@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import signal
 import sys
@@ -60,6 +61,11 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
                         default=ServerConfig.collision_margin, metavar="METRES",
                         help="no planned motion may bring two bodies of the cell closer than "
                              "this; a jog stops there (default %(default)s m)")
+    parser.add_argument("--placement", default=None, metavar="X,Y,Z,ROLL,PITCH,YAW",
+                        help="where the arm's base stands in a cell shared with other arms "
+                             "(metres, degrees), for displays (default: nowhere)")
+    parser.add_argument("--shared-cell", default="", metavar="NAME",
+                        help="the name of the cell --placement places the arm in")
     _security_arguments(parser.add_argument_group(
         "security", "plaintext is for loopback: any other --address needs TLS and tokens, or "
                     "--insecure"))
@@ -79,6 +85,16 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
         parser.error(f"--collision-margin must be above 0 and at most {MAX_COLLISION_MARGIN} m")
     if args.mtls and not args.tls_ca:
         parser.error("--mtls needs --tls-ca (the CA that signs the clients' certificates)")
+    placement = None
+    if args.placement is not None:
+        try:
+            placement = tuple(float(v) for v in args.placement.split(","))
+        except ValueError:
+            placement = ()
+        if len(placement) != 6 or not all(map(math.isfinite, placement)):
+            parser.error(f"--placement takes six numbers X,Y,Z,ROLL,PITCH,YAW (metres, degrees), "
+                         f"not {args.placement!r}")
+        placement = (*placement[:3], *map(math.radians, placement[3:]))
     sized = {}
     for item in args.rate_limit_for:
         name, _, rate = item.partition("=")
@@ -99,7 +115,8 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
                           reset_settings=args.reset_settings, security=security,
                           collision_margin=args.collision_margin,
                           max_message_bytes=args.max_message_bytes,
-                          metrics_port=args.metrics_port, metrics_address=args.metrics_address)
+                          metrics_port=args.metrics_port, metrics_address=args.metrics_address,
+                          placement=placement, shared_cell=args.shared_cell)
     return config, args.log_level
 
 

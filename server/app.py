@@ -7,6 +7,7 @@ command bodies run on the guard's thread pools (servicers/guard.py).
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import sys
 import threading
@@ -45,6 +46,7 @@ from landscape.server.api.servicers.state import StateServicer
 from landscape.server.api.state_stream import StateHub
 from landscape.server.workcell.assembly import Workcell, build_workcell
 from landscape.robot.cell import load_cell
+from landscape.robot.cell_model import Pose
 
 log = logging.getLogger(__name__)
 
@@ -161,6 +163,9 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         security.close()
         raise
     cell = load_cell(config.cell)
+    if config.placement is not None:
+        cell = dataclasses.replace(cell, shared_cell=config.shared_cell, placement=Pose(
+            config.placement[:3], config.placement[3:]))
     link = ControllerLink(config.clock, config.cell,
                           on_message=lambda msg: device and device.on_cycle_message(msg),
                           on_lost=lambda why: device and device.controller_lost(why),

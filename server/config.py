@@ -59,6 +59,10 @@ class ServerConfig:
     # it goes, which tests can hold and step; for tests).
     cell: str | None = None
     clock: str = "realtime"
+    # Where the arm's base stands in a cell shared with other arms (x, y, z m; roll, pitch,
+    # yaw rad) and that cell's name (GetCellDescription's world_in_cell); None: nowhere.
+    placement: tuple[float, ...] | None = None
+    shared_cell: str = ""
     # The controller backend (robot/backends.py: "pybullet", "kinematic") if not the cell
     # file's (tests run the device's contract on both).
     backend: str | None = None

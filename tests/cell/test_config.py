@@ -71,6 +71,9 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
     assert "--token-file" in gateway
     server = device_service(config.devices[1], config.security).argv
     assert "--tokens" in server and "--tls-cert" in server
+    # Both arms stand in the one cell: the servers are told where.
+    assert [d.placement for d in config.devices] == [(0.0,) * 6, (0.0, 2.5, 0.0, 0.0, 0.0, 0.0)]
+    assert "--placement=0.0,2.5,0.0,0.0,0.0,0.0" in server and "--shared-cell=lan" in server
     # The supervisor: people sign in with the devices' tokens; its own feeds are a viewer's.
     assert config.supervisor.sign_in_tokens == tmp_path / "var" / "tokens"
     assert config.supervisor.token == tmp_path / "var" / "tokens" / "viewer.tokens"
@@ -92,6 +95,8 @@ def test_the_lan_example_is_valid_once_certificates_and_tokens_exist(tmp_path):
      r"collision_margin: expected a number above 0 and at most 0\.1, got 0"),
     ("[[devices]]\nname = 'a'\ncollision_margin = 0.5",
      r"collision_margin: expected a number above 0 and at most 0\.1, got 0\.5"),
+    ("[[devices]]\nname = 'a'\nplacement_xyz = [1, 2]",
+     r"devices\[0\]\.placement_xyz: expected a list of 3 numbers, got \[1, 2\]"),
     ("[gateway]\ndevice = 'arm9'", r"gateway\.device: no device is named 'arm9'"),
     ("[supervisor]\ndevices = []",
      r"supervisor\.devices: expected a non-empty list of device names, got \[\]"),

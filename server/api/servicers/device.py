@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import asyncio
 
+import numpy as np
+
 from landscape.server.api import cell_view, convert, services
 from landscape.server.device.device import Device
 from landscape.server.errors import ControllerFailure, Stopped
@@ -363,12 +365,16 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
 
     def GetCellDescription(self, request, context):
         scene = self.device.collisions
-        base = scene.cell.base
+        cell = scene.cell
+        base = pose_matrix(cell.base.xyz, cell.base.rpy)
+        placement = cell.placement
+        world_in_cell = None if placement is None else convert.matrix_to_pose(
+            pose_matrix(placement.xyz, placement.rpy) @ np.linalg.inv(base), Units())
         return control_pb2.GetCellDescriptionResponse(
-            ret_val=convert.ok(), cell_name=scene.cell.name,
-            base=convert.matrix_to_pose(pose_matrix(base.xyz, base.rpy), Units()),
-            floor=scene.cell.world.floor,
-            bodies=[convert.cell_body_to_pb(body) for body in cell_view.bodies(scene)])
+            ret_val=convert.ok(), cell_name=cell.name, base=convert.matrix_to_pose(base, Units()),
+            floor=cell.world.floor,
+            bodies=[convert.cell_body_to_pb(body) for body in cell_view.bodies(scene)],
+            world_in_cell=world_in_cell, shared_cell=cell.shared_cell)
 
     def GetRobotDescription(self, request, context):
         arm = self.device.arm
