@@ -7,6 +7,7 @@ command bodies run on the guard's thread pools (servicers/guard.py).
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import sys
 import dataclasses
@@ -36,6 +37,7 @@ from landscape.server.planning.paths import PathStore
 from landscape.server.security.rate_limit import RateLimiter
 from landscape.server.api.reflection_pool import MethodResolvingPool
 from landscape.server.security.interceptor import SecurityInterceptor
+from landscape.server.api.servicers.audit import AuditServicer
 from landscape.server.api.servicers.device import DeviceServicer
 from landscape.server.api.servicers.digital_io import DigitalIOServicer
 from landscape.server.api.servicers.events import EventServicer
@@ -183,7 +185,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
         if config.start_device:
             device.start()
         health_servicer = runner.run(_start(server, device, workcell, bus, hub, dispatch,
-                                            limits, cell.recorder.path))
+                                            limits, cell.recorder.path, config.security))
     except BaseException:
         device.close()
         workcell.close()
@@ -284,7 +286,8 @@ async def _bind(config: ServerConfig,
     return server, port
 
 
-async def _start(server, device, workcell, bus, hub, dispatch, limits, recording: str):
+async def _start(server, device, workcell, bus, hub, dispatch, limits, recording: str,
+                 security: SecurityConfig):
     hub.attach(asyncio.get_running_loop())
     servicers = {
         services.DEVICE: DeviceServicer(device, workcell, hub, dispatch, limits),
@@ -293,6 +296,8 @@ async def _start(server, device, workcell, bus, hub, dispatch, limits, recording
         services.SESSIONS: SessionServicer(device, dispatch, limits),
         services.STATE: StateServicer(device, hub, dispatch, limits),
         services.RECORDINGS: RecordingServicer(device, recording, dispatch, limits),
+        services.AUDIT: AuditServicer(device, security.audit_log, security.audit_backups,
+                                      dispatch, limits),
     }
     for spec, servicer in servicers.items():
         spec.add_to_server(servicer, server)

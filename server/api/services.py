@@ -10,7 +10,8 @@ from types import ModuleType
 
 import grpc
 
-from landscape.v1 import (device_service_pb2, device_service_pb2_grpc, digital_io_service_pb2,
+from landscape.v1 import (audit_service_pb2, audit_service_pb2_grpc, device_service_pb2,
+                          device_service_pb2_grpc, digital_io_service_pb2,
                           digital_io_service_pb2_grpc, event_service_pb2, event_service_pb2_grpc,
                           recording_service_pb2, recording_service_pb2_grpc, session_service_pb2, session_service_pb2_grpc, state_service_pb2,
                           state_service_pb2_grpc)
@@ -71,5 +72,6 @@ EVENTS = ServiceSpec("EventService", event_service_pb2, event_service_pb2_grpc)
 SESSIONS = ServiceSpec("SessionService", session_service_pb2, session_service_pb2_grpc)
 STATE = ServiceSpec("StateService", state_service_pb2, state_service_pb2_grpc)
 RECORDINGS = ServiceSpec("RecordingService", recording_service_pb2, recording_service_pb2_grpc)
+AUDIT = ServiceSpec("AuditService", audit_service_pb2, audit_service_pb2_grpc)
 
-ALL = (DEVICE, DIGITAL_IO, EVENTS, SESSIONS, STATE, RECORDINGS)
+ALL = (DEVICE, DIGITAL_IO, EVENTS, SESSIONS, STATE, RECORDINGS, AUDIT)

@@ -127,6 +127,8 @@ RULES: dict[str, Rule] = {
     "StreamState": _read("-"),
     # the controller recorder's stored file (LLI s7.4 5.5), read-only
     "FetchRecording": _read("-"),
+    # the audit log, read back: admin only (auth.py)
+    "ReadAuditLog": _read("-"),
 }
 
 

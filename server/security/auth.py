@@ -73,7 +73,8 @@ class TokenFileError(ValueError):
 
 
 # RPCs whose state rule makes them read-only but which act on the device or its people.
-_ADMIN = {"OperatePanel", "Reset"}
+# ReadAuditLog: the audit names people and what they did.
+_ADMIN = {"OperatePanel", "Reset", "ReadAuditLog"}
 # FetchRecording: a file off the device's disk, for those who command the cell (audited).
 # AcknowledgeAlarm: no lease (anyone commanding the cell may), but audited and named.
 _OPERATOR = {"Connect", "SendCommand", "Lock", "FetchRecording", "AcknowledgeAlarm"}

@@ -27,12 +27,13 @@ EXPECTED = {
     services.EVENTS: ["Subscribe", "PostMessage", "AcknowledgeAlarm"],
     services.SESSIONS: ["Connect"],
     services.STATE: ["StreamState"],
+    services.AUDIT: ["ReadAuditLog"],
 }
 
 # (client streaming, server streaming)
 STREAMING = {"PathLoad": (True, False), "Jog": (True, True), "Subscribe": (False, True),
              "Connect": (True, True), "StreamState": (False, True),
-             "GetPath": (False, True)}
+             "GetPath": (False, True), "ReadAuditLog": (False, True)}
 
 
 @pytest.mark.parametrize("spec", list(EXPECTED), ids=lambda s: s.name)

@@ -373,7 +373,7 @@ def test_every_rpc_of_the_contract_needs_a_role_and_health_none():
     roles = {method.name: required_role(f"/{spec.full_name}/{method.name}")
              for spec in services.ALL for method in spec.descriptor.methods}
     assert {name for name, role in roles.items() if role is Role.ADMIN} == {"OperatePanel",
-                                                                            "Reset"}
+                                                                            "Reset", "ReadAuditLog"}
     assert roles["MoveAbsolute"] is roles["Lock"] is roles["Connect"] is Role.OPERATOR
     assert roles["GetRobotPosition"] is roles["StreamState"] is roles["Subscribe"] is Role.VIEWER
     assert roles["ListPaths"] is roles["GetPath"] is roles["SolvePose"] is Role.VIEWER

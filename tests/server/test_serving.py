@@ -33,9 +33,11 @@ def test_every_rpc_of_the_contract_is_built():
     """What is not built answers UNIMPLEMENTED (guard.py); today nothing is left."""
     from landscape.server.app import DeviceServicer, DigitalIOServicer, EventServicer
     from landscape.server.app import RecordingServicer, SessionServicer, StateServicer
+    from landscape.server.app import AuditServicer
     servicers = {services.DEVICE: DeviceServicer, services.DIGITAL_IO: DigitalIOServicer,
                  services.EVENTS: EventServicer, services.SESSIONS: SessionServicer,
-                 services.STATE: StateServicer, services.RECORDINGS: RecordingServicer}
+                 services.STATE: StateServicer, services.RECORDINGS: RecordingServicer,
+                 services.AUDIT: AuditServicer}
     assert set(servicers) == set(services.ALL)
     missing = [f"{spec.name}.{method.name}" for spec, cls in servicers.items()
                for method in spec.descriptor.methods

@@ -42,7 +42,12 @@ READS = ["GetUnits", "GetVelocities", "GetAccelerations", "GetMaxVelocities",
          # Extensions, read-only (OperatePanel is the person at the cell: no lease, any state).
          "GetDeviceState", "GetRobotDescription", "GetCellDescription", "OperatePanel",
          "ListDigitalIO", "StreamState",
-         "FetchRecording"]                 # the recorder's stored file (LLI s7.4 5.5)
+         "FetchRecording",                 # the recorder's stored file (LLI s7.4 5.5)
+         "ListPaths", "GetPath",           # the stored paths (3.5.1) read back
+         "AcknowledgeAlarm",               # 2.1's alarms, acknowledged: an operator's, no lease
+         "SolvePose",                      # 3.4.1's planning, nothing moves
+         "ReadAuditLog",                   # the audit log: an admin's
+         ]
 # The seed's headings put every motion command in "Active" (3.4.1, 3.5.2) but its text for
 # moveReact (3.7.2) says "valid only in the Resting State": one motion at a time, so a command
 # that starts a motion needs the arm at rest (DESIGN.md 4: Resting --move--> Moving).
