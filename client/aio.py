@@ -37,14 +37,16 @@ from landscape.client.event_feed import LOSS_GRACE, EventFeed
 from landscape.client.identity import Identity
 from landscape.client.link import DeviceLink
 from landscape.client.values import DeviceState, Frame
-from landscape.v1 import (device_service_pb2_grpc, digital_io_service_pb2_grpc, event_service_pb2,
-                          event_service_pb2_grpc, sensing_pb2, state_service_pb2,
+from landscape.v1 import (audit_service_pb2_grpc, device_service_pb2_grpc,
+                          digital_io_service_pb2_grpc, event_service_pb2, event_service_pb2_grpc,
+                          recording_service_pb2_grpc, sensing_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
 
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT = 30.0   # seconds, for a blocking call that names none
-STATE = "state"          # the StateService's stub (beside commands.DEVICE, IO, EVENTS)
+# The stubs beside commands.DEVICE, IO, EVENTS: for streams and invoke_stream.
+STATE, RECORDING, AUDIT = "state", "recording", "audit"
 FENCE_TIMEOUT = 5.0      # seconds for the event subscription to be registered (event_feed.py)
 
 
@@ -277,7 +279,9 @@ class AsyncRobot(DeviceCommands):
             self._stubs = {DEVICE: device_service_pb2_grpc.DeviceServiceStub(channel),
                            IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(channel),
                            EVENTS: event_service_pb2_grpc.EventServiceStub(channel),
-                           STATE: state_service_pb2_grpc.StateServiceStub(channel)}
+                           STATE: state_service_pb2_grpc.StateServiceStub(channel),
+                           RECORDING: recording_service_pb2_grpc.RecordingServiceStub(channel),
+                           AUDIT: audit_service_pb2_grpc.AuditServiceStub(channel)}
         return self._stubs[service]
 
     def _metadata(self) -> tuple[tuple[str, str], ...]:

@@ -36,6 +36,7 @@ import grpc
 from google.protobuf import json_format
 
 from landscape.client import AsyncRobot, LandscapeError, SessionEnded
+from landscape.client.aio import AUDIT, RECORDING
 from landscape.client.commands import DEVICE, EVENTS, IO
 from landscape.client.errors import to_status
 from landscape.supervisor import wire
@@ -52,7 +53,8 @@ from landscape.v1 import control_pb2, session_service_pb2, types_pb2
 log = logging.getLogger(__name__)
 
 FED = {STREAM_STATE, SUBSCRIBE}   # fed to every browser by its hub; a browser does not open them
-SERVICES = {"DeviceService": DEVICE, "DigitalIOService": IO, "EventService": EVENTS}
+SERVICES = {"DeviceService": DEVICE, "DigitalIOService": IO, "EventService": EVENTS,
+            "RecordingService": RECORDING, "AuditService": AUDIT}
 CALL_TIMEOUT_S = 120.0   # a blocking call's longest wait (an Activate, a long PathLoad)
 
 

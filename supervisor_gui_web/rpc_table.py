@@ -11,8 +11,9 @@ from dataclasses import dataclass
 from google.protobuf import message_factory
 from google.protobuf.descriptor import MethodDescriptor
 
-from landscape.v1 import (device_service_pb2, digital_io_service_pb2, session_service_pb2,
-                          state_service_pb2, event_service_pb2)
+from landscape.v1 import (audit_service_pb2, device_service_pb2, digital_io_service_pb2,
+                          event_service_pb2, recording_service_pb2, session_service_pb2,
+                          state_service_pb2)
 
 # Services whose RPCs the browser calls through the backend. StateService and EventService are
 # fed to every browser by the backend itself (one stream per device, shared), so they are here
@@ -23,6 +24,8 @@ SERVICES = {
     "SessionService": session_service_pb2,
     "StateService": state_service_pb2,
     "EventService": event_service_pb2,
+    "RecordingService": recording_service_pb2,
+    "AuditService": audit_service_pb2,
 }
 
 

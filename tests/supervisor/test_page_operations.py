@@ -13,10 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dashboard_support import Page
+from dashboard_support import DashboardThread, Page
 from landscape.client import Frame, Robot, TagPoint
+from landscape.server.config import SecurityConfig
 from landscape.server.device.states import State
-from support import wait_until
+from support import start_server, wait_until
 
 SRC = Path(__file__).resolve().parents[2] / "supervisor_gui_web" / "frontend" / "src"
 GOAL = (0.4, 0.1, 1.4, 0.0, 1.4, 0.0)
@@ -255,17 +256,39 @@ def test_the_devices_stored_paths_are_listed_and_read_for_the_preview(chromium, 
     page.close()
 
 
-def test_the_recorder_runs_and_downloads_say_they_are_not_offered_yet(chromium, dashboard,
-                                                                      cell_server):
-    page = Page(chromium, dashboard)
-    page.page.locator("details.panel > summary", has_text="Recordings").click()
-    assert page.page.locator("#btn-recorder-start").is_disabled()   # the lock holder's
-    page.take_control()
-    page.click("btn-recorder-start")
-    page.shows("recorder-result", "arm1: recording")
-    page.click("btn-recorder-stop")
-    page.shows("recorder-result", "arm1: stopped")
-    for button in ("btn-download-recording", "btn-download-audit"):
-        assert page.page.locator(f"#{button}").is_disabled()
-    page.shows("downloads-note", "Not available yet")
-    page.close()
+def test_the_recorder_runs_and_its_recording_and_the_audit_log_download(chromium, people,
+                                                                          tmp_path):
+    """Issue 28: the recorder stores an MCAP file on the device; an operator downloads it
+    (RecordingService.FetchRecording, checked against its SHA-256), an admin the audit log
+    (AuditService.ReadAuditLog), which names the operator's calls and its own; the audit log
+    is not an operator's."""
+    server = start_server(lockstep_pace=1.0,
+                          security=SecurityConfig(audit_log=str(tmp_path / "audit.log")))
+    dashboard = DashboardThread({"arm1": server.target}, people)
+    try:
+        page = Page(chromium, dashboard)
+        page.page.locator("details.panel > summary", has_text="Recordings").click()
+        assert page.page.locator("#btn-recorder-start").is_disabled()   # the lock holder's
+        assert page.page.locator("#btn-download-audit").is_disabled()   # an admin's
+        page.take_control()
+        for action, said in (("start", "recording"), ("stop", "stopped"), ("store", "")):
+            page.click(f"btn-recorder-{action}")
+            page.shows("recorder-result", f"arm1: {said}")
+        with page.page.expect_download() as download:
+            page.click("btn-download-recording")
+        page.shows("download-result", "saved")
+        assert download.value.suggested_filename.startswith("arm1-")
+        assert Path(download.value.path()).read_bytes().startswith(b"\x89MCAP0\r\n")
+        page.close()
+        admin = Page(chromium, dashboard, name="ada")
+        admin.page.locator("details.panel > summary", has_text="Recordings").click()
+        with admin.page.expect_download() as download:
+            admin.click("btn-download-audit")
+        admin.shows("download-result", "the audit log (audit.log)")
+        records = [json.loads(line) for line in Path(download.value.path()).read_text().splitlines()]
+        assert any(r.get("for") == "olga" and r["rpc"].endswith("/Lock") for r in records), records
+        assert records[-1]["rpc"].endswith("/ReadAuditLog") and records[-1]["for"] == "ada"
+        admin.close()
+    finally:
+        dashboard.stop()
+        server.stop(grace=None)
