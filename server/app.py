@@ -10,7 +10,6 @@ import asyncio
 import dataclasses
 import logging
 import sys
-import dataclasses
 import threading
 from dataclasses import dataclass
 

@@ -72,27 +72,33 @@ def test_list_paths_sums_up_each_stored_path_and_get_path_gives_its_joints(arm):
     # The Cartesian points come back as the joints the device resolved them to: the tool tip
     # (through the offset they were loaded with) where they were asked to be.
     (message,) = get_path(arm.device, "line")
+    get_path_si = message.points
     tcp = np.eye(4)
     tcp[2, 3] = 0.1
     for got, sent in zip(message.points, line):
         tip = arm.kin.forward(np.array(got.joint_values)) @ tcp
         assert np.allclose(tip[:3, 3], [sent.x, sent.y, sent.z], atol=1e-6)
-
-
-def test_get_path_streams_a_long_path_in_chunks_in_the_device_units(arm):
-    joints = joint_points(2500)
-    load(arm.device, "long", joints)
+    # In the device's units, whatever they were loaded in.
     arm.device.SetUnits(settings_pb2.SetUnitsRequest(
         linear_units=types_pb2.LINEAR_UNIT_MILLIMETERS,
         angular_units=types_pb2.ANGULAR_UNIT_DEGREES), timeout=10)
+    (message,) = get_path(arm.device, "line")
+    assert message.units.angular == types_pb2.ANGULAR_UNIT_DEGREES
+    assert message.path.tool_offset.z == pytest.approx(100.0)
+    assert np.allclose([p.joint_values for p in message.points],
+                       np.degrees([p.joint_values for p in get_path_si]))
+
+
+def test_get_path_streams_a_long_path_in_chunks(arm):
+    joints = joint_points(2001)
+    load(arm.device, "long", joints)
     messages = get_path(arm.device, "long")
     assert [(m.first_point, len(m.points)) for m in messages] == [(0, 1000), (1000, 1000),
-                                                                  (2000, 500)]
-    assert messages[0].path.number_of_points == 2500
+                                                                  (2000, 1)]
+    assert messages[0].path.number_of_points == 2001
     assert not any(m.HasField("path") for m in messages[1:])
-    assert messages[0].units.angular == types_pb2.ANGULAR_UNIT_DEGREES
     got = [p.joint_values for m in messages for p in m.points]
-    assert np.allclose(got, np.degrees([p.joint_values for p in joints]))
+    assert np.allclose(got, [p.joint_values for p in joints])
 
 
 def test_an_unknown_path_is_not_found_and_an_empty_device_lists_none(arm):
