@@ -9,7 +9,8 @@
 
 The command methods are in commands.py; here each returns an awaitable. A robot is a session
 (aio_session.py) on a DeviceLink (link.py): its own link for a "host:port" or Endpoint, or a
-link the program shares among many robots (the gateway's CRCL connections each have one).
+link the program shares among many robots (the gateway's CRCL connections each have one; a
+supervisor's people, one per person, each reading before `open()` adds its session).
 Must be used from one event loop. If the device ends the session (errors.SessionEnded: it
 stopped the arm and freed the lock), the command waited for and every later call that needed
 the lock raise it with the device's reason; `lock()` raises it too: a program that wants the
@@ -20,7 +21,7 @@ from __future__ import annotations
 import contextlib
 import logging
 from dataclasses import dataclass, field
-from typing import AsyncIterator, Sequence
+from typing import AsyncIterable, AsyncIterator, Sequence
 
 import grpc
 
@@ -36,13 +37,16 @@ from landscape.client.event_feed import LOSS_GRACE, EventFeed
 from landscape.client.identity import Identity
 from landscape.client.link import DeviceLink
 from landscape.client.values import DeviceState, Frame
-from landscape.v1 import (device_service_pb2_grpc, digital_io_service_pb2_grpc, event_service_pb2,
-                          event_service_pb2_grpc, sensing_pb2, state_service_pb2,
+from landscape.v1 import (audit_service_pb2_grpc, device_service_pb2_grpc,
+                          digital_io_service_pb2_grpc, event_service_pb2, event_service_pb2_grpc,
+                          recording_service_pb2_grpc, sensing_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
 
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT = 30.0   # seconds, for a blocking call that names none
+# The stubs beside commands.DEVICE, IO, EVENTS: for streams and invoke_stream.
+STATE, RECORDING, AUDIT = "state", "recording", "audit"
 FENCE_TIMEOUT = 5.0      # seconds for the event subscription to be registered (event_feed.py)
 
 
@@ -97,6 +101,7 @@ class AsyncRobot(DeviceCommands):
         self._on_rsvp = on_rsvp
         self._session: AsyncSession | None = None
         self._no_session: NotAllowed | None = None   # why there is no session, if refused
+        self._stubs: dict | None = None               # made on first use (_stub)
 
     async def open(self, timeout: float = 10.0) -> "AsyncRobot":
         """The link (if this robot's own) and the session; a role token that may not open a
@@ -106,13 +111,8 @@ class AsyncRobot(DeviceCommands):
             return self
         if self._own_link:
             await self._link.open(timeout)
-        link = self._link
-        self._stubs = {DEVICE: device_service_pb2_grpc.DeviceServiceStub(link.channel),
-                       IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(link.channel),
-                       EVENTS: event_service_pb2_grpc.EventServiceStub(link.channel)}
-        self._state = state_service_pb2_grpc.StateServiceStub(link.channel)
-        session = link.session(self.client_name, self._on_rsvp, identity=self.identity,
-                               token=self._token)
+        session = self._link.session(self.client_name, self._on_rsvp, identity=self.identity,
+                                     token=self._token)
         try:
             self._session = await session.open(timeout)
         except grpc.RpcError as error:
@@ -154,7 +154,9 @@ class AsyncRobot(DeviceCommands):
         """Seed 3.1.1: take the lock for this session; returns the lease, which every later
         call carries. SessionEnded if the device ended the session."""
         if self._session is None:
-            raise self._no_session
+            raise self._no_session or WrongState(
+                "open a session first: the lock belongs to a session",
+                grpc.StatusCode.FAILED_PRECONDITION, rpc="Lock")
         await self._link.events.ready(FENCE_TIMEOUT)   # its commands' events will be seen
         try:
             return await self._session.lock(timeout)
@@ -197,7 +199,7 @@ class AsyncRobot(DeviceCommands):
                      timeout: float | None = None) -> AsyncEventStream:
         """Events and alarms (seed 2.1): live only, or the kept ones after `after_sequence`
         first; with `timeout` (s) the stream raises RpcTimeout when that time is up."""
-        return AsyncEventStream(self._stubs[EVENTS].Subscribe(
+        return AsyncEventStream(self._stub(EVENTS).Subscribe(
             subscribe_request(after_sequence), metadata=self._metadata(), timeout=timeout))
 
     async def events(self, after_sequence: int | None = None, timeout: float | None = None
@@ -212,7 +214,7 @@ class AsyncRobot(DeviceCommands):
                      timeout: float | None = None) -> AsyncStateStream:
         """The device's state at `rate_hz` samples per second (0: every 4 ms cycle); see
         state_service.proto."""
-        return AsyncStateStream(self._state.StreamState(
+        return AsyncStateStream(self._stub(STATE).StreamState(
             state_request(rate_hz, frame, units, sensors), metadata=self._metadata(),
             timeout=timeout))
 
@@ -239,16 +241,48 @@ class AsyncRobot(DeviceCommands):
                     yield jog_request(velocity, frame)
             yield jog_request(None, frame)
 
-        call = self._stubs[DEVICE].Jog(requests(), metadata=self._metadata())
+        async for reply in self.jog_stream(requests()):
+            yield reply
+
+    async def jog_stream(self, requests: AsyncIterable[sensing_pb2.JogRequest]
+                         ) -> AsyncIterator[sensing_pb2.JogResponse]:
+        """`async for` a JogResponse per message of one Jog stream, whose JogRequests the
+        caller makes and paces (a program relaying someone's jog: each button press its own
+        stream); the stream ends when `requests` does."""
+        async for reply in self.invoke_stream(DEVICE, "Jog", requests):
+            yield reply
+
+    async def invoke_stream(self, service: str, rpc: str, request,
+                            timeout: float | None = None) -> AsyncIterator:
+        """`async for` each reply of a streaming call of the contract (GetPath; Jog, whose
+        `request` is an async iterable of requests); the client's exceptions when it fails;
+        with `timeout` (s) the whole stream must end within it."""
+        call = getattr(self._stub(service), rpc)(request, metadata=self._metadata(),
+                                                  timeout=timeout)
         try:
             async for reply in call:
                 yield reply
         except grpc.aio.AioRpcError as error:
-            raise await self._refusal(error, "Jog") from None
+            raise await self._refusal(error, rpc) from None
         finally:
             call.cancel()
 
     # ---- every command goes through here ----
+
+    def _stub(self, service: str):
+        """The service's stub on the link's channel, made on first use: a robot on a shared
+        link reads and streams before (or without) its session."""
+        if self._stubs is None:
+            channel = self._link.channel
+            if channel is None:
+                raise RuntimeError(f"{self.target}: open the robot (or its link) first")
+            self._stubs = {DEVICE: device_service_pb2_grpc.DeviceServiceStub(channel),
+                           IO: digital_io_service_pb2_grpc.DigitalIOServiceStub(channel),
+                           EVENTS: event_service_pb2_grpc.EventServiceStub(channel),
+                           STATE: state_service_pb2_grpc.StateServiceStub(channel),
+                           RECORDING: recording_service_pb2_grpc.RecordingServiceStub(channel),
+                           AUDIT: audit_service_pb2_grpc.AuditServiceStub(channel)}
+        return self._stubs[service]
 
     def _metadata(self) -> tuple[tuple[str, str], ...]:
         return self._session.metadata() if self._session else (
@@ -261,7 +295,7 @@ class AsyncRobot(DeviceCommands):
         if started:
             await self._link.events.ready(FENCE_TIMEOUT)
         try:
-            reply = await getattr(self._stubs[service], rpc)(
+            reply = await getattr(self._stub(service), rpc)(
                 request, metadata=self._metadata(), timeout=timeout or DEFAULT_TIMEOUT)
         except grpc.aio.AioRpcError as error:
             raise await self._refusal(error, rpc) from None

@@ -90,6 +90,11 @@ class AsyncStateStream(_AsyncStream):
                 yield message.sample
 
 
+# Meters and radians: the units of a URDF, for a program that draws or plans with the state.
+SI_UNITS = types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS,
+                           angular=types_pb2.ANGULAR_UNIT_RADIANS)
+
+
 def subscribe_request(after_sequence: int | None) -> event_service_pb2.SubscribeRequest:
     return event_service_pb2.SubscribeRequest(after_sequence=after_sequence)
 

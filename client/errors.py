@@ -20,7 +20,8 @@ session: nothing takes the lock back by itself.
 from __future__ import annotations
 
 import grpc
-from google.rpc import error_details_pb2
+from google.protobuf import any_pb2
+from google.rpc import error_details_pb2, status_pb2
 from grpc_status import rpc_status
 
 DOMAIN = "landscape"
@@ -229,3 +230,18 @@ def _error_info(error) -> error_details_pb2.ErrorInfo | None:
         if detail.Unpack(info) and info.domain == DOMAIN:
             return info
     return None
+
+
+def to_status(error: LandscapeError) -> status_pb2.Status:
+    """The google.rpc.Status an error stands for, as the device sent it (code, message, the
+    ErrorInfo with its reason and the seed's ret_code), for a program that passes refusals on
+    (the web supervisor's page). Errors without a gRPC code are UNKNOWN."""
+    code = getattr(error, "code", None) or grpc.StatusCode.UNKNOWN
+    status = status_pb2.Status(code=code.value[0],
+                               message=getattr(error, "message", None) or str(error))
+    if isinstance(error, CommandRefused) and error.reason:
+        detail = any_pb2.Any()
+        detail.Pack(error_details_pb2.ErrorInfo(reason=error.reason, domain=DOMAIN,
+                                                metadata=error.metadata))
+        status.details.append(detail)
+    return status

@@ -7,7 +7,9 @@ device has registered it (it sends the call's headers then), so
 a command started after `ready()` cannot have events the feed misses. When the stream breaks it
 is opened again after the last event seen, so nothing is missed across the gap; a device that
 restarted (it no longer has that event: OUT_OF_RANGE) is followed live again, its command ids
-starting afresh. Every event also goes to the `listeners` (a supervisor shows them).
+starting afresh (with `replay`, from its first kept event). Every event also goes to the
+`listeners` (a supervisor shows them), and each time the stream is registered or fails the
+`status_listeners` hear (code, details): (OK, "") once registered.
 
 A started command's end is waited for here (`wait`, `follow`), raced against the end of the
 session that started it: a command the device aborted because that session was lost raises
@@ -18,11 +20,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from typing import AsyncIterator, Callable
+from typing import AsyncIterator
 
 import grpc
 
 from landscape.client.errors import CommandTimeout, ServerUnavailable, SessionEnded
+from landscape.client.feed import Feed
 from landscape.client.tracking import ALARM_GRACE, CommandLog
 from landscape.v1 import event_service_pb2 as pb
 from landscape.v1 import event_service_pb2_grpc
@@ -34,26 +37,16 @@ SETTLE_GRACE = 2.0    # s for a command's final event once its session ended (th
 LOSS_GRACE = 5.0      # s for a session's end after the device said its lock holder is gone
 
 
-class EventFeed:
+class EventFeed(Feed[pb.Event]):
     def __init__(self, channel: grpc.aio.Channel, metadata=(), replay: bool = False):
+        super().__init__("landscape-events")
         self._stub = event_service_pb2_grpc.EventServiceStub(channel)
         self._metadata = tuple(metadata)
         self._replay = replay
         self.log = CommandLog()
-        self.listeners: list[Callable[[pb.Event], None]] = []
         self.failure = ""                    # why the stream is down, while it is
         self._live = asyncio.Event()
         self._changed = asyncio.Condition()
-        self._task: asyncio.Task | None = None
-
-    def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.create_task(self._run(), name="landscape-events")
-
-    async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            await asyncio.gather(self._task, return_exceptions=True)
 
     async def ready(self, timeout: float) -> None:
         """Until the device has registered the subscription; ServerUnavailable if it does not
@@ -74,22 +67,24 @@ class EventFeed:
 
     async def _run(self) -> None:
         pause = RETRY_FIRST
-        after: int | None = 0 if self._replay else None   # then after the last event seen
+        first: int | None = 0 if self._replay else None   # where a stream with no past starts
+        after = first                                     # then after the last event seen
         while True:
             try:
                 await self._stream(after)
             except grpc.aio.AioRpcError as error:
                 if error.code() is grpc.StatusCode.OUT_OF_RANGE:
-                    log.info("events: %s; following the device live", error.details())
+                    log.info("events: %s; following the device afresh", error.details())
                     self.log = CommandLog()  # a restarted device: its ids start again
-                    after, pause = None, 0.0
+                    after, pause = first, 0.0
                     continue
                 if not self.failure:
                     log.warning("event stream: %s: %s", error.code().name, error.details())
                 self.failure = f"{error.code().name}: {error.details()}"
+                self._tell(error.code(), error.details())
             finally:
                 self._live.clear()
-            after = self.log.last_sequence or None
+            after = self.log.last_sequence or first
             await asyncio.sleep(pause)
             pause = min(max(2 * pause, RETRY_FIRST), RETRY_MAX)
 
@@ -100,10 +95,10 @@ class EventFeed:
             await call.initial_metadata()    # sent once the device has subscribed us
             self._live.set()
             self.failure = ""
+            self._tell(grpc.StatusCode.OK, "")
             async for reply in call:
                 self.log.record(reply.event)
-                for listener in self.listeners:
-                    listener(reply.event)
+                self._hand_on(reply.event)
                 await self._notify()
         finally:
             call.cancel()

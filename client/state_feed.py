@@ -7,7 +7,8 @@ last sample is, and the stream is opened again every RETRY_PERIOD. The sensors r
 sample are those any owner asked for (`watch`); a set that grows is tried on a new stream
 first, which replaces the running one only once the device has accepted it, so a sensor the
 stream cannot carry is refused and the feed goes on as it was. Every sample also goes to the
-`listeners`.
+`listeners`; the stream's terms are kept in `started`, and each time a stream starts or fails
+the `status_listeners` hear (code, details): (OK, "") once a stream's terms arrived.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from typing import Callable
 import grpc
 
 from landscape.client.errors import CommandRefused, from_rpc_error
+from landscape.client.feed import Feed
 from landscape.v1 import state_service_pb2, state_service_pb2_grpc
 
 log = logging.getLogger(__name__)
@@ -42,31 +44,22 @@ class Sample:
         return self.message.time.ToNanoseconds() / 1e9
 
 
-class StateFeed:
+class StateFeed(Feed[Sample]):
     """`request` gives the rate, frame and units; its sensors are the feed's to set."""
 
     def __init__(self, channel: grpc.aio.Channel, request: state_service_pb2.StreamStateRequest,
                  metadata=()):
+        super().__init__("landscape-state")
         self._stub = state_service_pb2_grpc.StateServiceStub(channel)
         self._request = request
         self._metadata = tuple(metadata)
         self.latest: Sample | None = None
         self.unavailable = "no state from the device yet"
         self.sensors: tuple[str, ...] = tuple(request.sensors)
-        self.listeners: list[Callable[[Sample], None]] = []
+        self.started: state_service_pb2.StreamStarted | None = None   # the running stream's terms
         self._wanted: dict[object, frozenset[str]] = {}     # owner -> its sensors
         self._changing = asyncio.Lock()                     # one change of sensors at a time
         self._changed = asyncio.Condition()
-        self._task: asyncio.Task | None = None
-
-    def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.create_task(self._run(), name="landscape-state")
-
-    async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            await asyncio.gather(self._task, return_exceptions=True)
 
     async def watch(self, owner, names) -> None:
         """Read `owner`'s sensors (with every other owner's) into every sample from now on;
@@ -153,15 +146,14 @@ class StateFeed:
     async def _restart(self, sensors: tuple[str, ...], first) -> None:
         old = self._task
         self.sensors = sensors
-        self._task = asyncio.create_task(self._run(first), name="landscape-state")
+        self._task = asyncio.create_task(self._run(first), name=self._task_name)
         if old is not None:
             old.cancel()
             await asyncio.gather(old, return_exceptions=True)
 
     async def _publish(self, sample: Sample) -> None:
         self.latest, self.unavailable = sample, ""
-        for listener in self.listeners:
-            listener(sample)
+        self._hand_on(sample)
         async with self._changed:
             self._changed.notify_all()
 
@@ -172,21 +164,29 @@ class StateFeed:
             call, message = opened or (self._stub.StreamState(
                 self._request_for(self.sensors), metadata=self._metadata), None)
             opened = None
+            code, details = grpc.StatusCode.UNAVAILABLE, "the device ended it"
             try:
                 while True:
-                    if message is not None and message.WhichOneof("message") == "sample":
+                    kind = message.WhichOneof("message") if message is not None else None
+                    if kind == "sample":
                         await self._publish(Sample(message.sample, time.monotonic()))
+                    elif kind == "started":
+                        self.started = message.started
+                        self._tell(grpc.StatusCode.OK, "")
                     message = await call.read()
                     if message is grpc.aio.EOF:
                         break
-                self.unavailable = "state stream: the device ended it"
+                self.unavailable = f"state stream: {details}"
             except grpc.aio.AioRpcError as error:
-                self.unavailable = f"state stream: {error.code().name}: {error.details()}"
+                code, details = error.code(), error.details()
+                self.unavailable = f"state stream: {code.name}: {details}"
             except Exception as error:   # noqa: BLE001 - the feed must outlive any surprise
-                self.unavailable = f"state stream: {error!r}"
+                code, details = grpc.StatusCode.UNKNOWN, repr(error)
+                self.unavailable = f"state stream: {details}"
                 log.exception("state stream")
             finally:
                 call.cancel()
             log.warning("%s", self.unavailable)
+            self._tell(code, details)
             await asyncio.sleep(RETRY_PERIOD)
 

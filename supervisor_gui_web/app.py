@@ -24,7 +24,7 @@ from landscape.supervisor import sign_in_routes
 from landscape.supervisor.config import DashboardConfig
 from landscape.supervisor.connections import HEADER_TIMEOUT_S, ConnectionGuard
 from landscape.supervisor.console import Console
-from landscape.supervisor.device_link import DeviceLink
+from landscape.supervisor.device_hub import DeviceHub
 from landscape.supervisor.http_guard import GUARD, POLICY, SIGN_INS, WS_PATH, guard, signed_in
 from landscape.supervisor.origins import OriginPolicy, own_origins
 from landscape.supervisor.outbox import Outbox, TooSlow
@@ -34,7 +34,7 @@ from landscape.supervisor.supervisor_calls import SupervisorCalls
 log = logging.getLogger(__name__)
 
 STATIC_DIR = Path(__file__).parent / "frontend" / "dist"
-LINKS = web.AppKey("links", dict)
+HUBS = web.AppKey("hubs", dict)
 CALLS = web.AppKey("calls", SupervisorCalls)
 CONFIG = web.AppKey("config", DashboardConfig)
 # WebSocket close code 1013 "try again later": the page reconnects and is sent the history.
@@ -66,7 +66,7 @@ def create_app(config: DashboardConfig, origins: tuple[str, ...]) -> web.Applica
 
     app.router.add_get("/", index)
     app.router.add_static("/", static)
-    app.cleanup_ctx.append(_device_links)
+    app.cleanup_ctx.append(_device_hubs)
     app.cleanup_ctx.append(_sweeper)
     return app
 
@@ -83,75 +83,85 @@ async def _sweeper(app: web.Application):
         await task
 
 
-async def _device_links(app: web.Application):
+async def _device_hubs(app: web.Application):
     config = app[CONFIG]
-    links = {d.name: DeviceLink(d, config.display_rate_hz, config.tls, config.token)
-             for d in config.devices}
-    for link in links.values():
-        link.start()
-    app[LINKS] = links
+    hubs = {d.name: DeviceHub(d, config.display_rate_hz, config.tls, config.token)
+            for d in config.devices}
+    for hub in hubs.values():
+        await hub.start()
+    app[HUBS] = hubs
     yield
-    await asyncio.gather(*(link.close() for link in links.values()))
+    await asyncio.gather(*(hub.close() for hub in hubs.values()))
 
 
 async def _devices(request: web.Request) -> web.Response:
-    links = request.app[LINKS]
-    return web.json_response([{"name": link.name, "target": link.target} for link in links.values()])
+    hubs = request.app[HUBS]
+    return web.json_response([{"name": hub.name, "target": hub.target} for hub in hubs.values()])
 
 
 async def _websocket(request: web.Request) -> web.WebSocketResponse:
     person = signed_in(request)   # the guard checked the Origin and the sign-in already
     ws = web.WebSocketResponse(heartbeat=10.0)
     await ws.prepare(request)
-    links = request.app[LINKS]
+    hubs = request.app[HUBS]
     sign_ins = request.app[SIGN_INS]
     outbox = Outbox()
     calls = request.app[CALLS]
-    console = Console(links, outbox, person, calls)
+    console = Console(hubs, outbox, person, calls)
     sign_ins.page_opened(person)
-    for link in links.values():
-        link.join(outbox)
-    calls.acks.join(outbox)
+    for hub in hubs.values():
+        hub.join(outbox)
     sender = asyncio.create_task(_send(ws, outbox))
-    ender = asyncio.create_task(_close_when_signed_out(ws, person))
+    reader = asyncio.create_task(_receive(ws, person, sign_ins, console))
+    signed_out = asyncio.create_task(person.ended.wait())
     try:
-        async for message in ws:
-            if message.type is not WSMsgType.TEXT:
-                continue
-            try:
-                body = json.loads(message.data)
-            except json.JSONDecodeError:
-                continue   # not a frame of ours; nothing to answer it with
-            if isinstance(body, dict) and not person.ended.is_set():
-                sign_ins.touch(person)
-                console.receive(body)
+        await asyncio.wait((reader, sender, signed_out), return_when=asyncio.FIRST_COMPLETED)
     finally:
-        ender.cancel()
+        for task in (reader, signed_out):
+            task.cancel()
+        await asyncio.gather(reader, signed_out, return_exceptions=True)
+        # Closed here, with no receive waiting, the close handshake completes and the browser
+        # hears why (aiohttp drops the socket, 1006, when another task is receiving).
+        if person.ended.is_set():
+            await ws.close(code=CLOSE_SIGNED_OUT, message=person.why_ended.encode()[:120])
+        elif sender.done() and sender.result() == CLOSE_TOO_SLOW:
+            await ws.close(code=CLOSE_TOO_SLOW, message=b"too slow")
         sign_ins.page_closed(person)
-        for link in links.values():
-            link.leave(outbox)
-        calls.acks.leave(outbox)
+        for hub in hubs.values():
+            hub.leave(outbox)
         outbox.close()
         await console.close()   # ends this page's sessions: the device's disconnect handler runs
         await sender
     return ws
 
 
-async def _close_when_signed_out(ws: web.WebSocketResponse, person: SignIn) -> None:
-    await person.ended.wait()
-    await ws.close(code=CLOSE_SIGNED_OUT, message=person.why_ended.encode()[:120])
+async def _receive(ws: web.WebSocketResponse, person: SignIn, sign_ins: SignIns,
+                   console: Console) -> None:
+    """The page's frames, each to the console, until the page closes its socket."""
+    async for message in ws:
+        if message.type is not WSMsgType.TEXT:
+            continue
+        try:
+            body = json.loads(message.data)
+        except json.JSONDecodeError:
+            continue   # not a frame of ours; nothing to answer it with
+        if isinstance(body, dict) and not person.ended.is_set():
+            sign_ins.touch(person)
+            console.receive(body)
 
 
-async def _send(ws: web.WebSocketResponse, outbox: Outbox) -> None:
+async def _send(ws: web.WebSocketResponse, outbox: Outbox) -> int | None:
+    """Frames to the page until its outbox closes; CLOSE_TOO_SLOW if it fell behind."""
     try:
         while batch := await outbox.take():
             for text in batch:
                 await ws.send_str(text)
     except TooSlow as error:
         log.warning("closing a browser's connection: %s", error)
-        await ws.close(code=CLOSE_TOO_SLOW, message=b"too slow")
+        return CLOSE_TOO_SLOW
     except ConnectionError:
         pass   # the browser went away; the receive loop ends too
+    return None
 
 
 @dataclass

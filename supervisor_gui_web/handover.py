@@ -29,6 +29,8 @@ from typing import Protocol
 
 import grpc
 
+from landscape.client import LandscapeError
+
 log = logging.getLogger(__name__)
 
 REQUEST_S = 60.0
@@ -132,16 +134,16 @@ class ControlDesk:
         requester = request.requester
         try:
             await page.give_up_lock(device, deactivate=state == "DEVICE_STATE_RESTING")
-        except grpc.aio.AioRpcError as error:
-            self._tell((page, requester), device, {"failed": {"why": f"{page.name} kept the lock: {error.details()}"}})
+        except LandscapeError as error:
+            self._tell((page, requester), device, {"failed": {"why": f"{page.name} kept the lock: {error}"}})
             raise
         self.unlocked(device, page)
         page.notify(device, {"given": {"to": requester.name}})
         try:
             await requester.take_lock(device)
-        except grpc.aio.AioRpcError as error:
+        except LandscapeError as error:
             self._tell((page, requester), device, {"failed": {
-                "why": f"{page.name} released the lock, and {requester.name}'s Lock was refused: {error.details()}"}})
+                "why": f"{page.name} released the lock, and {requester.name}'s Lock was refused: {error}"}})
             return
         self.locked(device, requester)
         requester.notify(device, {"received": {"from": page.name}})

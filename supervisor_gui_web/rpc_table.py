@@ -1,19 +1,19 @@
 """The landscape.v1 RPCs a browser may call, found by name in the contract's descriptors.
 
 The table is read from the generated descriptors, not written by hand: an RPC added to the
-contract is callable from the page as soon as the stubs are rebuilt. Each entry makes its own
-grpc.aio multi-callable on a channel, so no stub class is needed.
+contract is callable from the page as soon as the stubs are rebuilt (the client core's
+AsyncRobot.invoke makes the call, by service and method name).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import grpc
 from google.protobuf import message_factory
 from google.protobuf.descriptor import MethodDescriptor
 
-from landscape.v1 import (device_service_pb2, digital_io_service_pb2, session_service_pb2,
-                          state_service_pb2, event_service_pb2)
+from landscape.v1 import (audit_service_pb2, device_service_pb2, digital_io_service_pb2,
+                          event_service_pb2, recording_service_pb2, session_service_pb2,
+                          state_service_pb2)
 
 # Services whose RPCs the browser calls through the backend. StateService and EventService are
 # fed to every browser by the backend itself (one stream per device, shared), so they are here
@@ -24,6 +24,8 @@ SERVICES = {
     "SessionService": session_service_pb2,
     "StateService": state_service_pb2,
     "EventService": event_service_pb2,
+    "RecordingService": recording_service_pb2,
+    "AuditService": audit_service_pb2,
 }
 
 
@@ -35,8 +37,8 @@ class Rpc:
     response_class: type
 
     @property
-    def path(self) -> str:   # gRPC's method path
-        return "/" + self.name
+    def service(self) -> str:   # "DeviceService"
+        return self.method.containing_service.name
 
     @property
     def kind(self) -> str:
@@ -44,12 +46,6 @@ class Rpc:
         client, server = self.method.client_streaming, self.method.server_streaming
         return {(False, False): "unary", (True, False): "client_stream",
                 (False, True): "server_stream", (True, True): "bidi"}[(client, server)]
-
-    def callable(self, channel: grpc.aio.Channel):
-        make = {"unary": channel.unary_unary, "client_stream": channel.stream_unary,
-                "server_stream": channel.unary_stream, "bidi": channel.stream_stream}[self.kind]
-        return make(self.path, request_serializer=self.request_class.SerializeToString,
-                    response_deserializer=self.response_class.FromString)
 
 
 def _table() -> dict[str, Rpc]:

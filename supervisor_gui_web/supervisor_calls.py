@@ -1,7 +1,7 @@
 """The supervisor's own calls, beside the landscape.v1 contract: what the backend does among
-the people signed in to it and the device contract does not offer (docs/page.md).
+the people signed in to it and the device contract does not offer (docs/page.md). Alarms
+are acknowledged on the device (EventService.AcknowledgeAlarm), like any call of the page.
 
-    supervisor/AcknowledgeAlarms  {"keys": ["<sequence>@<time>", ...]}   alarm_acks.py
     supervisor/RequestControl     {}        ask this supervisor's lock holder for the lock
     supervisor/AnswerControl      {"give": true | false}   the holder hands over or declines
     supervisor/CancelControlRequest {}                                     handover.py
@@ -16,25 +16,16 @@ import grpc
 
 from landscape.server.security.auth import Role
 from landscape.supervisor import wire
-from landscape.supervisor.alarm_acks import AlarmAcks
 from landscape.supervisor.handover import CONTROL, ControlDesk, HandoverRefused
-from landscape.supervisor.rpc_table import RPCS, rpc_name
-from landscape.v1 import control_pb2, types_pb2
+from landscape.supervisor.wire import Refused
+from landscape.v1 import types_pb2
 
 PREFIX = "supervisor/"
-GET_STATE = RPCS[rpc_name("DeviceService", "GetDeviceState")]
-DEACTIVATE = RPCS[rpc_name("DeviceService", "Deactivate")]
-RELEASE = RPCS[rpc_name("DeviceService", "Release")]
-
-
-class CallRefused(Exception):
-    def __init__(self, code: grpc.StatusCode, message: str):
-        super().__init__(message)
-        self.status = wire.status(code, message)
 
 
 class ConsolePage:
-    """A console (one browser page) as the control desk sees it: handover.Page."""
+    """A console (one browser page) as the control desk sees it: handover.Page. Its calls are
+    the person's, through their robot on the device (console.Console.robot_of)."""
 
     def __init__(self, console):
         self.console = console
@@ -44,25 +35,21 @@ class ConsolePage:
         self.console.outbox.put(wire.note(device, CONTROL, body))
 
     def has_session(self, device: str) -> bool:
-        session = self.console.session_of(device)
+        session = self.console.robot_of(device).session
         return session is not None and not session.ended.is_set()
 
-    def _call(self, device: str, rpc, request):
-        session = self.console.session_of(device)
-        metadata = session.metadata() if session else ()
-        return rpc.callable(self.console.caller_of(device))(request, metadata=metadata, timeout=30)
-
     async def device_state(self, device: str) -> str:
-        reply = await self._call(device, GET_STATE, control_pb2.GetDeviceStateRequest())
+        reply = await self.console.robot_of(device).get_device_state()
         return types_pb2.DeviceState.Name(reply.state)
 
     async def give_up_lock(self, device: str, deactivate: bool) -> None:
+        robot = self.console.robot_of(device)
         if deactivate:
-            await self._call(device, DEACTIVATE, control_pb2.DeactivateRequest())
-        await self._call(device, RELEASE, control_pb2.ReleaseRequest())
+            await robot.deactivate()
+        await robot.release()
 
     async def take_lock(self, device: str) -> None:
-        await self.console.session_of(device).lock()
+        await self.console.robot_of(device).lock()
 
 
 class SupervisorCalls:
@@ -70,24 +57,21 @@ class SupervisorCalls:
 
     def __init__(self):
         self.desk = ControlDesk()
-        self.acks = AlarmAcks()
 
     @staticmethod
     def handles(name) -> bool:
         return isinstance(name, str) and name.startswith(PREFIX)
 
     async def call(self, page: ConsolePage, role: Role, device: str, name: str, request) -> dict:
-        """The reply to one call of `page`; CallRefused says why not."""
+        """The reply to one call of `page`; Refused says why not."""
         method = name.removeprefix(PREFIX)
-        if method not in ("AcknowledgeAlarms", "RequestControl", "AnswerControl", "CancelControlRequest"):
-            raise CallRefused(grpc.StatusCode.UNIMPLEMENTED, f"{name!r} is not a call of the supervisor")
+        if method not in ("RequestControl", "AnswerControl", "CancelControlRequest"):
+            raise Refused(grpc.StatusCode.UNIMPLEMENTED, f"{name!r} is not a call of the supervisor")
         if role < Role.OPERATOR:
-            raise CallRefused(grpc.StatusCode.PERMISSION_DENIED,
-                              f"{method} needs the operator role; you are signed in as {role.label}")
+            raise Refused(grpc.StatusCode.PERMISSION_DENIED,
+                          f"{method} needs the operator role; you are signed in as {role.label}")
         request = request if isinstance(request, dict) else {}
         try:
-            if method == "AcknowledgeAlarms":
-                return {"acknowledged": self.acks.acknowledge(device, request.get("keys"), page.name)}
             if method == "RequestControl":
                 self.desk.request(device, page)
             elif method == "CancelControlRequest":
@@ -98,7 +82,7 @@ class SupervisorCalls:
                     raise ValueError("give: true (hand the lock over) or false (decline)")
                 await self.desk.answer(device, page, give)
         except HandoverRefused as refused:
-            raise CallRefused(refused.code, str(refused)) from None
+            raise Refused(refused.code, str(refused)) from None
         except ValueError as error:
-            raise CallRefused(grpc.StatusCode.INVALID_ARGUMENT, str(error)) from None
+            raise Refused(grpc.StatusCode.INVALID_ARGUMENT, str(error)) from None
         return {}

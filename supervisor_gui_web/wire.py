@@ -14,15 +14,16 @@ Every WebSocket frame is a JSON object about one message of one RPC of one devic
                         ("requests": [...] for a client-streaming RPC; "cancel": true ends a stream
                          the browser opened: the session, a jog. Every frame of a stream carries
                          the id of its first: a jog press's frames share one, and each press has
-                         a fresh id, larger than any before it: console.py)
+                         a fresh id, larger than any before it: console.py. A server-streaming
+                         call (GetPath) is answered by a frame a reply, then a status, code 0)
 
 The feeds the backend keeps for every browser arrive under their own RPC names
-(StateService/StreamState, EventService/Subscribe, the read-only gets of `status_poll`, and
-DeviceService/GetCellDescription, the cell around the arm: world_feed.py).
+(StateService/StreamState, EventService/Subscribe, the read-only gets of the status, and
+DeviceService/GetCellDescription, the cell around the arm: device_hub.py).
 Nothing here is a second schema: "reply" and "status" are protobuf's own JSON mapping.
 
-Beside the contract, the supervisor's own calls among the people signed in to it (alarms
-acknowledged, control handed over: supervisor_calls.py) use the same frames under names
+Beside the contract, the supervisor's own calls among the people signed in to it (control
+handed over: supervisor_calls.py) use the same frames under names
 "supervisor/<Name>", with plain JSON objects as their "request" and "reply" (`note`).
 """
 from __future__ import annotations
@@ -33,8 +34,6 @@ import grpc
 from google.protobuf import any_pb2, json_format
 from google.protobuf.message import Message
 from google.rpc import code_pb2, error_details_pb2, status_pb2  # noqa: F401 (ErrorInfo for JSON)
-
-STATUS_DETAILS_KEY = "grpc-status-details-bin"
 
 
 def message_dict(message: Message) -> dict:
@@ -50,17 +49,16 @@ def any_dict(message: Message) -> dict:
     return message_dict(packed)
 
 
-def status_of(error: grpc.RpcError) -> status_pb2.Status:
-    """The google.rpc.Status the server sent (with its ErrorInfo), or one made of the call's
-    code and text when it sent none (a transport failure, a cancelled call)."""
-    for key, value in (error.trailing_metadata() or ()):
-        if key == STATUS_DETAILS_KEY:
-            return status_pb2.Status.FromString(value)
-    return status_pb2.Status(code=error.code().value[0], message=error.details() or "")
-
-
 def status(code: grpc.StatusCode, message: str) -> status_pb2.Status:
     return status_pb2.Status(code=code.value[0], message=message)
+
+
+class Refused(Exception):
+    """A browser's frame the backend answers with this status itself: no device was called."""
+
+    def __init__(self, code: grpc.StatusCode, message: str):
+        super().__init__(message)
+        self.status = status(code, message)
 
 
 def frame(device: str, rpc: str, *, reply: Message | None = None,

@@ -19,6 +19,7 @@ from google.rpc import error_details_pb2
 
 from dashboard_support import (CONNECT, DEVICE, PageClient, open_page, run_with_page,
                                signed_in_http)
+from landscape.client import Frame, Robot, TagPoint
 from landscape.server.app import serve
 from landscape.server.config import SecurityConfig, ServerConfig
 from landscape.server.device.states import State
@@ -128,17 +129,38 @@ def test_closing_the_page_ends_its_session_and_the_device_releases(people, serve
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
 
-def test_a_session_the_device_ends_is_reported_with_the_devices_reason(people, server):
+def test_a_blocked_backend_loop_keeps_the_pages_session_and_lock(people, server):
     """Issue 25 item 4: the backend's loop held past the device's keep-alive timeout (2 s):
-    the device ends the session, and the page is told why, in the device's words."""
+    the session's keep-alives go from the client core's keeper threads all the same, so the
+    page keeps its session and lock (the backend's own loop sent them before: it lost both)."""
     async def body(page, dashboard):
         session = await page.send(CONNECT, {"hello": {}})
         await page.answer(session)
         await page.call(DEVICE + "Lock")
-        time.sleep(3)   # nothing on the loop runs: neither the backend nor its keep-alives
+        time.sleep(3)   # nothing on the loop runs: neither the backend nor the page's client
+        assert "reply" in await page.call(DEVICE + "Activate")
+        assert server.device.state is State.RESTING
+        assert server.device.status().lock_holder == "olga"
+        assert not [f for f in page.frames if f.get("id") == session and "status" in f]
+    run_with_page(server, body, people)
+
+
+def test_a_session_the_device_ends_is_reported_with_the_devices_reason(people, server):
+    """Issue 25 item 4: the device ends the page's session as its keep-alive watchdog does;
+    the page is told at once, in the device's words, and the lock is not taken back."""
+    async def body(page, dashboard):
+        session = await page.send(CONNECT, {"hello": {}})
+        opened = await page.answer(session)
+        await page.call(DEVICE + "Lock")
+        registry = server.device.sessions
+        registry.end(registry.get(opened["reply"]["opened"]["sessionId"]),
+                     "no keep-alive for 2 s", "DEADLINE_EXCEEDED")
         ended = await page.until(lambda f: f.get("id") == session and "status" in f)
         assert ended["status"]["code"] == 4, ended   # DEADLINE_EXCEEDED
         assert ended["status"]["message"] == "your session ended: no keep-alive for 2 s"
+        refused = await page.call(DEVICE + "Activate")   # the lock is gone, and says why
+        assert refused["status"]["message"].startswith("your session ended: no keep-alive")
+        assert not server.device.status().locked
     run_with_page(server, body, people)
     wait_until(lambda: server.device.state is State.UNLOCKED, timeout=20)
 
@@ -355,3 +377,25 @@ def test_an_unanswered_question_times_out_on_the_device_and_the_backend_sends_no
     late = [r.getMessage() for r in caplog.records if "no such question waits" in r.getMessage()]
     assert not late
     assert server.device.state is State.ERROR   # "stay": the default kept it there
+
+
+def test_a_server_stream_is_relayed_a_frame_a_reply_then_its_end(people, server):
+    """GetPath, server-streaming: each of the device's replies a frame under the call's id,
+    then status 0; an unknown path is the device's refusal, as it gave it."""
+    with Robot(server.target, "script") as robot, robot.control(activate=False):
+        robot.path_load("two", [TagPoint([0.1, 0, 1.5, 0, 1.5, 0], tag_name="a"),
+                                TagPoint([0.2, 0, 1.5, 0, 1.5, 0])], Frame.JOINT)
+
+    async def body(page, dashboard):
+        call_id = await page.send(DEVICE + "GetPath", {"pathName": "two"})
+        end = await page.until(lambda f: f.get("id") == call_id and "status" in f)
+        assert end["status"]["code"] == 0
+        replies = [f["reply"] for f in page.frames if f.get("id") == call_id and "reply" in f]
+        assert replies[0]["path"]["numberOfPoints"] == 2
+        points = [p for reply in replies for p in reply["points"]]
+        assert [p["jointValues"][0] for p in points] == [0.1, 0.2]
+        assert points[0]["tagName"] == "a"
+        refused = await page.call(DEVICE + "GetPath", {"pathName": "none"})
+        assert refused["status"]["code"] == 3, refused
+        assert refused["status"]["details"][0]["reason"] == "NOT_FOUND"
+    run_with_page(server, body, people)

@@ -1,11 +1,14 @@
 """Issue 28 item 2, the alarm list, in Debian's headless Chromium on the real backend and real
-device servers: each arm's alarms with who acknowledged them (the supervisor's record, shown
-to everyone signed in), their count in the status bar, and the device's questions answered
+device servers: each arm's alarms with who acknowledged them (the device's record, its
+AlarmAcknowledged events, shown to everyone signed in and to any other client), their count in the status bar, and the device's questions answered
 from the list. On a cell of one arm and of two. Screenshots go to var/screenshots."""
 from __future__ import annotations
 
+import grpc
+
 from dashboard_support import Page
 from landscape.server.device.states import State
+from landscape.v1 import event_service_pb2, event_service_pb2_grpc
 from support import wait_until
 
 ESTOP_ALARM = "#alarms li.alarm", "e-stop pressed: motion stopped, drives off"
@@ -13,6 +16,22 @@ ESTOP_ALARM = "#alarms li.alarm", "e-stop pressed: motion stopped, drives off"
 
 def _estop_alarm(page: Page):
     return page.page.locator(ESTOP_ALARM[0], has_text=ESTOP_ALARM[1]).first
+
+
+def _acknowledgements(target: str) -> list:
+    """The AlarmAcknowledged events the device keeps, as any other client reads them."""
+    found = []
+    with grpc.insecure_channel(target) as channel:
+        call = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
+            event_service_pb2.SubscribeRequest(after_sequence=0), timeout=2)
+        try:
+            for reply in call:   # the kept events, then live ones until the deadline
+                if reply.event.HasField("alarm_acknowledged"):
+                    found.append(reply.event.alarm_acknowledged)
+        except grpc.RpcError as error:
+            if error.code() is not grpc.StatusCode.DEADLINE_EXCEEDED:
+                raise
+    return found
 
 
 def test_alarms_are_acknowledged_for_everyone_and_questions_answered_from_the_list(
@@ -31,6 +50,8 @@ def test_alarms_are_acknowledged_for_everyone_and_questions_answered_from_the_li
     for page in (olga, vera):
         page.expect(_estop_alarm(page)).to_contain_text("acknowledged by olga")
         page.expect(page.status("alarms")).not_to_have_text(before)
+    acks = _acknowledgements(cell_server.target)   # the device's, for every client
+    assert [(a.client, a.on_behalf_of) for a in acks] == [("supervisor", "olga")]
     olga.screenshot("alarms-acknowledged")
     # The device asks the lock holder whether to reset: put aside, then answered in the list.
     olga.click("btn-estop-release")

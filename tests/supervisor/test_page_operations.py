@@ -13,10 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dashboard_support import Page
-from landscape.client import Robot
+from dashboard_support import DashboardThread, Page
+from landscape.client import Frame, Robot, TagPoint
+from landscape.server.config import SecurityConfig
 from landscape.server.device.states import State
-from support import wait_until
+from support import start_server, wait_until
 
 SRC = Path(__file__).resolve().parents[2] / "supervisor_gui_web" / "frontend" / "src"
 GOAL = (0.4, 0.1, 1.4, 0.0, 1.4, 0.0)
@@ -39,10 +40,10 @@ def _move_in_joints(page: Page, server, device: str) -> None:
     before = _joints(server)
     for i, value in enumerate(GOAL):
         page.page.fill(f"#move-v{i}", str(value))
+    page.shows("move-preview", "Ghost arm: the goal as the device solves it")
     ghost = _ghost(page, device)
     assert ghost["joints"] == pytest.approx(GOAL, abs=1e-9)      # the goal, before any move
     assert _joints(server) == pytest.approx(before, abs=1e-6)    # nothing moved
-    page.shows("move-preview", "Ghost arm: the goal")
     page.screenshot(f"move-ghost-{device}")
     page.click("btn-move")
     page.shows("st-state", "moving")
@@ -65,7 +66,7 @@ def test_move_to_a_cartesian_goal_from_the_current_pose(chromium, dashboard, cel
     page.expect(page.page.locator("#move-v2")).not_to_have_value("", timeout=10_000)
     z = float(page.page.input_value("#move-v2"))
     page.page.fill("#move-v2", f"{z - 0.05:.4f}")                 # 5 cm down
-    page.shows("move-preview", "solved on this page from the arm's present configuration")
+    page.shows("move-preview", "the goal as the device solves it")   # SolvePose
     ghost = _ghost(page)
     before = _joints(cell_server)
     assert np.abs(np.array(ghost["joints"]) - before).max() > 0.005   # the ghost is elsewhere
@@ -76,6 +77,21 @@ def test_move_to_a_cartesian_goal_from_the_current_pose(chromium, dashboard, cel
     wait_until(lambda: _joints(cell_server) == pytest.approx(ghost["joints"], abs=3e-3), timeout=10)
     with Robot(cell_server.target, "reader") as robot:
         assert robot.get_robot_position().world_position.z == pytest.approx(z - 0.05, abs=1e-3)
+    page.close()
+
+
+def test_a_goal_the_device_would_refuse_has_no_ghost_and_says_why(chromium, dashboard,
+                                                                   cell_server):
+    """Issue 28: the ghost is the device's answer (SolvePose); a pose beyond reach gets none,
+    and the device's reason, before anything is sent to move."""
+    page = Page(chromium, dashboard)
+    page.page.select_option("#move-frame", "REFERENCE_FRAME_BASE_CARTESIAN_FRAME")
+    page.click("btn-move-from-current")
+    page.shows("move-preview", "the goal as the device solves it")
+    page.page.fill("#move-v2", "5")                               # 5 m up: beyond reach
+    page.shows("move-preview", "No preview: the device would refuse this move:")
+    assert not page.page.evaluate(GHOST, "arm1")["visible"]
+    assert cell_server.device.state is State.UNLOCKED              # asked as a viewer may
     page.close()
 
 
@@ -209,17 +225,70 @@ def test_paths_are_listed_and_previewed_in_3d_before_they_run(chromium, two_arm_
     page.close()
 
 
-def test_the_recorder_runs_and_downloads_say_they_are_not_offered_yet(chromium, dashboard,
-                                                                      cell_server):
+def test_the_devices_stored_paths_are_listed_and_read_for_the_preview(chromium, dashboard,
+                                                                       cell_server):
+    """Issue 28: the list is the device's (ListPaths), whoever stored the path: a script's path
+    is listed with its count of points, and its preview reads the points from the device
+    (GetPath, resolved to joints) and stands the ghost at the first; a path another client
+    clears leaves the list when the panel is opened again."""
+    first, second = [0.5, -0.2, 1.3, 0, 1.2, 0], [0.9, 0.1, 1.1, 0.2, 1.0, 0]
+    with Robot(cell_server.target, "script") as robot, robot.control(activate=False):
+        robot.path_load("theirs", [TagPoint(first, tag_name="p1"), TagPoint(second)],
+                        Frame.JOINT)
     page = Page(chromium, dashboard)
-    page.page.locator("details.panel > summary", has_text="Recordings").click()
-    assert page.page.locator("#btn-recorder-start").is_disabled()   # the lock holder's
-    page.take_control()
-    page.click("btn-recorder-start")
-    page.shows("recorder-result", "arm1: recording")
-    page.click("btn-recorder-stop")
-    page.shows("recorder-result", "arm1: stopped")
-    for button in ("btn-download-recording", "btn-download-audit"):
-        assert page.page.locator(f"#{button}").is_disabled()
-    page.shows("downloads-note", "Not available yet")
+    theirs = page.page.locator("#path-list li", has_text="theirs")
+    page.expect(theirs).to_contain_text("2 points (read when previewed), joints; stored on the device")
+    page.expect(page.page.locator("#path-list-source")).to_contain_text("stored on the device")
+    still = _joints(cell_server)
+    theirs.locator(".path-preview").click()
+    page.expect(theirs).to_contain_text("2 points, joints; stored on the device")
+    page.page.wait_for_function("() => window.armViews.arm1.ghost.visible", timeout=10_000)
+    assert _dots(page) == 2
+    assert _ghost(page)["joints"] == pytest.approx(first, abs=1e-9)
+    assert _joints(cell_server) == pytest.approx(still, abs=1e-6)         # a preview moves nothing
+    page.expect(page.page.locator("#path-progress .tag")).to_have_text(["p1"])
+    with Robot(cell_server.target, "script") as robot, robot.control(activate=False):
+        robot.path_clear_path("theirs")
+    panel = page.page.locator("details.panel > summary", has_text="Paths")
+    panel.click()   # folded, then opened: the list is read again
+    panel.click()
+    page.expect(theirs).to_have_count(0)
     page.close()
+
+
+def test_the_recorder_runs_and_its_recording_and_the_audit_log_download(chromium, people,
+                                                                          tmp_path):
+    """Issue 28: the recorder stores an MCAP file on the device; an operator downloads it
+    (RecordingService.FetchRecording, checked against its SHA-256), an admin the audit log
+    (AuditService.ReadAuditLog), which names the operator's calls and its own; the audit log
+    is not an operator's."""
+    server = start_server(lockstep_pace=1.0,
+                          security=SecurityConfig(audit_log=str(tmp_path / "audit.log")))
+    dashboard = DashboardThread({"arm1": server.target}, people)
+    try:
+        page = Page(chromium, dashboard)
+        page.page.locator("details.panel > summary", has_text="Recordings").click()
+        assert page.page.locator("#btn-recorder-start").is_disabled()   # the lock holder's
+        assert page.page.locator("#btn-download-audit").is_disabled()   # an admin's
+        page.take_control()
+        for action, said in (("start", "recording"), ("stop", "stopped"), ("store", "")):
+            page.click(f"btn-recorder-{action}")
+            page.shows("recorder-result", f"arm1: {said}")
+        with page.page.expect_download() as download:
+            page.click("btn-download-recording")
+        page.shows("download-result", "saved")
+        assert download.value.suggested_filename.startswith("arm1-")
+        assert Path(download.value.path()).read_bytes().startswith(b"\x89MCAP0\r\n")
+        page.close()
+        admin = Page(chromium, dashboard, name="ada")
+        admin.page.locator("details.panel > summary", has_text="Recordings").click()
+        with admin.page.expect_download() as download:
+            admin.click("btn-download-audit")
+        admin.shows("download-result", "the audit log (audit.log)")
+        records = [json.loads(line) for line in Path(download.value.path()).read_text().splitlines()]
+        assert any(r.get("for") == "olga" and r["rpc"].endswith("/Lock") for r in records), records
+        assert records[-1]["rpc"].endswith("/ReadAuditLog") and records[-1]["for"] == "ada"
+        admin.close()
+    finally:
+        dashboard.stop()
+        server.stop(grace=None)

@@ -47,6 +47,8 @@ def _open_panel(page: Page, title: str) -> None:
 
 
 def test_another_clients_path_run_is_followed_tag_by_tag(chromium, dashboard, cell_server):
+    """The run of a path the page did not load: its points read from the device (GetPath),
+    so its tags count out of the path's."""
     page = Page(chromium, dashboard)
     tags = [TagPoint([0.3, 0.0, 1.5, 0.0, 1.5, 0.0], tag_name="near"),
             TagPoint([0.6, 0.1, 1.4, 0.0, 1.4, 0.0], tag_name="far")]
@@ -54,7 +56,7 @@ def test_another_clients_path_run_is_followed_tag_by_tag(chromium, dashboard, ce
         robot.path_load("visit", tags, Frame.JOINT)
         run = robot.path_move("visit")
         run.wait(timeout=60)
-    page.shows("path-progress", f"run {run.command_id} of visit: done, 2 tags reached")
+    page.shows("path-progress", f"run {run.command_id} of visit: done, 2/2 tags reached")
     reached = page.page.locator("#path-progress .tag.reached")
     page.expect(reached).to_have_text(["near", "far"])
     page.close()

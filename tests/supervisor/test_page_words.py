@@ -55,23 +55,25 @@ def test_progress_counts_each_cycle_out_of_the_paths_tags(chromium, dashboard, c
 def test_progress_of_a_path_stored_before_counts_what_the_device_has(chromium, dashboard,
                                                                       cell_server):
     """The device kept two points of "kept" (another client's); the page teaches a third onto
-    it and runs it: it counts three tags, never more than it knows the path has."""
+    it and runs it: it reads the stored points from the device (GetPath), so it counts out of
+    the path's three tags, never more."""
     with Robot(cell_server.target, "script") as robot, robot.control(activate=False):
         robot.path_load("kept", [TagPoint(list(TOUR["a"]), tag_name="a"),
                                  TagPoint(list(TOUR["b"]), tag_name="b")], Frame.JOINT)
     page = Page(chromium, dashboard)
     page.take_control()
     page.page.evaluate(RECORD_PROGRESS)
+    page.expect(page.page.locator("#path-list")).to_contain_text("kept 2 points (read when previewed)")
     page.page.fill("#path-name", "kept")
     page.page.fill("#teach-tag", "here")
     page.click("btn-teach")
-    page.expect(page.page.locator("#path-progress .tag")).to_have_count(1)
+    page.expect(page.page.locator("#path-progress .tag")).to_have_text(["a", "b", "here"])
     page.click("btn-path-run")
     page.shows("path-progress", "done", timeout_ms=60_000)
     counts = _counts(page)
-    assert all(reached <= of for reached, of in counts), counts
-    page.shows("path-progress", "done, 3 tags reached")
-    page.expect(page.page.locator("#path-list")).to_contain_text("3 points, 1 known here")
+    assert counts and all(reached <= of == 3 for reached, of in counts), counts
+    page.shows("path-progress", "done, 3/3 tags reached")
+    page.expect(page.page.locator("#path-list")).to_contain_text("3 points, joints; stored on the device")
     page.close()
 
 

@@ -1,7 +1,7 @@
 """The supervisor's own calls (supervisor_calls.py) through the backend's WebSocket on a real
 device server: the control desk (handover.py) mediates only a lock held through this
-supervisor, for an operator with a session; acknowledgements (alarm_acks.py) reach every
-page, later ones too; what is refused changes nothing."""
+supervisor, for an operator with a session; alarms are acknowledged on the device, and every
+page, later ones too, sees who; what is refused changes nothing."""
 from __future__ import annotations
 
 import asyncio
@@ -12,7 +12,8 @@ from support import wait_until
 
 ASK, ANSWER, CANCEL = ("supervisor/RequestControl", "supervisor/AnswerControl",
                        "supervisor/CancelControlRequest")
-ACKNOWLEDGE, ACKNOWLEDGED = "supervisor/AcknowledgeAlarms", "supervisor/Acknowledged"
+ACKNOWLEDGE = "landscape.v1.EventService/AcknowledgeAlarm"
+SUBSCRIBE = "landscape.v1.EventService/Subscribe"
 
 
 def test_the_desk_refuses_what_it_cannot_mediate(people, server):
@@ -44,20 +45,32 @@ def test_a_viewer_may_not_ask(people, server):
     run_with_page(server, body, people, person="vera")
 
 
-def test_acknowledgements_reach_every_page_and_bad_ones_change_nothing(people, server):
+def test_an_acknowledgement_is_the_devices_seen_by_every_page_and_a_bad_one_changes_nothing(
+        people, server):
+    """Issue 28: the page acknowledges an alarm on the device (EventService.AcknowledgeAlarm,
+    as the signed-in person); every page, later ones too, sees the device's AlarmAcknowledged
+    event naming who; an unknown alarm or a viewer's acknowledgement is refused."""
+    def events(frame, kind):
+        return frame["rpc"] == SUBSCRIBE and kind in frame.get("reply", {}).get("event", {})
+
     async def body(page, dashboard):
-        for keys in (None, [], ["x" * 65], [3], ["ok", None]):
-            refused = await page.call(ACKNOWLEDGE, {"keys": keys})
-            assert refused["status"]["code"] == 3, keys          # INVALID_ARGUMENT
-        reply = await page.call(ACKNOWLEDGE, {"keys": ["7@2026-01-01T00:00:00Z", "7@2026-01-01T00:00:00Z"]})
-        assert reply["reply"] == {"acknowledged": 1}
-        told = await page.until(lambda f: f["rpc"] == ACKNOWLEDGED)
-        assert [(a["key"], a["by"]) for a in told["reply"]["acks"]] == [("7@2026-01-01T00:00:00Z", "olga")]
+        await page.call(DEVICE + "OperatePanel", {"action": "PANEL_ACTION_PRESS_ESTOP"})
+        alarm = (await page.until(lambda f: events(f, "alarm")))["reply"]["event"]
+        refused = await page.call(ACKNOWLEDGE, {"sequence": "999999"})
+        assert refused["status"]["code"] == 3, refused                  # INVALID_ARGUMENT
+        assert not [f for f in page.frames if events(f, "alarmAcknowledged")]
+        reply = (await page.call(ACKNOWLEDGE, {"sequence": alarm["sequence"]}))["reply"]
+        assert reply["newly"] and reply["acknowledgement"]["onBehalfOf"] == "olga"
+        told = (await page.until(lambda f: events(f, "alarmAcknowledged")))["reply"]["event"]
+        assert told["alarmAcknowledged"]["alarmSequence"] == alarm["sequence"]
+        assert told["alarmAcknowledged"]["client"] == "supervisor"
         http, ws = await open_page(dashboard.url, people.token("vera"))   # a page opened later
         async with http, ws:
             later = PageClient(ws, http)
-            told = await later.until(lambda f: f["rpc"] == ACKNOWLEDGED)
-            assert [a["key"] for a in told["reply"]["acks"]] == ["7@2026-01-01T00:00:00Z"]
-            refused = await later.call(ACKNOWLEDGE, {"keys": ["8@x"]})   # a viewer's
+            seen = await later.until(lambda f: events(f, "alarmAcknowledged"))
+            assert seen["reply"]["event"]["sequence"] == told["sequence"]
+            refused = await later.call(ACKNOWLEDGE, {"sequence": alarm["sequence"]})   # a viewer's
             assert refused["status"]["code"] == 7
+        again = (await page.call(ACKNOWLEDGE, {"sequence": alarm["sequence"]}))["reply"]
+        assert not again.get("newly") and again["eventSequence"] == told["sequence"]
     run_with_page(server, body, people)

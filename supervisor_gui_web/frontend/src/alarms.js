@@ -1,26 +1,33 @@
 // Alarms: each device's alarms from its event stream, newest first, with who acknowledged
 // them, and the device's questions (clientAlarmRSVP / clientEventRSVP) with their answers.
 //
-// An acknowledgement is the supervisor's: the backend keeps it and tells every page, naming
-// who acknowledged (supervisor_gui_web/alarm_acks.py); the device contract has no call for it
-// yet (docs/page.md). A question is answered from the page that holds the lock (its session
+// An acknowledgement is the device's (EventService.AcknowledgeAlarm): it records it in its audit
+// log and tells every client with an AlarmAcknowledged event naming who, which this list shows
+// (a page opened later sees them in the replayed history). A question is answered from the page that holds the lock (its session
 // is the one the device asks); everyone sees it and how it was answered.
 import { clock, severityWord } from './words.js';
 
 const $ = (id) => document.getElementById(id);
-const ACKNOWLEDGE = 'supervisor/AcknowledgeAlarms';
+const ACKNOWLEDGE = 'landscape.v1.EventService/AcknowledgeAlarm';
 const KEPT = 500;
 const SEVERITY = { ALARM_SEVERITY_INFO: 1, ALARM_SEVERITY_WARNING: 2, ALARM_SEVERITY_ERROR: 3, ALARM_SEVERITY_CRITICAL: 4 };
 
 // An event's key: its sequence and time (a restarted device numbers from 1 again).
 const keyOf = (event) => `${event.sequence}@${event.time}`;
 
+// Who acknowledged, as the device names them: the person a program acted for, with the
+// program and the authenticated caller when they say more (tokens off: the caller's address).
+function acknowledger({ by, client, onBehalfOf }) {
+  if (!onBehalfOf || onBehalfOf === by) return by;
+  return `${onBehalfOf} (${[client, by].filter(Boolean).join(', ')})`;
+}
+
 export class AlarmBook {
   constructor(ctx) {
     this.ctx = ctx;
     this.entries = [];        // newest first: {key, time, kind: 'alarm'|'question', ...}
     this.byKey = new Map();
-    this.acks = new Map();    // key -> {by, at}
+    this.acks = new Map();    // key -> {who, at (ms)}
     this.questions = new Map();   // rsvpId -> entry
   }
 
@@ -52,6 +59,12 @@ export class AlarmBook {
       if (this.pending?.rsvpId === r.rsvpId) entry.answer = this.pending.settle;   // asked first
       this.questions.set(r.rsvpId, entry);
       this.add(entry);
+    } else if (event.alarmAcknowledged) {
+      const a = event.alarmAcknowledged;
+      const entry = this.entries.find((e) => e.kind === 'alarm' && e.sequence === a.alarmSequence);
+      if (!entry) return;   // an alarm older than the page's list
+      this.acks.set(entry.key, { who: acknowledger(a), at: time });
+      this.ctx.changed('alarms');
     } else if (event.rsvpAnswer) {
       const entry = this.questions.get(event.rsvpAnswer.rsvpId);
       if (!entry) return;
@@ -71,14 +84,11 @@ export class AlarmBook {
     this.ctx.changed('alarms');
   }
 
-  // The backend's acknowledgements: [{key, by, at}].
-  acknowledged(acks) {
-    for (const ack of acks) this.acks.set(ack.key, ack);
-    this.ctx.changed('alarms');
-  }
-
+  // Each alarm to the device; its AlarmAcknowledged event marks it, on every page.
   acknowledge(keys) {
-    return keys.length ? this.ctx.command(ACKNOWLEDGE, { keys }) : null;
+    return Promise.all(keys.map((key) => this.byKey.get(key))
+      .filter((entry) => entry?.kind === 'alarm')
+      .map((entry) => this.ctx.command(ACKNOWLEDGE, { sequence: entry.sequence })));
   }
 }
 
@@ -124,7 +134,7 @@ export class AlarmPanel {
     if (ack) {
       const by = document.createElement('span');
       by.className = 'acked';
-      by.textContent = `acknowledged by ${ack.by} at ${clock(ack.at * 1000)}`;
+      by.textContent = `acknowledged by ${ack.who} at ${clock(ack.at)}`;
       li.append(by);
     } else {
       const button = document.createElement('button');

@@ -6,7 +6,7 @@ import { fmt } from './units.js';
 import { UNIT_WORDS } from './words.js';
 
 const $ = (id) => document.getElementById(id);
-const EXPECT_MS = 3000;   // longer than the status reads' period (feeds.py: 0.5 s)
+const EXPECT_MS = 3000;   // longer than the status reads' period (device_hub.py: 0.5 s)
 
 export class Controls {
   constructor(selection) {

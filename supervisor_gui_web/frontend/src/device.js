@@ -62,6 +62,7 @@ export class Device {
     this.ctx.model.robotType = description.robotType || '?';
     if (this.ctx.model.cell && !this.ctx.model.cell.refused) this.arm.setCell(this.ctx.model.cell);
     this.ctx.changed('robot');
+    this.paths.refresh();   // the device answers: its stored paths
   }
 
   // One frame of the backend about this device.
@@ -102,7 +103,7 @@ export class Device {
     ctx.model.sample = sample;
     this.age = received - cycle;
     this.fresh.sample(sample);
-    const units = sample.units;   // the backend asks for meters and radians (state_feed.py)
+    const units = sample.units;   // the backend asks for meters and radians (device_hub.py)
     this.arm.setJoints((sample.jointPositions || []).map((q) => toSI(q, 'angular', units)));
     this.arm.setEndEffector(sample.endEffector, sample.endEffectorState);
     if (sample.toolPose) this.arm.setToolPose(poseToSI(sample.toolPose, units));
@@ -138,10 +139,9 @@ export class Device {
     ctx.changed('status');
   }
 
-  // The supervisor's own frames about this device: alarms acknowledged, control requests.
+  // The supervisor's own frames about this device: control requests.
   supervisor(method, reply) {
-    if (method === 'Acknowledged') this.alarms.acknowledged(reply.acks || []);
-    else if (method === 'Control') this.handover?.notice(reply);
+    if (method === 'Control') this.handover?.notice(reply);
   }
 
   // The tool tip's offset in the flange frame (SI), as GetToolOffsets says; none: zero.

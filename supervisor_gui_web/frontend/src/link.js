@@ -89,6 +89,24 @@ export class Link {
     });
   }
 
+  // A server-streaming call (GetPath): resolves with its replies once it ended, rejects with
+  // Refused.
+  collect(device, rpc, request = {}) {
+    return new Promise((resolve, reject) => {
+      const replies = [];
+      const stream = this.open(device, rpc, (frame) => {
+        if (frame.reply) replies.push(frame.reply);
+        if (!frame.status) return;
+        if (frame.status.code) reject(new Refused(rpc, frame.status));
+        else resolve(replies);
+      });
+      if (!stream.send(request)) {
+        this.streams.delete(stream.id);
+        reject(new Refused(rpc, { code: 14, message: 'not connected to the dashboard', details: [] }));
+      }
+    });
+  }
+
   // A stream the page opens (the session, a jog): returns {id, send(request), cancel()}; every
   // frame of it, replies and the final status, goes to handler.
   open(device, rpc, handler) {

@@ -1,8 +1,15 @@
 // Move to a point: a goal in joints, or as a tool tip pose in the base or world frame, typed or
 // taken from the arm's current pose, previewed by the ghost arm before anything moves; Move
 // sends it as MoveAbsolute. Values are in the device's units.
+//
+// The ghost stands where the device says the move would end (SolvePose: the move planned and
+// checked, not made), or the preview says why the device would refuse it (beyond reach or
+// range, a collision). A device without SolvePose: typed joints as they are, a pose solved on
+// this page from the arm's present joints (as the device keeps the arm's configuration).
 import { poseMatrix } from './arm_view.js';
+import { DEVICE } from './context.js';
 import { solvePose } from './ik.js';
+import { Refused } from './link.js';
 import { fmt, fromSI, poseToSI, symbol, toSI } from './units.js';
 
 const $ = (id) => document.getElementById(id);
@@ -10,6 +17,7 @@ const JOINT = 'REFERENCE_FRAME_JOINT_FRAME';
 const WORLD = 'REFERENCE_FRAME_WORLD_CARTESIAN_FRAME';
 const POSE = ['x', 'y', 'z', 'roll', 'pitch', 'yaw'];
 const PREVIEW_MS = 150;
+const UNIMPLEMENTED = 12;
 
 export class MoveForm {
   constructor(selection) {
@@ -21,6 +29,8 @@ export class MoveForm {
     $('btn-move').addEventListener('click', () => this.move());
     $('btn-move-clear').addEventListener('click', () => this.clear());
     for (const input of this.inputs) input.addEventListener('input', () => this.schedule());
+    for (const id of ['move-motion', 'move-speed']) $(id).addEventListener('input', () => this.schedule());
+    this.asked = 0;       // the newest preview; an older answer arriving later gives way
     selection.on((what, device) => {
       if (what === 'switch') {
         for (const other of selection.devices.values()) if (other !== device) other.arm.showGhost(null);
@@ -69,12 +79,31 @@ export class MoveForm {
     this.timer = setTimeout(() => this.preview(), PREVIEW_MS);
   }
 
-  // The goal's joints (rad) for the ghost: typed, or solved from the arm's present joints.
+  // The goal's joints (rad) for the ghost, as the device solves the move.
   async goalJoints() {
-    const device = this.selection.device;
-    const units = device.ctx.model.units;
     const values = this.values();
     if (!values.every(Number.isFinite)) return { joints: null, why: 'six numbers are needed' };
+    const { ctx } = this.selection.device;
+    const request = { frame: this.frame, values, motionType: $('move-motion').value };
+    const speed = $('move-speed').value;
+    if (speed !== '') request.speed = Number(speed);
+    let answer;
+    try {
+      answer = await ctx.link.call(ctx.device, `${DEVICE}SolvePose`, request);
+    } catch (error) {
+      if (!(error instanceof Refused)) throw error;
+      if (error.status.code === UNIMPLEMENTED) return this.solvedHere(values);
+      return { joints: null, why: `the device did not solve it: ${error.status.message}` };
+    }
+    if (!answer.reachable) return { joints: null, why: `the device would refuse this move: ${answer.refusal.message}` };
+    return { joints: answer.joints.map((q) => toSI(q, 'angular', answer.units)),
+      why: `the goal as the device solves it, a move of ${answer.duration.toFixed(1)} s` };
+  }
+
+  // Without SolvePose: typed joints, or a pose solved from the arm's present joints.
+  async solvedHere(values) {
+    const device = this.selection.device;
+    const units = device.ctx.model.units;
     if (this.frame === JOINT) return { joints: values.map((v) => toSI(v, 'angular', units)), why: 'the goal' };
     const pose = poseToSI(Object.fromEntries(POSE.map((k, i) => [k, values[i]])), units);
     let target = poseMatrix(pose);
@@ -94,7 +123,9 @@ export class MoveForm {
   async preview() {
     const arm = this.selection.device.arm;
     if (!arm.robot) return;
+    const asked = ++this.asked;
     const { joints, why } = await this.goalJoints();
+    if (asked !== this.asked) return;
     arm.showGhost(joints);
     this.ghostJoints = joints;
     $('move-preview').textContent = joints ? `Ghost arm: ${why}.` : `No preview: ${why}.`;
@@ -109,6 +140,7 @@ export class MoveForm {
   }
 
   clear() {
+    this.asked += 1;   // a preview under way is not shown
     this.selection.device.arm.showGhost(null);
     this.ghostJoints = null;
     $('move-preview').textContent = '';

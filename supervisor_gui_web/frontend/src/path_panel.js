@@ -1,7 +1,7 @@
 // The paths panel of the selected device: teach (store the current pose as a tag of a named
-// path), load points typed in, clear, run, stop, resume, abort; the list of paths the page
-// knows, each previewed in 3D (its points dashed, the ghost arm at its first point) before it
-// runs; and the progress of the newest run by tag.
+// path), load points typed in, clear, run, stop, resume, abort; the device's stored paths
+// (paths.js), each previewed in 3D (its points read from the device, dashed, the ghost arm at
+// its first point) before it runs; and the progress of the newest run by tag.
 import { ENDED, tagKey } from './paths.js';
 import { poseToSI, fromSI, toSI } from './units.js';
 import { frameWord } from './words.js';
@@ -23,11 +23,16 @@ export class PathPanel {
     on('btn-stop', () => selection.ctx.command('StopMotion'));
     on('btn-resume', () => selection.ctx.command('ResumeMotion'));
     on('btn-abort', () => selection.ctx.command('AbortMotion'));
+    // Another client may have loaded or cleared a path: the list is read again when opened.
+    $('path-list').closest('details').addEventListener('toggle', (event) => {
+      if (event.target.open) book().refresh();
+    });
     $('path-name').addEventListener('input', () => { this.previewed = null; this.show(); });
     selection.on((what, device) => {
       if (what === 'switch') {
         for (const other of selection.devices.values()) if (other !== device) this.erase(other);
         this.previewed = null;
+        device.paths.refresh();
       }
       if (device === selection.device && ['switch', 'paths', 'robot'].includes(what)) this.show();
     });
@@ -108,17 +113,34 @@ export class PathPanel {
       preview.textContent = name;
       preview.setAttribute('aria-pressed', String(name === shown));
       preview.title = `preview ${name} in 3D`;
-      preview.addEventListener('click', () => { this.previewed = name; $('path-name').value = name; this.show(); });
+      preview.addEventListener('click', () => this.preview(name));
       const about = document.createElement('span');
       about.className = 'note';
       const points = path.length === null ? 'points not known here'
-        : path.length === path.tags.length ? `${path.length} points` : `${path.length} points, ${path.tags.length} known here`;
+        : path.length === path.tags.length ? `${path.length} points`
+          : path.source === 'stored on the device' ? `${path.length} points (read when previewed)`
+            : `${path.length} points, ${path.tags.length} known here`;
       about.textContent = ` ${points}${path.frame ? `, ${frameWord(path.frame)}` : ''}; ${path.source}`;
       li.append(preview, about);
       return li;
     });
     $('path-list').replaceChildren(...items);
     $('path-list-empty').hidden = items.length > 0;
+    $('path-list-source').textContent = book.unlisted
+      ? `The device did not list its stored paths (${book.unlisted}): these are the paths this page loaded, taught or saw running.`
+      : 'The paths stored on the device, whoever loaded them.';
+  }
+
+  // A path chosen in the list: its points read from the device unless known, then drawn.
+  async preview(name) {
+    const { ctx, paths } = this.selection.device;
+    this.previewed = name;
+    $('path-name').value = name;
+    if (paths.paths.get(name)?.source === 'stored on the device' && !paths.whole(name)) {
+      const refused = await paths.read(name);
+      if (refused) ctx.refused('GetPath', refused);
+    }
+    this.show();
   }
 
   erase(device) {
@@ -134,7 +156,7 @@ export class PathPanel {
     const arm = device.arm;
     const drawing = ++this.drawn;
     if (!path || !path.tags.length || !arm.robot) { this.erase(device); return; }
-    const units = device.ctx.model.units;
+    const units = path.units || device.ctx.model.units;
     const toolOffset = device.toolOffset();
     const world = path.frame === 'REFERENCE_FRAME_WORLD_CARTESIAN_FRAME' ? await device.worldInBase() : null;
     if (drawing !== this.drawn) return;

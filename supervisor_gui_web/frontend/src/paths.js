@@ -1,16 +1,22 @@
-// One device's paths as the page knows them, and the progress of its newest path run.
+// One device's paths, and the progress of its newest path run.
 //
-// The contract has no call that lists a device's stored paths or reads their points
-// (docs/page.md): the page knows the paths loaded or taught from it (their points, and the
-// device's count of points from PathLoad's reply, which also counts points stored before),
-// and the names of paths it saw run. A run's progress comes from the event stream, whoever
-// started it: the tags reached in the current cycle, out of the path's tags when the page
-// knows every point. A tag is known by its name and index (a client may leave every index
-// 0); reaching one already reached in this cycle starts the next.
+// The list is the device's (DeviceService.ListPaths: each stored path's name, motion type and
+// count of points and tags, whoever loaded it), read when the page connects and after it loads
+// or clears a path or sees an unknown one run. A path's points are read (GetPath: resolved to
+// joints, in the device's units) when it is previewed or runs; points the page loaded itself
+// are known already. A device that cannot list its paths (an older one) leaves the paths the
+// page knows: loaded or taught here, or seen running. A run's progress comes from the event
+// stream, whoever started it: the tags reached in the current cycle, out of the path's tags
+// when the page knows every point. A tag is known by its name and index (a client may leave
+// every index 0); reaching one already reached in this cycle starts the next.
+import { DEVICE } from './context.js';
+import { Refused } from './link.js';
 import { phaseWord } from './words.js';
 
 export const ENDED = new Set(['done', 'failed', 'aborted']);
 const RUNNING = new Set(['PHASE_STARTED', 'PHASE_RESUMED']);
+const JOINT_FRAME = 'REFERENCE_FRAME_JOINT_FRAME';
+const STORED = 'stored on the device';
 
 // A tag as its events name it (TagStruct JSON and CommandEvent spell both fields alike).
 export const tagKey = (tag) => `${tag.tagIndex || 0}:${tag.tagName}`;
@@ -18,8 +24,54 @@ export const tagKey = (tag) => `${tag.tagIndex || 0}:${tag.tagName}`;
 export class PathBook {
   constructor(ctx) {
     this.ctx = ctx;
-    this.paths = new Map();   // name -> {frame, motionType, tags, length (device's), source}
+    this.paths = new Map();   // name -> {frame, motionType, tags, length (device's), source, units?}
     this.run = null;          // {commandId, path, phase, cycles, cycle, reached: Set, last}
+    this.unlisted = '';       // why the device did not list its paths, if it did not
+  }
+
+  // The device's list (ListPaths); the points the page knows of a path it lists whole stay.
+  async refresh() {
+    let reply;
+    try {
+      reply = await this.ctx.link.call(this.ctx.device, `${DEVICE}ListPaths`, {});
+    } catch (error) {
+      if (!(error instanceof Refused)) throw error;
+      this.unlisted = error.status.message;
+      this.ctx.changed('paths');
+      return;
+    }
+    const listed = new Map();
+    for (const summary of reply.paths) {
+      const known = this.paths.get(summary.name);
+      const whole = known && known.length === summary.numberOfPoints && known.tags.length === summary.numberOfPoints;
+      listed.set(summary.name, whole ? { ...known, source: STORED }
+        : { frame: JOINT_FRAME, motionType: summary.motionType, tags: [], length: summary.numberOfPoints, source: STORED });
+    }
+    this.paths = listed;
+    this.unlisted = '';
+    this.ctx.changed('paths');
+  }
+
+  // A stored path's points (GetPath), resolved to joints; null, or the refusal's Status.
+  async read(name) {
+    let replies;
+    try {
+      replies = await this.ctx.link.collect(this.ctx.device, `${DEVICE}GetPath`, { pathName: name });
+    } catch (error) {
+      if (!(error instanceof Refused)) throw error;
+      return error.status;
+    }
+    const [first] = replies;
+    this.paths.set(name, { frame: JOINT_FRAME, motionType: first.path.motionType, tags: replies.flatMap((r) => r.points),
+      length: first.path.numberOfPoints, units: first.units, source: STORED });
+    this.ctx.changed('paths');
+    return null;
+  }
+
+  // Whether every point of a path is known here.
+  whole(name) {
+    const path = this.paths.get(name);
+    return Boolean(path) && path.length === path.tags.length;
   }
 
   // PathLoad of `tags` (TagStruct JSON, device units) onto path `name`; true when loaded.
@@ -33,6 +85,8 @@ export class PathBook {
     const base = known && known.frame === frame ? known.tags : [];
     this.paths.set(name, { frame, motionType, tags: [...base, ...tags], length: reply.pathLength, source: 'loaded here' });
     this.ctx.changed('paths');
+    await this.refresh();
+    await this.readIfListed(name);   // the points stored before this load, too
     return true;
   }
 
@@ -40,6 +94,7 @@ export class PathBook {
     if (!await this.ctx.command('PathClearPath', { pathName: name })) return false;
     this.paths.delete(name);
     this.ctx.changed('paths');
+    await this.refresh();
     return true;
   }
 
@@ -55,8 +110,17 @@ export class PathBook {
 
   follow(commandId, path, cycles = null) {
     this.run = { commandId, path, phase: 'running', cycles, cycle: 1, reached: new Map() };   // tag key -> name
-    if (!this.paths.has(path)) this.paths.set(path, { frame: '', motionType: '', tags: [], length: null, source: 'seen running' });
+    if (!this.paths.has(path)) {
+      this.paths.set(path, { frame: '', motionType: '', tags: [], length: null, source: 'seen running' });
+      this.refresh().then(() => this.readIfListed(path));
+    } else this.readIfListed(path);
     this.ctx.changed('paths');
+  }
+
+  // The points of a path the device lists and the page does not know whole: its tags count.
+  readIfListed(name) {
+    const path = this.paths.get(name);
+    return path?.source === STORED && !this.whole(name) ? this.read(name) : null;
   }
 
   // A landscape.v1.Event: a PathMove started by any client (its point name is the path's), the
@@ -80,9 +144,8 @@ export class PathBook {
 
   // The tags of a path that raise events (the named ones), when the page knows every point.
   namedTags(name) {
-    const path = this.paths.get(name);
-    if (!path || path.length !== path.tags.length) return null;
-    return path.tags.filter((tag) => tag.tagName);
+    if (!this.whole(name)) return null;
+    return this.paths.get(name).tags.filter((tag) => tag.tagName);
   }
 
   // "run 12 of tour: moving, cycle 2 of 3, 1/4 tags reached".

@@ -77,6 +77,21 @@ export class CellView {
     this.requestRender();
   }
 
+  // An arm drawn here moved to another view.
+  remove(arm) {
+    this.arms = this.arms.filter((a) => a !== arm);
+    this.scene.remove(arm.root);
+    this.requestRender();
+  }
+
+  // An arm's world frame placed in the view's (a Matrix4).
+  place(arm, placement) {
+    if (!this.arms.includes(arm)) this.add(arm);
+    placement.decompose(arm.root.position, arm.root.quaternion, arm.root.scale);
+    arm.root.updateMatrixWorld(true);
+    this.requestRender();
+  }
+
   // The floor grid where any arm's cell has a floor.
   showFloor() {
     this.grid.visible = this.arms.some((arm) => arm.cell?.floor);
