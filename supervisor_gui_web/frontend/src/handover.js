@@ -71,7 +71,8 @@ export class ControlRequests {
   // The holder's banner: hand over, or decline.
   prompt(text, expiresMs) {
     const until = new Date(Date.now() + expiresMs).toLocaleTimeString();
-    const give = button('Hand over', () => this.call('AnswerControl', { give: true }));
+    const give = button('Hand over', () => this.device.session.lettingGo(
+      () => this.call('AnswerControl', { give: true })));
     give.dataset.testid = `hand-over-${this.device.name}`;
     const decline = button('Decline', () => this.call('AnswerControl', { give: false }));
     decline.dataset.testid = `decline-${this.device.name}`;

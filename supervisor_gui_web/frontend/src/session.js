@@ -74,10 +74,21 @@ export class DeviceSession {
   }
 
   async release() {
-    if (!await this.ctx.command('Release')) return false;
+    if (!await this.lettingGo(() => this.ctx.command('Release'))) return false;
     this.notice.released();
     this.setLock(false);
     return true;
+  }
+
+  // While this page lets the lock go (Release, a hand-over), a read showing it gone is that,
+  // not a loss: the read may come before the call's reply or the "given" note.
+  async lettingGo(call) {
+    this.lettingGoNow = true;
+    try {
+      return await call();
+    } finally {
+      this.lettingGoNow = false;
+    }
   }
 
   // The lock was handed to someone else on this page's word: not a loss.
@@ -109,7 +120,7 @@ export class DeviceSession {
   checkLock() {
     const ctx = this.ctx;
     const status = ctx.model.status.GetDeviceState;
-    if (!ctx.holdsLock || !status || status.refused) return;
+    if (!ctx.holdsLock || this.lettingGoNow || !status || status.refused) return;
     if (status.locked && status.lockHolder === ctx.person.name) this.lockSeen = true;
     if (this.lockSeen && (!status.locked || status.lockHolder !== ctx.person.name)) {
       ctx.holdsLock = false;
