@@ -125,6 +125,8 @@ def response_size(server, rpc: str, lease: str) -> int:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer calls, for CI")
+    parser.add_argument("--only", nargs="+", choices=sorted(CALLS), metavar="RPC",
+                        help="measure these calls only (default: all)")
     args = parser.parse_args()
     calls = 150 if args.quick else 500
     server = serve(ServerConfig(port=0, clock="realtime"))
@@ -135,7 +137,7 @@ def main() -> None:
     try:
         print(f"{calls} calls per client; ms p50 / p99, calls/s; ratio = device / echo "
               f"(p50, and throughput)")
-        for rpc in CALLS:
+        for rpc in args.only or CALLS:
             size = response_size(server, rpc, lease)
             for clients in (1, 8, 32):
                 per = max(20, calls // clients) if clients > 1 else calls

@@ -58,6 +58,11 @@ class StateHub:
         self._poses: dict[int, np.ndarray] = {}   # sequence -> flange pose (4, 4), newest few
         self._model = PinocchioModel(device.arm)  # one pose in ~5 us (the numpy FK: ~60 us)
 
+    @property
+    def cycle(self) -> int:
+        """The newest cycle's sequence number (-1 before the first)."""
+        return self.ring.head
+
     def attach(self, loop: asyncio.AbstractEventLoop) -> None:
         """Start listening to the ring's wake-ups on `loop` (the server's)."""
         self._loop = loop
