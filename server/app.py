@@ -169,7 +169,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     paths = PathStore(config.paths_file, report=lambda severity, message: bus.alarm(
         severity, alarms.STORAGE, message))
     device = Device(link, bus, cell.arm, paths=paths, outputs=outputs,
-                    reset_settings=config.reset_settings,
+                    reset_settings=config.reset_settings, settings_delay=config.settings_delay,
                     collisions=CollisionScene(cell, config.collision_margin))
     workcell = build_workcell(device, cell)
     hub = StateHub(device, workcell, max_lag=250 if config.clock == "realtime" else 8)

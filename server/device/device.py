@@ -39,7 +39,7 @@ from landscape.server.device.safety import SafetyActions
 from landscape.server.device.sessions import Session, SessionRegistry
 from landscape.server.device.state_machine import StateMachine
 from landscape.server.device.states import State
-from landscape.server.device.stored_settings import SettingsKeeper
+from landscape.server.device.stored_settings import WRITE_BEHIND, SettingsKeeper
 from landscape.server.errors import ControllerFailure, EstopActive, NotOffered, ParamError
 from landscape.server.events import alarms
 from landscape.server.events.bus import EventBus, Severity
@@ -68,7 +68,7 @@ class Device:
                  collisions: CollisionScene, paths: PathStore | None = None,
                  outputs: set[str] = frozenset(), enable_timeout: float = 5.0,
                  keepalive_interval: float = 0.5, keepalive_timeout: float = 2.0,
-                 reset_settings: bool = False):
+                 reset_settings: bool = False, settings_delay: float | None = None):
         self.link = link
         self.bus = bus
         self.arm = arm
@@ -83,7 +83,9 @@ class Device:
         self.state_machine = StateMachine(bus)
         self.rsvp = RsvpBroker(bus)
         store = paths or PathStore()
-        self.settings_keeper = SettingsKeeper(MotionSettings(arm), store, reset_settings)
+        self.settings_keeper = SettingsKeeper(MotionSettings(arm), store, reset_settings,
+                                              WRITE_BEHIND if settings_delay is None
+                                              else settings_delay)
         self.motions = MotionControl(self.state_machine, link, bus, arm,
                                      Planner(self.kinematics, link.cycle_time), collisions,
                                      store, self.settings_keeper, set(outputs))
@@ -143,6 +145,7 @@ class Device:
         self.sessions.close()
         self.safety.wait_idle(timeout)
         self.safety.close()
+        self.settings_keeper.close()     # the settings written behind, now
         self.motions.close()
 
     # ---- state -----------------------------------------------------------------------------
@@ -257,8 +260,8 @@ class Device:
     # ---- 3.2 settings, 3.3 queries ---------------------------------------------------------
 
     def update_settings(self, change) -> MotionSettings:
-        """Apply `change(settings) -> settings`: validated, stored, then in force; a validation
-        or storage error leaves them as they were."""
+        """Apply `change(settings) -> settings`: validated, in force, then stored behind
+        (stored_settings.py); a validation error leaves them as they were."""
         return self.settings_keeper.update(change)
 
     def feedback(self) -> Sample:
