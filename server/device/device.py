@@ -22,6 +22,7 @@ Concurrency:
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 from dataclasses import dataclass
 from typing import Callable
@@ -185,6 +186,14 @@ class Device:
         """Run the body of `rpc` if the state table allows it now, for this caller
         (StateMachine.command)."""
         return self.state_machine.command(rpc, lease)
+
+    def command_if_free(self, rpc: str, lease: str | None):
+        """`command` now if no other command holds the turn (StateMachine.command_if_free),
+        for the settings' bodies: never while the settings are written through (a file
+        write may wait)."""
+        if self.settings_keeper.writes_through:
+            return contextlib.nullcontext(False)
+        return self.state_machine.command_if_free(rpc, lease)
 
     def check_holder(self, what: str, lease: str | None) -> None:
         self.state_machine.check_holder(what, lease)

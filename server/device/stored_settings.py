@@ -100,13 +100,19 @@ class SettingsKeeper:
     def current(self) -> MotionSettings:
         return self._current
 
+    @property
+    def writes_through(self) -> bool:
+        """Whether `update` writes to the file before it returns (a delay of 0, a file that
+        fails, a keeper closing)."""
+        return self._delay == 0 or self._store.failing or self._closing.is_set()
+
     def update(self, change: Callable[[MotionSettings], MotionSettings]) -> MotionSettings:
         """Apply `change(settings) -> settings`: validated, in force, written behind; a
         validation error (or, while the file fails, a storage error) leaves them as they
         were."""
         with self._lock:
             settings = change(self._current)
-            if self._delay == 0 or self._store.failing or self._closing.is_set():
+            if self.writes_through:
                 with self._writing:
                     self._store.save_settings(to_record(settings))
                     self._written = settings

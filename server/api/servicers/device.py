@@ -11,7 +11,7 @@ from landscape.server.api import cell_view, convert, services
 from landscape.server.device.device import Device
 from landscape.server.errors import ControllerFailure, Stopped
 from landscape.server.planning.process import StreamRef
-from landscape.server.api.guard import blocking, guarded, lease_of
+from landscape.server.api.guard import blocking, guarded, lease_of, on_loop
 from landscape.server.api.read_cache import ReplyCache, by_version
 from landscape.server.planning.targets import Frame
 from landscape.robot.units import Units, pose_matrix
@@ -55,6 +55,7 @@ class DeviceServicer(services.DEVICE.servicer_base):
         return control_pb2.DeactivateResponse(ret_val=convert.ok("drives off"))
 
     # ---- 3.2 ----
+    @on_loop
     def SetSpeed(self, request, context):
         kind = convert.enum_value(convert.SPEED_KINDS, request.attribute, "attribute")
         value = convert.rate_to_si(kind, request.speed, self.device.settings.units)
@@ -62,6 +63,7 @@ class DeviceServicer(services.DEVICE.servicer_base):
         return settings_pb2.SetSpeedResponse(ret_val=convert.ok(convert.rate_text(
             "speed", kind, request.speed, self.device.settings.units)))
 
+    @on_loop
     def SetAcceleration(self, request, context):
         kind = convert.enum_value(convert.ACCEL_KINDS, request.attribute, "attribute")
         value = convert.rate_to_si(kind, request.accel, self.device.settings.units)
@@ -69,18 +71,21 @@ class DeviceServicer(services.DEVICE.servicer_base):
         return settings_pb2.SetAccelerationResponse(ret_val=convert.ok(convert.rate_text(
             "acceleration", kind, request.accel, self.device.settings.units)))
 
+    @on_loop
     def SetToolOffset(self, request, context):
         offset = convert.pose_to_matrix(request.offset, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_tool_offset(offset))
         return settings_pb2.SetToolOffsetResponse(ret_val=convert.ok(convert.pose_text(
             "tool offset", request.offset, self.device.settings.units)))
 
+    @on_loop
     def SetWorldCartesianFrame(self, request, context):
         frame = convert.pose_to_matrix(request.frame, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_world_frame(frame))
         return settings_pb2.SetWorldCartesianFrameResponse(ret_val=convert.ok(convert.pose_text(
             "world frame", request.frame, self.device.settings.units)))
 
+    @on_loop
     def SetUnits(self, request, context):
         units = convert.units_from_pb(request.linear_units, request.angular_units)
         self.device.update_settings(lambda s: s.with_units(units))
