@@ -149,6 +149,11 @@ def main() -> None:
     lease = holder.lock()
     pool = Callers()
     try:
+        # Settled before the first figure: the controller homed, the planning process up,
+        # every caller process and both servers past their first calls.
+        time.sleep(3.0)
+        for target, size in ((server.target, 0), (echo.target, 24)):
+            pool.measure(target, "GetDeviceState", 4, 100, lease, size)
         print(f"{calls} calls per client; ms p50 / p99, calls/s; ratio = device / echo "
               f"(p50, and throughput)")
         for rpc in args.only or CALLS:
