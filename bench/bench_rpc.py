@@ -28,6 +28,7 @@ from landscape.v1 import (control_pb2, device_service_pb2_grpc, end_effector_pb2
                           settings_pb2, types_pb2)
 
 LEASE = "landscape-lease"
+ROUNDS = 5   # device and echo alternate, each measured in this many rounds
 # Every read-only unary call of DeviceService, then a command.
 CALLS = {
     "GetRobotPosition": (settings_pb2.GetRobotPositionRequest, False),
@@ -74,6 +75,7 @@ async def callers(target: str, rpc: str, n: int, calls: int, lease: str, echo_si
                 await stub(request, metadata=metadata)
                 latencies.append((time.perf_counter() - began) * 1000)
 
+        await stub(request, metadata=metadata)     # connected before the clock starts
         began = time.perf_counter()
         await asyncio.gather(*(one() for _ in range(n)))
         return latencies, time.perf_counter() - began
@@ -93,15 +95,27 @@ class Callers:
             child.start()
 
     def measure(self, target: str, rpc: str, clients: int, calls: int, lease: str,
-                echo_size: int = 0):
-        """(p50, p99 ms, calls/s) with `clients` concurrent callers over up to 4 processes."""
+                echo_size: int = 0) -> tuple[list[float], float]:
+        """(latencies ms, wall s) of `clients` concurrent callers over up to 4 processes."""
         processes = min(len(self.jobs), clients)
         for jobs in self.jobs[:processes]:
             jobs.put((target, rpc, clients // processes, calls, lease, echo_size))
         results = [self.results.get(timeout=600) for _ in range(processes)]
-        latencies = [x for lat, _ in results for x in lat]
-        wall = max(w for _, w in results)
-        return pct(latencies, 50), pct(latencies, 99), len(latencies) / wall
+        return [x for lat, _ in results for x in lat], max(w for _, w in results)
+
+    def beside(self, device: str, echo: str, rpc: str, clients: int, calls: int, lease: str,
+               echo_size: int, rounds: int = ROUNDS):
+        """((p50, p99 ms, calls/s) of the device, the same of the echo), measured in
+        alternating rounds: on a shared machine both meet the same moments of load."""
+        seen = {device: ([], 0.0), echo: ([], 0.0)}
+        for _ in range(rounds):
+            for target, size in ((device, 0), (echo, echo_size)):
+                latencies, wall = self.measure(target, rpc, clients, max(1, calls // rounds),
+                                               lease, size)
+                kept, walls = seen[target]
+                seen[target] = (kept + latencies, walls + wall)
+        return tuple((pct(lat, 50), pct(lat, 99), len(lat) / wall)
+                     for lat, wall in (seen[device], seen[echo]))
 
     def close(self) -> None:
         for jobs in self.jobs:
@@ -125,6 +139,8 @@ def response_size(server, rpc: str, lease: str) -> int:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer calls, for CI")
+    parser.add_argument("--only", nargs="+", choices=sorted(CALLS), metavar="RPC",
+                        help="measure these calls only (default: all)")
     args = parser.parse_args()
     calls = 150 if args.quick else 500
     server = serve(ServerConfig(port=0, clock="realtime"))
@@ -133,14 +149,19 @@ def main() -> None:
     lease = holder.lock()
     pool = Callers()
     try:
+        # Settled before the first figure: the controller homed, the planning process up,
+        # every caller process and both servers past their first calls.
+        time.sleep(3.0)
+        for target, size in ((server.target, 0), (echo.target, 24)):
+            pool.measure(target, "GetDeviceState", 4, 100, lease, size)
         print(f"{calls} calls per client; ms p50 / p99, calls/s; ratio = device / echo "
               f"(p50, and throughput)")
-        for rpc in CALLS:
+        for rpc in args.only or CALLS:
             size = response_size(server, rpc, lease)
             for clients in (1, 8, 32):
                 per = max(20, calls // clients) if clients > 1 else calls
-                d50, d99, drate = pool.measure(server.target, rpc, clients, per, lease)
-                e50, e99, erate = pool.measure(echo.target, rpc, clients, per, lease, echo_size=size)
+                (d50, d99, drate), (e50, e99, erate) = pool.beside(
+                    server.target, echo.target, rpc, clients, per, lease, size)
                 print(f"  {rpc:17s} {clients:2d} clients: device {d50:6.3f} / {d99:6.3f} ms "
                       f"{drate:7.0f}/s   echo ({size} B) {e50:6.3f} / {e99:6.3f} ms "
                       f"{erate:7.0f}/s   ratio {d50 / e50:4.2f}, {drate / erate:4.2f}")

@@ -109,8 +109,18 @@ async def holder(target: str, stop, ready):
         ready.set()
         stop, runs = local(stop), 0
         while not stop.is_set():
-            command = (await device.PathMove(motion_pb2.PathMoveRequest(
-                path_name="soak", number_of_cycles=1), metadata=md)).ret_val.command_id
+            try:
+                command = (await device.PathMove(motion_pb2.PathMoveRequest(
+                    path_name="soak", number_of_cycles=1), metadata=md)).ret_val.command_id
+            except grpc.aio.AioRpcError as error:
+                if error.code() is not grpc.StatusCode.FAILED_PRECONDITION:
+                    raise
+                # In error (a shared machine starved the cycle process: the watchdog took it
+                # for hung): what a user would do, so that the soak goes on measuring memory.
+                print(f"soak: {error.details()}: reset", flush=True)
+                await device.Reset(control_pb2.ResetRequest(), metadata=md)
+                await device.Activate(control_pb2.ActivateRequest(), metadata=md)
+                continue
             async for reply in events:
                 if reply.event.command.command_id == command and reply.event.event_id in (
                         "command_done", "command_failed", "command_aborted"):
@@ -176,18 +186,35 @@ def start_server(folder: str) -> tuple[subprocess.Popen, str]:
 
 def sample(pids: list, seconds: float, rows: list) -> None:
     """(t, MB of each of `pids`: the server, its cycle and planning processes) once a second
-    for `seconds`."""
-    began = time.monotonic()
+    for `seconds`, and a line a minute. A child gone (a cycle process restarted by a Reset)
+    is NaN that second, and found again."""
+    began, said = time.monotonic(), 0.0
     while (now := time.monotonic() - began) < seconds:
-        rows.append((now, *(rss_mb(p) if p else math.nan for p in pids)))
+        row = [now]
+        for p in pids:
+            try:
+                row.append(rss_mb(p) if p else math.nan)
+            except FileNotFoundError:
+                row.append(math.nan)
+                pids[1:] = children(pids[0])
+        rows.append(tuple(row))
+        if now - said >= 60:
+            said = now
+            print(f"  {now:5.0f} s: " + ", ".join(f"{m:.1f}" for m in row[1:]) + " MB",
+                  flush=True)
         time.sleep(1.0)
 
 
 def growth(rows: list) -> tuple[float, ...]:
-    """MB per minute of each process sampled (least squares)."""
+    """MB per minute of each process sampled (least squares, over the seconds it was read)."""
     t = np.array([r[0] for r in rows])
-    return tuple(float(np.polyfit(t, np.array([r[k] for r in rows]), 1)[0]) * 60
-                 for k in range(1, len(rows[0])))
+    slopes = []
+    for k in range(1, len(rows[0])):
+        mb = np.array([r[k] for r in rows])
+        read = np.isfinite(mb)
+        slopes.append(float(np.polyfit(t[read], mb[read], 1)[0]) * 60 if read.sum() > 1
+                      else math.nan)
+    return tuple(slopes)
 
 
 def main() -> None:
@@ -219,7 +246,7 @@ def main() -> None:
             proc.terminate()
             proc.wait(timeout=30)
     (server_idle, cycle_idle, planning_idle), (server_load, cycle_load, planning_load) = (
-        [float(np.median([r[k] for r in rows])) for k in (1, 2, 3)] for rows in (idle, loaded))
+        [float(np.nanmedian([r[k] for r in rows])) for k in (1, 2, 3)] for rows in (idle, loaded))
     server_growth, cycle_growth, planning_growth = growth(loaded)
     print(f"resident memory (MB), {seconds:g} s of load after {warm_up:g} s of warm-up: "
           f"{runs} path runs, {calls:,} read calls, {messages:,} streamed messages")

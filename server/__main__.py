@@ -57,6 +57,11 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
                              "(default %(default)s)")
     parser.add_argument("--reset-settings", action="store_true",
                         help="start from the default settings instead of the stored ones")
+    parser.add_argument("--settings-delay", type=float, default=None,
+                        metavar="SECONDS",
+                        help="an accepted setting is written to --paths within this; a server "
+                             "killed outright (SIGKILL) sooner restarts without it; 0 writes "
+                             "each before its reply (default 0.2 s)")
     parser.add_argument("--collision-margin", type=float,
                         default=ServerConfig.collision_margin, metavar="METRES",
                         help="no planned motion may bring two bodies of the cell closer than "
@@ -83,6 +88,8 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
         parser.error("--tls-cert and --tls-key go together")
     if not 0.0 < args.collision_margin <= MAX_COLLISION_MARGIN:
         parser.error(f"--collision-margin must be above 0 and at most {MAX_COLLISION_MARGIN} m")
+    if args.settings_delay is not None and not 0.0 <= args.settings_delay <= 60.0:
+        parser.error("--settings-delay must be from 0 to 60 s")
     if args.mtls and not args.tls_ca:
         parser.error("--mtls needs --tls-ca (the CA that signs the clients' certificates)")
     placement = None
@@ -112,7 +119,8 @@ def parse_args(argv=None) -> tuple[ServerConfig, str]:
         insecure=args.insecure)
     config = ServerConfig(address=args.address, port=args.port, cell=args.cell,
                           clock=args.clock, paths_file=args.paths,
-                          reset_settings=args.reset_settings, security=security,
+                          reset_settings=args.reset_settings,
+                          settings_delay=args.settings_delay, security=security,
                           collision_margin=args.collision_margin,
                           max_message_bytes=args.max_message_bytes,
                           metrics_port=args.metrics_port, metrics_address=args.metrics_address,

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
-from grpc_reflection.v1alpha import reflection
+from grpc_reflection.v1alpha import reflection, reflection_pb2_grpc
 
 from landscape.bridges.metrics.endpoint import (MetricsEndpoint, MetricsExposed, MetricsTLS,
                                                 new_registry, serve_metrics)
@@ -175,7 +175,7 @@ def serve(config: ServerConfig = ServerConfig()) -> RunningServer:
     paths = PathStore(config.paths_file, report=lambda severity, message: bus.alarm(
         severity, alarms.STORAGE, message))
     device = Device(link, bus, cell.arm, paths=paths, outputs=outputs,
-                    reset_settings=config.reset_settings,
+                    reset_settings=config.reset_settings, settings_delay=config.settings_delay,
                     collisions=CollisionScene(cell, config.collision_margin))
     workcell = build_workcell(device, cell)
     hub = StateHub(device, workcell, max_lag=250 if config.clock == "realtime" else 8)
@@ -301,12 +301,12 @@ async def _start(server, device, workcell, bus, hub, dispatch, limits, recording
     for spec, servicer in servicers.items():
         spec.add_to_server(servicer, server)
     health_servicer = health.aio.HealthServicer()
-    health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
+    health_pb2_grpc.add_HealthServicer_to_server(health_servicer, services.GenericOnly(server))
     status = health_pb2.HealthCheckResponse.SERVING
     for name in ("", *(spec.full_name for spec in services.ALL)):
         await health_servicer.set(name, status)
-    reflection.enable_server_reflection(
+    reflection_pb2_grpc.add_ServerReflectionServicer_to_server(reflection.aio.ReflectionServicer(
         (*(spec.full_name for spec in services.ALL), health.SERVICE_NAME, reflection.SERVICE_NAME),
-        server, pool=MethodResolvingPool())
+        pool=MethodResolvingPool()), services.GenericOnly(server))
     await server.start()
     return health_servicer

@@ -72,6 +72,10 @@ class ServerConfig:
     paths_file: str | None = None
     # Start from the default settings instead of the stored ones (and store the defaults).
     reset_settings: bool = False
+    # s an accepted setting may wait to be written to paths_file (a server killed outright
+    # within it restarts without it); 0: written before the reply; None: the default
+    # (stored_settings.WRITE_BEHIND).
+    settings_delay: float | None = None
     # m: no planned motion may bring two bodies of the cell closer than this (collision/);
     # (0, MAX_COLLISION_MARGIN].
     collision_margin: float = 0.005

@@ -10,7 +10,8 @@ servicer grows by modules of its own):
 2. The body runs where it belongs. Plain methods are synchronous and thin: read-only ones
    are answered on the event loop (they read memory), except those marked `@blocking` (they
    ask the controller); mutating ones run on the command threads inside `device.command`
-   (one at a time); the immediate ones (they stop the arm: StopMotion, AbortMotion,
+   (one at a time), except those marked `@on_loop` (a setting: memory only), which run on
+   the loop when no other command holds the turn; the immediate ones (they stop the arm: StopMotion, AbortMotion,
    Deactivate) on threads of their own, never behind another command. `async def` methods
    (the streams) run on the loop and use `Dispatch` for their device calls.
 3. One error mapping: a CommandError ends the call with its status and ErrorInfo
@@ -46,6 +47,14 @@ def lease_of(context) -> str | None:
         if key == LEASE_KEY:
             return value
     return None
+
+
+def on_loop(body):
+    """Marks a mutating RPC whose body never waits (it changes memory only: a setting): it
+    runs on the event loop when no other command holds the turn, saving two thread hand-overs,
+    else on a command thread like the others."""
+    body.on_loop = True
+    return body
 
 
 def blocking(method=None, *, lane: str = "reads"):
@@ -122,6 +131,7 @@ def _missing(full_name: str):
 def _unary(name: str, body):
     rule = states.RULES[name]
     read_only = rule.lease is Lease.NONE
+    quick = getattr(body, "on_loop", False) and not read_only and not rule.immediate
 
     def run_command(self, request, context, lease):
         with self.device.command(name, lease):
@@ -136,6 +146,10 @@ def _unary(name: str, body):
             lane = getattr(body, "blocking", None)
             if read_only and lane is None:
                 return body(self, request, context)
+            if quick:
+                with self.device.command_if_free(name, lease) as free:
+                    if free:
+                        return body(self, request, context)
             pool = (getattr(self.dispatch, lane) if read_only else
                     self.dispatch.immediate if rule.immediate else self.dispatch.commands)
             return await self.dispatch.run(pool, run_command, self, request, context, lease)

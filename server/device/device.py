@@ -22,6 +22,7 @@ Concurrency:
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 from dataclasses import dataclass
 from typing import Callable
@@ -39,7 +40,7 @@ from landscape.server.device.safety import SafetyActions
 from landscape.server.device.sessions import Session, SessionRegistry
 from landscape.server.device.state_machine import StateMachine
 from landscape.server.device.states import State
-from landscape.server.device.stored_settings import SettingsKeeper
+from landscape.server.device.stored_settings import WRITE_BEHIND, SettingsKeeper
 from landscape.server.errors import ControllerFailure, EstopActive, NotOffered, ParamError
 from landscape.server.events import alarms
 from landscape.server.events.bus import EventBus, Severity
@@ -68,7 +69,7 @@ class Device:
                  collisions: CollisionScene, paths: PathStore | None = None,
                  outputs: set[str] = frozenset(), enable_timeout: float = 5.0,
                  keepalive_interval: float = 0.5, keepalive_timeout: float = 2.0,
-                 reset_settings: bool = False):
+                 reset_settings: bool = False, settings_delay: float | None = None):
         self.link = link
         self.bus = bus
         self.arm = arm
@@ -83,7 +84,9 @@ class Device:
         self.state_machine = StateMachine(bus)
         self.rsvp = RsvpBroker(bus)
         store = paths or PathStore()
-        self.settings_keeper = SettingsKeeper(MotionSettings(arm), store, reset_settings)
+        self.settings_keeper = SettingsKeeper(MotionSettings(arm), store, reset_settings,
+                                              WRITE_BEHIND if settings_delay is None
+                                              else settings_delay)
         self.motions = MotionControl(self.state_machine, link, bus, arm,
                                      Planner(self.kinematics, link.cycle_time), collisions,
                                      store, self.settings_keeper, set(outputs))
@@ -143,6 +146,7 @@ class Device:
         self.sessions.close()
         self.safety.wait_idle(timeout)
         self.safety.close()
+        self.settings_keeper.close()     # the settings written behind, now
         self.motions.close()
 
     # ---- state -----------------------------------------------------------------------------
@@ -182,6 +186,14 @@ class Device:
         """Run the body of `rpc` if the state table allows it now, for this caller
         (StateMachine.command)."""
         return self.state_machine.command(rpc, lease)
+
+    def command_if_free(self, rpc: str, lease: str | None):
+        """`command` now if no other command holds the turn (StateMachine.command_if_free),
+        for the settings' bodies: never while the settings are written through (a file
+        write may wait)."""
+        if self.settings_keeper.writes_through:
+            return contextlib.nullcontext(False)
+        return self.state_machine.command_if_free(rpc, lease)
 
     def check_holder(self, what: str, lease: str | None) -> None:
         self.state_machine.check_holder(what, lease)
@@ -257,8 +269,8 @@ class Device:
     # ---- 3.2 settings, 3.3 queries ---------------------------------------------------------
 
     def update_settings(self, change) -> MotionSettings:
-        """Apply `change(settings) -> settings`: validated, stored, then in force; a validation
-        or storage error leaves them as they were."""
+        """Apply `change(settings) -> settings`: validated, in force, then stored behind
+        (stored_settings.py); a validation error leaves them as they were."""
         return self.settings_keeper.update(change)
 
     def feedback(self) -> Sample:

@@ -206,14 +206,33 @@ class StateMachine:
             yield
             return
         with contextlib.nullcontext() if rule.immediate else self.turn:
-            with self._lock:
-                self._check_state(rpc, rule)
-                self._check_lease(rpc, rule, lease)
-                self._local.epoch = self._epoch
-            try:
+            with self._admitted(rpc, rule, lease):
                 yield
-            finally:
-                self._local.epoch = None
+
+    @contextlib.contextmanager
+    def command_if_free(self, rpc: str, lease: str | None):
+        """`command` for a mutating body that never waits, if no other command holds the
+        turn now: yields True (the body runs, holding the turn), else False at once (nothing
+        checked: the caller takes its turn where waiting is allowed)."""
+        if not self.turn.acquire(blocking=False):
+            yield False
+            return
+        try:
+            with self._admitted(rpc, states.RULES[rpc], lease):
+                yield True
+        finally:
+            self.turn.release()
+
+    @contextlib.contextmanager
+    def _admitted(self, rpc: str, rule: states.Rule, lease: str | None):
+        with self._lock:
+            self._check_state(rpc, rule)
+            self._check_lease(rpc, rule, lease)
+            self._local.epoch = self._epoch
+        try:
+            yield
+        finally:
+            self._local.epoch = None
 
     def check_holder(self, what: str, lease: str | None) -> None:
         """For a read-only RPC's parts that change something (vendor commands): the lock

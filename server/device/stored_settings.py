@@ -1,11 +1,16 @@
 """The set commands' settings (seed 3.2) as stored beside the paths, and back.
 
 Tool offset, world frame, units, speeds and accelerations survive a restart of the device
-server: every accepted change is written in the same SQLite file as the paths, in one
-transaction, before it takes effect. Read back, each value goes through the same validation
-as a Set command; a stored value that no longer passes (an arm with other limits) is dropped
-with a warning and its default kept. `landscape-device-server --reset-settings` starts from
-the defaults (and stores them).
+server: an accepted change is in force at once and written behind, in the same SQLite file as
+the paths, within WRITE_BEHIND seconds (the changes of that interval in one transaction, the
+newest settings whole); stopping the server (SIGTERM, SIGINT, SIGHUP) writes what is pending
+at once. A server killed outright (SIGKILL, a power cut) within that interval after a change
+comes back with the settings stored before it (docs/performance.md says so too). While the
+file cannot be written (a full disk: its last write failed), each change is written through
+before it takes effect, and refused if that fails, as the paths are. Read back, each value
+goes through the same validation as a Set command; a stored value that no longer passes (an
+arm with other limits) is dropped with a warning and its default kept.
+`landscape-device-server --reset-settings` starts from the defaults (and stores them).
 """
 from __future__ import annotations
 
@@ -22,6 +27,11 @@ from landscape.server.errors import CommandError
 from landscape.server.planning.paths import PathStore
 
 log = logging.getLogger(__name__)
+
+# s: the longest an accepted change waits to be written (it is in force at once). Short
+# enough that a restart finds it; long enough that a burst (a CRCL program sets a speed, an
+# acceleration and a tool offset per move) is one transaction.
+WRITE_BEHIND = 0.2
 
 
 def to_record(settings: MotionSettings) -> dict:
@@ -64,26 +74,76 @@ def from_record(defaults: MotionSettings, record: dict | None) -> MotionSettings
 
 class SettingsKeeper:
     """The settings in force, kept in `store` (a PathStore): read back at start (the defaults
-    if `reset`, stored at once), and each change validated, stored, then in force. One change
-    at a time, under a lock of its own (the file may keep it waiting)."""
+    if `reset`, stored at once); each change validated and in force at once, then written
+    behind by a thread of its own within `delay` seconds (0: before `update` returns;
+    `close` writes what is pending).
+    Changes take a lock of their own, never held while the file is written, except while the
+    file fails: then each change is written through, and refused if it cannot be."""
 
-    def __init__(self, defaults: MotionSettings, store: PathStore, reset: bool = False):
-        self._store = store
+    def __init__(self, defaults: MotionSettings, store: PathStore, reset: bool = False,
+                 delay: float = WRITE_BEHIND):
+        self._store, self._delay = store, delay
         self._current = defaults if reset else from_record(defaults, store.load_settings())
+        self._written = self._current           # the settings the file holds
         if reset:
             with contextlib.suppress(CommandError):   # reported by the store; in force anyway
                 store.save_settings(to_record(defaults))
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()           # one change at a time
+        self._writing = threading.Lock()        # one write at a time, in order
+        self._due = threading.Event()           # a change waits to be written
+        self._closing = threading.Event()
+        self._writer = threading.Thread(target=self._write_behind, name="settings-writer",
+                                        daemon=True)
+        self._writer.start()
 
     @property
     def current(self) -> MotionSettings:
         return self._current
 
+    @property
+    def writes_through(self) -> bool:
+        """Whether `update` writes to the file before it returns (a delay of 0, a file that
+        fails, a keeper closing)."""
+        return self._delay == 0 or self._store.failing or self._closing.is_set()
+
     def update(self, change: Callable[[MotionSettings], MotionSettings]) -> MotionSettings:
-        """Apply `change(settings) -> settings`: validated, stored, then in force; a validation
-        or storage error leaves them as they were."""
+        """Apply `change(settings) -> settings`: validated, in force, written behind; a
+        validation error (or, while the file fails, a storage error) leaves them as they
+        were."""
         with self._lock:
             settings = change(self._current)
-            self._store.save_settings(to_record(settings))
+            if self.writes_through:
+                with self._writing:
+                    self._store.save_settings(to_record(settings))
+                    self._written = settings
             self._current = settings
-            return settings
+        self._due.set()
+        return settings
+
+    def flush(self) -> None:
+        """Write the settings in force now, if the file does not hold them yet. A failure is
+        the store's to report (an alarm); the writer tries again after its delay."""
+        with self._writing:
+            settings = self._current
+            if settings is self._written:
+                return
+            try:
+                self._store.save_settings(to_record(settings))
+            except CommandError:
+                self._due.set()
+                return
+            self._written = settings
+
+    def close(self) -> None:
+        """Write what is pending, now; later changes are written through."""
+        self._closing.set()
+        self._due.set()
+        self._writer.join(5.0)
+        self.flush()
+
+    def _write_behind(self) -> None:
+        while not self._closing.is_set():
+            self._due.wait()
+            self._closing.wait(self._delay)     # the changes of the next `delay` s, together
+            self._due.clear()
+            self.flush()

@@ -116,7 +116,9 @@ class Subscription:
 
     # Called by the bus with its lock held (lock order: bus, then subscription).
 
-    def offer(self, event: Event, clock: Callable[[], float]) -> None:
+    def offer(self, event: Event, clock: Callable[[], float]) -> asyncio.Future | None:
+        """Take `event`; returns the async reader's wake-up, if one waits, for the publisher
+        to resolve (with the others of its loop in one hand-over: `_wake_all`)."""
         with self._cond:
             live = self._live
             if len(live) >= self._capacity:
@@ -128,7 +130,8 @@ class Subscription:
                 live.append(_lost(first, event.sequence - 1, clock()))
             live.append(event)
             self._cond.notify()
-            self._wake()
+            waiter, self._waiter = self._waiter, None
+            return waiter
 
     def end(self, drain: bool = False) -> None:
         """No more events; with `drain`, the pending ones are still delivered first."""
@@ -185,6 +188,24 @@ def _text_fields(kind: type) -> tuple[str, ...]:
 def _resolve(waiter: asyncio.Future) -> None:
     if not waiter.done():
         waiter.set_result(None)
+
+
+def _resolve_all(waiters: list[asyncio.Future]) -> None:
+    for waiter in waiters:
+        _resolve(waiter)
+
+
+def _wake_all(waiters: list[asyncio.Future]) -> None:
+    """Resolve the async readers' wake-ups with one call per event loop: 50 subscribers
+    waiting on the server's loop cost it one wake-up, not 50 (issue 31 item 6)."""
+    by_loop: dict[asyncio.AbstractEventLoop, list[asyncio.Future]] = {}
+    for waiter in waiters:
+        by_loop.setdefault(waiter.get_loop(), []).append(waiter)
+    for loop, some in by_loop.items():
+        try:
+            loop.call_soon_threadsafe(_resolve_all, some)
+        except RuntimeError:   # that loop is closed: nobody is left to wake
+            pass
 
 
 def _lost(first: int, last: int, now: float) -> Event:
@@ -289,8 +310,9 @@ class EventBus:
             self._last_sequence += 1
             event = Event(self._last_sequence, self._clock(), event_id, data, detail)
             self._history.append(event)
-            for subscriber in self._subscribers:
-                subscriber.offer(event, self._clock)
+            waiters = [waiter for subscriber in self._subscribers
+                       if (waiter := subscriber.offer(event, self._clock)) is not None]
+        _wake_all(waiters)
         return event
 
     def kept(self, sequence: int) -> Event | None:

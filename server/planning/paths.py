@@ -107,6 +107,11 @@ class PathStore:
         self._failing = False        # the last write failed: said once, until one works
         self._db = self._open(file)
 
+    @property
+    def failing(self) -> bool:
+        """The last write failed (a full disk, say): none has worked since."""
+        return self._failing
+
     def _report(self, severity: Severity, message: str) -> None:
         log.log(_LOG_LEVELS[severity], "%s", message)
         self._report_to(severity, message)

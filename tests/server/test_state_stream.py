@@ -42,6 +42,22 @@ def _samples(call, n):
     return [next(call).sample for _ in range(n)]
 
 
+def test_watchers_that_come_after_the_others_left_get_the_arm_as_it_is_now(realtime):
+    """The hub listens to the cycles only while someone watches (issue 31 item 5): a watcher
+    after a quiet spell (the cycles' wake-ups pile up unheard meanwhile) gets consecutive
+    samples of the newest cycles, as the first one did."""
+    for _ in range(3):
+        with grpc.insecure_channel(realtime.target) as channel:
+            call, _ = _stream(channel)
+            samples = _samples(call, 20)
+            call.cancel()
+        sequences = [s.sequence for s in samples]
+        assert sequences[0] >= realtime.link.feedback.head - 250     # not a stale one
+        assert all(s.skipped == 0 for s in samples[1:])
+        assert len(set(sequences)) == 20 and sequences == sorted(sequences)
+        time.sleep(0.5)                                                # nobody watches
+
+
 def test_every_cycle_reaches_a_reader_with_no_gap(realtime):
     with grpc.insecure_channel(realtime.target) as channel:
         call, started = _stream(channel)

@@ -13,7 +13,8 @@ from landscape.server.api import cell_view, convert, services
 from landscape.server.device.device import Device
 from landscape.server.errors import ControllerFailure, Stopped
 from landscape.server.planning.process import StreamRef
-from landscape.server.api.guard import blocking, guarded, lease_of
+from landscape.server.api.guard import blocking, guarded, lease_of, on_loop
+from landscape.server.api.read_cache import ReplyCache, by_version
 from landscape.server.api.servicers.paths import PathReads
 from landscape.server.api.servicers.pose_solving import PoseSolving
 from landscape.server.planning.targets import Frame
@@ -25,12 +26,20 @@ from landscape.v1 import (control_pb2, end_effector_pb2, motion_pb2, sensing_pb2
 
 JOG_END_TIMEOUT = 5.0   # s for a jogging arm to come to rest once its stream ends
 
+# What the cached reads' replies depend on (read_cache.py).
+_SETTINGS = by_version(lambda s: (s.device.settings,))
+_CYCLE = by_version(lambda s: (s.hub.cycle,))
+_CYCLE_AND_SETTINGS = by_version(lambda s: (s.hub.cycle, s.device.settings))
+_SCENE = by_version(lambda s: (s.device.collisions.version,))
+_FIXED = by_version(lambda s: ())
+
 
 @guarded(services.DEVICE)
 class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
     def __init__(self, device: Device, workcell: Workcell, hub, dispatch, limits):
         self.device, self.workcell, self.hub = device, workcell, hub
         self.dispatch, self.limits = dispatch, limits
+        self.replies = ReplyCache()
 
     # ---- 3.1 ----
     def Lock(self, request, context):
@@ -50,6 +59,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
         return control_pb2.DeactivateResponse(ret_val=convert.ok("drives off"))
 
     # ---- 3.2 ----
+    @on_loop
     def SetSpeed(self, request, context):
         kind = convert.enum_value(convert.SPEED_KINDS, request.attribute, "attribute")
         value = convert.rate_to_si(kind, request.speed, self.device.settings.units)
@@ -57,6 +67,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
         return settings_pb2.SetSpeedResponse(ret_val=convert.ok(convert.rate_text(
             "speed", kind, request.speed, self.device.settings.units)))
 
+    @on_loop
     def SetAcceleration(self, request, context):
         kind = convert.enum_value(convert.ACCEL_KINDS, request.attribute, "attribute")
         value = convert.rate_to_si(kind, request.accel, self.device.settings.units)
@@ -64,30 +75,35 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
         return settings_pb2.SetAccelerationResponse(ret_val=convert.ok(convert.rate_text(
             "acceleration", kind, request.accel, self.device.settings.units)))
 
+    @on_loop
     def SetToolOffset(self, request, context):
         offset = convert.pose_to_matrix(request.offset, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_tool_offset(offset))
         return settings_pb2.SetToolOffsetResponse(ret_val=convert.ok(convert.pose_text(
             "tool offset", request.offset, self.device.settings.units)))
 
+    @on_loop
     def SetWorldCartesianFrame(self, request, context):
         frame = convert.pose_to_matrix(request.frame, self.device.settings.units)
         self.device.update_settings(lambda s: s.with_world_frame(frame))
         return settings_pb2.SetWorldCartesianFrameResponse(ret_val=convert.ok(convert.pose_text(
             "world frame", request.frame, self.device.settings.units)))
 
+    @on_loop
     def SetUnits(self, request, context):
         units = convert.units_from_pb(request.linear_units, request.angular_units)
         self.device.update_settings(lambda s: s.with_units(units))
         return settings_pb2.SetUnitsResponse(ret_val=convert.ok(convert.units_text(units)))
 
     # ---- 3.3 ----
+    @_SETTINGS
     def GetUnits(self, request, context):
         units = self.device.settings.units
         return settings_pb2.GetUnitsResponse(ret_val=convert.ok(),
                                              linear_units=convert.LINEAR_PB[units.linear],
                                              angular_units=convert.ANGULAR_PB[units.angular])
 
+    @_SETTINGS
     def GetVelocities(self, request, context):
         s = self.device.settings
         return settings_pb2.GetVelocitiesResponse(
@@ -97,6 +113,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
             joint_velocities=s.units.angle_from_si(s.joint_velocities).tolist(),
             units=convert.units_to_pb(s.units))
 
+    @_SETTINGS
     def GetAccelerations(self, request, context):
         s = self.device.settings
         return settings_pb2.GetAccelerationsResponse(
@@ -106,6 +123,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
             joint_accels=s.units.angle_from_si(s.joint_accelerations).tolist(),
             units=convert.units_to_pb(s.units))
 
+    @_SETTINGS
     def GetMaxVelocities(self, request, context):
         arm, units = self.device.arm, self.device.settings.units
         return settings_pb2.GetMaxVelocitiesResponse(
@@ -115,6 +133,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
             max_joint_velocities=units.angle_from_si(arm.max_velocity).tolist(),
             units=convert.units_to_pb(units))
 
+    @_SETTINGS
     def GetMaxAccelerations(self, request, context):
         arm, units = self.device.arm, self.device.settings.units
         return settings_pb2.GetMaxAccelerationsResponse(
@@ -124,18 +143,21 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
             max_joint_accels=units.angle_from_si(arm.max_acceleration).tolist(),
             units=convert.units_to_pb(units))
 
+    @_SETTINGS
     def GetToolOffsets(self, request, context):
         s = self.device.settings
         return settings_pb2.GetToolOffsetsResponse(
             ret_val=convert.ok(), offset=convert.matrix_to_pose(s.tool_offset, s.units),
             units=convert.units_to_pb(s.units))
 
+    @_SETTINGS
     def GetWorldCartesianFrame(self, request, context):
         s = self.device.settings
         return settings_pb2.GetWorldCartesianFrameResponse(
             ret_val=convert.ok(), frame=convert.matrix_to_pose(s.world_frame, s.units),
             units=convert.units_to_pb(s.units))
 
+    @_CYCLE_AND_SETTINGS
     def GetRobotPosition(self, request, context):
         joints, world, units = self._position()
         return settings_pb2.GetRobotPositionResponse(
@@ -318,6 +340,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
             raise Stopped(f"the jog session ended: {why or motion.phase}")
 
     # ---- 3.8 end effector ----
+    @_CYCLE
     def GetEndEffectorState(self, request, context):
         tool, state = self.workcell.tools.state()
         return end_effector_pb2.GetEndEffectorStateResponse(ret_val=convert.ok(), current_ee=tool,
@@ -363,6 +386,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
         return control_pb2.OperatePanelResponse(ret_val=convert.ok(action), estop_pressed=estop,
                                                 door_open=door_open)
 
+    @_SCENE
     def GetCellDescription(self, request, context):
         scene = self.device.collisions
         cell = scene.cell
@@ -376,6 +400,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
             bodies=[convert.cell_body_to_pb(body) for body in cell_view.bodies(scene)],
             world_in_cell=world_in_cell, shared_cell=cell.shared_cell)
 
+    @_FIXED
     def GetRobotDescription(self, request, context):
         arm = self.device.arm
         return control_pb2.GetRobotDescriptionResponse(
