@@ -18,8 +18,10 @@ acceleration, with the payload the server declared) go into every row beside the
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
-  server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2 (ramps that start and
-                    resume), "stop_acceleration": (6,) rad/s^2 (stops: the arm's own),
+  server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2 and "jerk": (6,)
+                    rad/s^3 (ramps that resume: the set ones), "stop_acceleration" and
+                    "stop_jerk" (stops, aborts and a guard's braking: the arm's own, or the set
+                    ones where StopMotion asks for them),
                     "arrays": SharedArrays of run_arrays.pack_run, optional "guard": GuardSpec,
                     "comply": ComplySpec}: segments played in order; a mark reports its label
                     when its sample is passed
@@ -204,7 +206,7 @@ class Executor:
             if motion.settling is None:
                 # outlives the motion's arrays
                 self._hold = self._shifted(motion, sensors, running and motion.settling is None)
-                velocity = motion.sample(motion.velocities) * motion.rate
+                velocity = motion.velocity()
                 if motion.compliance is not None or motion.force_settle is not None:
                     velocity = velocity + (self._hold - self._last_setpoint) / self.cycle_time
                 self._last_setpoint = self._hold
@@ -278,7 +280,7 @@ class Executor:
     def _shifted(self, motion: Motion, sensors, active: bool) -> np.ndarray:
         """The motion's setpoint now: planned, shifted by its compliance or its force settling
         if it has one."""
-        planned = motion.sample(motion.positions)
+        planned = motion.position()
         if motion.force_settle is not None:
             return motion.force_settle.shift(planned, sensors)
         compliance = motion.compliance
@@ -295,7 +297,7 @@ class Executor:
             motion.outcome["guard"] = {"event": "full distance"}
         if comply is not None:
             motion.compliance = Admittance(comply, self._tip, self.cycle_time)
-            self._last_setpoint = motion.sample(motion.positions).copy()
+            self._last_setpoint = motion.position().copy()
 
     # ---- messages ----------------------------------------------------------------------------
 
@@ -314,6 +316,7 @@ class Executor:
             self._motion = Motion({**msg, "segments": Segments(self._arrays.open())},
                                    self.cycle_time)
             self._motion.stop_limit = np.asarray(msg["stop_acceleration"], dtype=float)
+            self._motion.stop_jerk = np.asarray(msg.get("stop_jerk", msg.get("jerk")), dtype=float)
             self._reports.append({"op": "started", "id": msg["id"], "wall_time": self._wall})
             if msg.get("comply") is not None and self._tip is None:
                 self._end("failed", message="this controller has no arm model for comply")
@@ -327,20 +330,16 @@ class Executor:
         elif op in ("stop", "abort") and motion is not None and motion.stopped_by is not None:
             motion.unsettled = f"{op} before the force settled"   # a guarded stop's: no more
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
-            motion.limit = motion.stop_limit   # stops brake at the arm's full deceleration
-            motion.target_rate = 0.0
+            motion.stop()   # at the stop limits ("stop_acceleration", "stop_jerk")
         elif op == "resume" and motion is not None and motion.paused:
-            motion.limit = motion.run_limit
-            motion.paused = False
-            motion.target_rate = 1.0
+            motion.resume()
             self._reports.append({"op": "resumed", "id": motion.id})
         elif op == "abort" and motion is not None:
             if motion.paused:
                 self._end("aborted")
             elif motion.settling is None:  # never drop a moving arm: stop along the path first
-                motion.limit = motion.stop_limit
                 motion.abort_when_paused = True
-                motion.target_rate = 0.0
+                motion.stop()
 
     def _handle_jog(self, msg: dict, fbk) -> None:
         op, jog = msg["op"], self._jog

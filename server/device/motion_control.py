@@ -205,8 +205,10 @@ class MotionControl:
         return motion
 
     def _ramps(self) -> dict:
-        return {"acceleration": self.settings.current.joint_accelerations,
-                "stop_acceleration": np.asarray(self.arm.max_acceleration)}
+        settings = self.settings.current
+        return {"acceleration": settings.joint_accelerations, "jerk": settings.joint_jerks,
+                "stop_acceleration": np.asarray(self.arm.max_acceleration),
+                "stop_jerk": np.asarray(self.arm.max_jerk)}
 
     def _begin(self, motion: RunningMotion, message: dict) -> None:
         """Register the motion, hand it to the cycle, then Moving and "started" (all under the

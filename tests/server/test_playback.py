@@ -21,34 +21,37 @@ PATHS = {
 
 
 def motion(segments, limits: Limits) -> Motion:
-    return Motion({"id": "m", "acceleration": limits.acceleration, "segments": [
-        {"positions": t.positions, "velocities": t.velocities} for t in segments]}, DT)
+    return Motion({"id": "m", "acceleration": limits.acceleration, "jerk": limits.jerk,
+                   "segments": [{"positions": t.positions, "velocities": t.velocities}
+                                for t in segments]}, DT)
 
 
 def play(m: Motion, commands: dict[int, str], max_cycles: int):
     """The positions and velocities the executor commands, cycle by cycle, as Executor._play
     does (segments back to back, held at rest before and after); commands: cycle -> "stop",
     "resume" or "restart" (resume as soon as the rate reaches 0)."""
-    positions = [m.sample(m.positions)] * 2             # at rest before the start
-    velocities = [np.zeros(6)] * 2
+    positions = [m.position()] * 3                      # at rest before the start
+    velocities = [np.zeros(6)] * 3
     restart = False
     for cycle in range(max_cycles):
         what = commands.get(cycle)
         if what == "stop":
-            m.target_rate = 0.0
+            m.stop()
         elif what == "resume":
-            m.target_rate = 1.0
+            m.resume()
         elif what == "restart":
-            m.target_rate, restart = 0.0, True
+            m.stop()
+            restart = True
         if restart and m.rate == 0.0 and m.target_rate == 0.0:
-            m.target_rate, restart = 1.0, False
+            m.resume()
+            restart = False
         m.advance()
         if m.s >= m.last and not m.next_segment():
-            positions += [m.sample(m.positions)] * 2   # held at the end
-            velocities += [np.zeros(6)] * 2
+            positions += [m.position()] * 3            # held at the end
+            velocities += [np.zeros(6)] * 3
             return np.array(positions), np.array(velocities)
-        positions.append(m.sample(m.positions))
-        velocities.append(m.sample(m.velocities) * m.rate)
+        positions.append(m.position())
+        velocities.append(m.velocity())
     raise AssertionError("the motion did not end")
 
 
@@ -58,6 +61,9 @@ def assert_within(limits: Limits, positions, velocities, where):
     assert np.all(ratio <= 1 + TOL), (where, "position second difference / limit", ratio)
     vel_accel = np.abs(np.diff(velocities, axis=0)) / DT
     assert np.all(vel_accel <= limits.acceleration * (1 + TOL)), (where, vel_accel.max(axis=0))
+    jerk = np.abs(np.diff(positions, 3, axis=0)) / DT**3
+    ratio = (jerk / limits.jerk).max(axis=0)
+    assert np.all(ratio <= 1 + TOL), (where, "position third difference / jerk limit", ratio)
 
 
 @pytest.mark.parametrize("name", PATHS)
