@@ -82,8 +82,8 @@ class Motion:
         if self.segment + 1 >= len(self.segments):
             return False
         self._load(self.segment + 1)
-        if self.target_rate == 0.0:
-            self.rate, self.rate_change, self._ramp = 0.0, 0.0, None
+        # The last one ended at rest: this one starts as planned, or waits there.
+        self.rate, self.rate_change, self._ramp = self.target_rate, 0.0, None
         return True
 
     @property

@@ -30,6 +30,7 @@ from ruckig import (ControlInterface, DurationDiscretization, InputParameter, Re
 
 ATTEMPTS = 3        # ramps planned and checked in one cycle, at most
 STEADY_RATES = (0.5, 0.25)   # a resume in steps: the rates held meanwhile
+STOP_SCALES = (1.0, 0.85, 0.7, 0.5)   # a stop's bounds from the speed now, tried in turn
 CALM = 7            # samples in a row where the planned motion leaves a resume room
 RETRY = 0.6         # the bounds of the next attempt, against the last one's
 SLACK = 1e-9        # relative: what rounding may add to a checked value
@@ -86,21 +87,29 @@ class RampPlanner:
         if last < 1:
             return None
         if target == 0.0:
-            options = [(RETRY ** k, None) for k in range(ATTEMPTS)]
+            # Bounds from the speed now first (a planned motion that speeds up meanwhile adds
+            # less than its speed-up, the rate falling), then from the fastest the stop covers.
+            options = [(1.0, "joint"), *((scale, "now") for scale in STOP_SCALES),
+                       (0.85, "joint"), *((RETRY ** k, None) for k in range(ATTEMPTS))]
         else:
             calm = self._calm(positions, sigma, acceleration, jerk)
             options = [(1.0, None), *((steady, start) for start in calm
                                       for steady in STEADY_RATES),
-                       *((RETRY ** k, None) for k in range(1, 4))]
+                       *((RETRY ** k, None) for k in range(1, 4)),
+                       *((RETRY ** k, "end") for k in range(3))]
         for k in range(min(ATTEMPTS, len(options))):
             option = options[(self._tries + k) % len(options)]
-            if option[1] is None:
+            if option[1] == "joint":
+                ramp = self._stop_along_joint(positions, sigma, rate, change, acceleration,
+                                              jerk, option[0])
+            elif option[1] in (None, "now", "end"):
                 ramp = self._planned(positions, sigma, rate, change, target, acceleration,
-                                     jerk, option[0])
+                                     jerk, option[0], now=option[1] == "now",
+                                     to_end=option[1] == "end")
             else:
                 ramp = self._by_steps(positions, sigma, rate, change, acceleration, jerk,
                                       *option)
-            if ramp is None and target == 0.0:
+            if ramp is None and target == 0.0 and option[1] != "joint":
                 return None       # the segment ends first: it comes to rest as planned
             if ramp is not None and self._fits(positions, recent, ramp, target, acceleration,
                                                jerk):
@@ -131,6 +140,59 @@ class RampPlanner:
                 if b - a >= CALM]
         return runs[:count]
 
+    def _stop_along_joint(self, positions, sigma, rate, change, acceleration, jerk, scale):
+        """A stop planned for the fastest joint: its own time-optimal jerk-limited stop
+        (ruckig, its limits times `scale`), the play position following it along the path
+        (the inverse of that joint's motion, monotone while it brakes). Exact on a straight
+        joint line, where a time warp with constant bounds brakes late (the planned motion's
+        speed-up, which it must also undo, fades as the rate falls); or None."""
+        last, dt = len(positions) - 1, self.dt
+        here = np.array([sigma - 1e-3, sigma, sigma + 1e-3])
+        q, slope = hermite(positions, here)
+        k = int(np.argmax(np.abs(slope[1]) / acceleration))
+        if abs(slope[1, k]) < 1e-9 or rate <= 0.0:
+            return None
+        sign = math.copysign(1.0, slope[1, k])
+        curve = (slope[2, k] - slope[0, k]) / 2e-3                  # d2q/dsigma2
+        inp = self._input
+        inp.current_position = [float(sign * q[1, k])]
+        inp.current_velocity = [float(sign * slope[1, k] * rate)]
+        inp.current_acceleration = [float(sign * (curve * rate * rate + slope[1, k] * change))]
+        inp.max_velocity = [max(inp.current_velocity[0], 1e-9) * 2.0]
+        inp.max_acceleration = [scale * float(acceleration[k]) * dt * dt]
+        inp.max_jerk = [scale * float(jerk[k]) * dt ** 3]
+        inp.target_velocity, inp.target_acceleration = [0.0], [0.0]
+        inp.control_interface = ControlInterface.Velocity
+        inp.duration_discretization = DurationDiscretization.Continuous
+        if self._otg.calculate(inp, self._trajectory) not in (Result.Working, Result.Finished):
+            return None
+        trajectory = self._trajectory
+        cycles = max(1, int(math.ceil(trajectory.duration - 1e-9)))
+        states = np.array([[v[0] for v in trajectory.at_time(float(t))[:2]]
+                           for t in range(cycles + 1)])
+        wanted, speed = states[:, 0], states[:, 1]
+        # Where along the path the joint is there: search the samples, then Newton on the curve.
+        hi = min(last, int(sigma) + 2 + int(math.ceil(cycles * max(rate, 1e-9))) * 2)
+        along = sign * positions[int(sigma):hi + 1, k]
+        if np.any(np.diff(along) < 0.0) or wanted[-1] > along[-1]:
+            return None        # the joint turns back, or the segment ends first
+        guess = int(sigma) + np.clip(np.searchsorted(along, wanted) - 1, 0, len(along) - 2)
+        found = np.maximum(guess + (wanted - along[guess - int(sigma)]) / np.maximum(
+            along[guess - int(sigma) + 1] - along[guess - int(sigma)], 1e-15), sigma)
+        for _ in range(4):
+            value, d = hermite(positions, found)
+            found = np.clip(found - (sign * value[:, k] - wanted)
+                            / np.where(np.abs(d[:, k]) > 1e-15, sign * d[:, k], np.inf),
+                            sigma, last)
+        found[0] = sigma
+        found = np.maximum.accumulate(found)
+        d = sign * hermite(positions, found)[1][:, k]
+        rates = np.where(d > 1e-15, speed / np.maximum(d, 1e-15), 0.0)
+        rates[0], rates[-1] = rate, 0.0
+        changes = np.gradient(rates)
+        changes[0], changes[-1] = change, 0.0
+        return found, rates, changes
+
     def _by_steps(self, positions, sigma, rate, change, acceleration, jerk, steady, calm):
         """A resume in three steps: up to the steady rate, held until the calm stretch `calm`
         (first, last sample), up to full rate within it; or None."""
@@ -150,14 +212,15 @@ class RampPlanner:
             first, (sigma_held, np.full(held, steady), np.zeros(held)), last))
 
     def _planned(self, positions, sigma, rate, change, target, acceleration, jerk, scale,
-                 reach=None):
-        """A ramp with bounds from the stretch it covers (times `scale`; a resume that must
-        land by sample `reach` takes the bounds from there), or None."""
+                 reach=None, now=False, to_end=False):
+        """A ramp with bounds from the stretch it covers (times `scale`; from the samples
+        around sigma alone if `now`; a resume must land by sample `reach`, or with `to_end`
+        goes through to the segment's end, at rest), or None."""
         last, dt = len(positions) - 1, self.dt
         lo = int(sigma)
         window = lo + 3
         bounds = ramp = None
-        for _ in range(2):    # the stretch the ramp covers decides its bounds
+        for _ in range(1 if now else 2):    # the stretch the ramp covers decides its bounds
             step = np.abs(np.diff(positions[max(lo - 1, 0):min(window, last) + 1], axis=0))
             fastest = np.maximum(step.max(axis=0), 1e-12)          # rad per sample
             wanted = (scale * float(np.min(acceleration * dt * dt / fastest)),
@@ -165,14 +228,14 @@ class RampPlanner:
             if bounds is not None and wanted[0] >= bounds[0] and wanted[1] >= bounds[1]:
                 break
             bounds = wanted
-            ramp = self._ruckig(sigma, rate, change, target, bounds, last)
+            ramp = self._ruckig(sigma, rate, change, target, bounds, last, to_end)
             if ramp is None or (reach is not None and ramp[0][-1] > reach):
                 return None
             window = int(math.ceil(ramp[0][-1])) + 2
         return ramp
 
     def _ruckig(self, sigma: float, rate: float, change: float, target: float,
-                bounds: tuple[float, float], last: int):
+                bounds: tuple[float, float], last: int, to_end: bool = False):
         """The ramp as (sigma, rate, change) at whole cycles, or None (it would leave the
         segment: a stop then lets the segment end at rest, as planned)."""
         inp = self._input
@@ -189,7 +252,7 @@ class RampPlanner:
             landing = math.ceil(end) + 1
             inp.control_interface = ControlInterface.Position
             inp.duration_discretization = DurationDiscretization.Discrete
-            if landing + 3 <= last:
+            if landing + 3 <= last and not to_end:
                 inp.target_position, inp.target_velocity = [float(landing)], [1.0]
             else:
                 inp.target_position, inp.target_velocity = [float(last)], [0.0]
