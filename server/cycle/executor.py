@@ -37,8 +37,9 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                    {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
                    a guarded motion's end adds "guard": {"event": "triggered" | "envelope" |
                    "full distance", "values": (3,), "position": (6,) rad} (at the trigger),
-                   once triggered "rest": (3,) (the reading at rest) and "settle": why the
-                   force did not settle, if it did not; a compliant one's
+                   once triggered "rest": (3,) (the reading at rest), "peak": (3,) (the
+                   reading furthest past the threshold since) and "settle": why the force did
+                   not settle, if it did not; a compliant one's
                    "comply": {"offset": (3,) m, "force": (3,) N, "panic": code or None}
 """
 from __future__ import annotations
@@ -52,6 +53,7 @@ from landscape.server.cycle.feedback import (CMD, ENABLE, ESTOP, IO, MODEL_TAU, 
                                        TIME, WALL, WIDTH, Q, FeedbackRing)
 from landscape.server.cycle.force_loops import (RANGE_KIND, Admittance, ForceSettle, ThresholdMonitor,
                                             vector)
+from landscape.server.cycle.jerk_tracker import PositionTracker
 from landscape.server.cycle.jog_integrator import JogIntegrator
 from landscape.server.cycle.playback import Motion, brake
 from landscape.server.cycle.run_arrays import Segments
@@ -91,6 +93,11 @@ class Executor:
         self._last_state = None
         self._reports: list[dict] = []   # reports of this cycle, posted after its row
         self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
+        self._tracker: PositionTracker | None = None    # a sensor loop's setpoints (jerk)
+        self._velocity = np.zeros(6)                    # the commanded velocity, last cycle
+        self._limits = None if arm is None else (np.asarray(arm.max_velocity),
+                                                 np.asarray(arm.max_acceleration),
+                                                 np.asarray(arm.max_jerk))
         self._sensors = sensors or CycleSensors()
         self._io = io or IoMonitor()
         self._wall = 0.0   # this cycle's time stamp (unix s)
@@ -135,6 +142,7 @@ class Executor:
         else:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
+        self._velocity = np.asarray(vel, dtype=float)
         model = self.model_torques(fbk, pos)
 
         key = (state.enable, state.estop)
@@ -185,6 +193,8 @@ class Executor:
         self._sequence += 1
 
     def _play(self, motion: Motion, fbk, sensors) -> tuple[np.ndarray, np.ndarray]:
+        if motion.stopped_by is not None:
+            self._peak(motion, sensors)
         if motion.settling is None:
             motion.advance()
             marks = motion.marks
@@ -205,13 +215,16 @@ class Executor:
                 motion.settling = None
             if motion.settling is None:
                 # outlives the motion's arrays
-                self._hold = self._shifted(motion, sensors, running and motion.settling is None)
-                velocity = motion.velocity()
+                target = self._shifted(motion, sensors, running and motion.settling is None)
                 if motion.compliance is not None or motion.force_settle is not None:
-                    velocity = velocity + (self._hold - self._last_setpoint) / self.cycle_time
-                self._last_setpoint = self._hold
-                return self._hold, velocity
-            self._hold = self._shifted(motion, sensors, False)
+                    return self._tracked(target)
+                self._hold = target
+                return self._hold, motion.velocity()
+            target = self._shifted(motion, sensors, False)
+            if motion.compliance is not None or motion.force_settle is not None:
+                self._tracked(target)
+            else:
+                self._hold = target
         # At the end of the motion or of a stop ramp: hold until the arm has settled there, so
         # "done" and "paused" mean the arm is at rest where the command says.
         motion.settle_cycles += 1
@@ -261,6 +274,18 @@ class Executor:
             motion.outcome["message"] = compliance.problem
             brake(motion, "failed")
 
+    @staticmethod
+    def _peak(motion: Motion, sensors) -> None:
+        """A guard that fired: the reading furthest past its threshold since (each watched
+        component, signed as read), for the final report ("peak")."""
+        guard = motion.stopped_by
+        value = guard.reading(sensors)
+        report = motion.outcome["guard"]
+        peak = np.array(report.get("peak", value), dtype=float)
+        further = guard.watched & (np.sign(guard.thresholds) * (value - peak) > 0)
+        peak[further] = value[further]
+        report["peak"] = peak.tolist()
+
     def _settling_force(self, motion: Motion) -> bool:
         """Whether a motion braked on a force threshold settles its force now (starting
         that once it is at a stop: ForceSettle)."""
@@ -276,6 +301,24 @@ class Executor:
         if note:
             motion.outcome["guard"]["settle"] = note
         return settle is not None and not settle.finished
+
+    def _tracked(self, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A sensor loop's setpoint, reached within the arm's velocity, acceleration and jerk
+        limits (jerk_tracker.py) from the state the last setpoints were in: the hand-over into
+        the loop (a compliance starting, a guarded stop's force settling) is continuous."""
+        tracker, dt = self._tracker, self.cycle_time
+        if tracker is None:
+            past = self._setpoints
+            acceleration = (np.zeros(6) if past is None
+                            else (past[0] - 2.0 * past[1] + past[2]) / (dt * dt))
+            tracker = self._tracker = PositionTracker(self._hold, dt, self._velocity,
+                                                      acceleration)
+            self._last_setpoint = target
+        wanted = (target - self._last_setpoint) / dt
+        self._last_setpoint = target
+        tracker.step(target, wanted, *self._limits)
+        self._hold = tracker.position.copy()
+        return self._hold, tracker.velocity.copy()
 
     def _shifted(self, motion: Motion, sensors, active: bool) -> np.ndarray:
         """The motion's setpoint now: planned, shifted by its compliance or its force settling
@@ -369,6 +412,7 @@ class Executor:
     def _end(self, how: str, **details) -> None:
         self._reports.append({"op": how, "id": self._motion.id, **details})
         self._motion = None
+        self._tracker = None
         self._sensors.watch_range = False
         if self._arrays is not None:
             self._arrays.close()

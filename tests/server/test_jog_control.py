@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.cycle.jog_integrator import (MANUAL_TIP_SPEED, STALE_CYCLES, JogIntegrator,
+from landscape.server.cycle.jog_integrator import (HEADROOM, MANUAL_TIP_SPEED, STALE_CYCLES,
+                                                   JogIntegrator,
                                           JogLimits)
 from landscape.server.cycle.tip_model import TipModel
 from landscape.robot.arm import arm_model
@@ -21,7 +22,8 @@ def _jog(deadman_cycles: int = 50, guarded: bool = False) -> JogIntegrator:
     a = np.array(ARM.max_acceleration)
     cartesian = np.array([ARM.max_linear_acceleration, ARM.max_angular_acceleration])
     limits = JogLimits(np.array(ARM.max_velocity) * 0.25, a * 0.5, a, ARM.lower, ARM.upper,
-                       cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, deadman_cycles)
+                       cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, deadman_cycles,
+                       np.array(ARM.max_jerk) * 0.5, np.array(ARM.max_jerk))
     return JogIntegrator("j", START, limits, TipModel(ARM), np.eye(4), DT, guarded=guarded)
 
 
@@ -44,9 +46,11 @@ def test_a_cartesian_jog_keeps_its_line_and_orientation_at_the_manual_speed():
     direction = np.array([0.3, 0.2, 0.0]) / np.linalg.norm([0.3, 0.2, 0.0])
     off_line = moved - (moved @ direction) * direction
     assert np.linalg.norm(off_line) < 5e-5 * np.linalg.norm(moved) / 0.05   # 50 um per 5 cm
-    assert np.allclose(now[:3, :3], start[:3, :3], atol=1e-6)
+    # The joints follow the jog through a jerk-limited tracker (issue 30), a cycle or two
+    # behind the line's own correction: the tool turns by 0.1 mrad at most.
+    assert np.allclose(now[:3, :3], start[:3, :3], atol=1e-4)
     assert max(speeds) <= MANUAL_TIP_SPEED * (1 + 1e-3)   # a chord of the step, not J qd
-    assert speeds[-1] == pytest.approx(0.98 * MANUAL_TIP_SPEED, rel=1e-3)   # the headroom
+    assert speeds[-1] == pytest.approx(HEADROOM * MANUAL_TIP_SPEED, rel=1e-3)   # the headroom
 
 
 def test_silence_brakes_to_rest_and_ends_the_session_saying_why():
@@ -58,8 +62,10 @@ def test_silence_brakes_to_rest_and_ends_the_session_saying_why():
     while not jog.finished:
         jog.step()
         cycles += 1
-    braking = 2.0 / ARM.max_acceleration[5] / DT
-    assert 50 < cycles <= 50 + math.ceil(braking) + 2
+    # Braking from 2 rad/s with the deceleration ramped up within the jerk limit (issue 30).
+    a, j = ARM.max_acceleration[5], ARM.max_jerk[5]
+    braking = (2.0 / a + a / j) / DT
+    assert 50 < cycles <= 50 + math.ceil(braking) + 3
     assert jog.ending[0] == "aborted" and "deadman" in jog.ending[1]
 
 
