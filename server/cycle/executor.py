@@ -26,7 +26,8 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                     "comply": ComplySpec}: segments played in order; a mark reports its label
                     when its sample is passed
                    {"op": "comply", "id", "spec": ComplySpec}: compliance for the running motion
-                   {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
+                   {"op": "stop", optional "acceleration", "jerk": this stop's limits}
+                   {"op": "resume"}  {"op": "abort"}
                    {"op": "payload", "parameters": (10,)}: what the flange carries now
                     (arm_dynamics.py)
                    the jog messages (jog_control.py) and the I/O ones (cycle_inputs.py)
@@ -373,7 +374,8 @@ class Executor:
         elif op in ("stop", "abort") and motion is not None and motion.stopped_by is not None:
             motion.unsettled = f"{op} before the force settled"   # a guarded stop's: no more
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
-            motion.stop()   # at the stop limits ("stop_acceleration", "stop_jerk")
+            # At the run's stop limits, or the message's (StopMotion at the set deceleration).
+            motion.stop(msg.get("acceleration"), msg.get("jerk"))
         elif op == "resume" and motion is not None and motion.paused:
             motion.resume()
             self._reports.append({"op": "resumed", "id": motion.id})

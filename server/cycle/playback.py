@@ -62,6 +62,7 @@ class Motion:
         self.force_settle: ForceSettle | None = None      # after its stop (force_control.py)
         self.unsettled = ""   # why the force is not settled after all (a stop or an abort)
         self._ramp: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # sigma, r, dr
+        self._braking: tuple[np.ndarray, np.ndarray] | None = None   # this stop's limits
         self._step = 0
         self._planner = RampPlanner(dt)
         self._recent = np.tile(self.positions[0], (3, 1))   # the last 3 played, newest first
@@ -109,9 +110,12 @@ class Motion:
 
     # ---- stops and resumes -------------------------------------------------------------------
 
-    def stop(self) -> None:
-        """Slow down to rest along the path (at the stop limits), then wait."""
+    def stop(self, acceleration: np.ndarray | None = None, jerk: np.ndarray | None = None
+             ) -> None:
+        """Slow down to rest along the path (at the stop limits, or those given), then wait."""
         self.target_rate = 0.0
+        self._braking = (self.stop_limit if acceleration is None else acceleration,
+                         self.stop_jerk if jerk is None else jerk)
 
     def resume(self) -> None:
         """Speed up again along the path (at the run limits) to the planned pace."""
@@ -144,10 +148,10 @@ class Motion:
 
     def _plan_ramp(self) -> None:
         stopping = self.target_rate == 0.0
-        ramp = self._planner.plan(
-            self.positions, self._recent, self.s, self.rate, self.rate_change, self.target_rate,
-            self.stop_limit if stopping else self.run_limit,
-            self.stop_jerk if stopping else self.run_jerk)
+        acceleration, jerk = ((self._braking or (self.stop_limit, self.stop_jerk)) if stopping
+                              else (self.run_limit, self.run_jerk))
+        ramp = self._planner.plan(self.positions, self._recent, self.s, self.rate,
+                                  self.rate_change, self.target_rate, acceleration, jerk)
         if ramp is not None:
             self._ramp, self._step = ramp, 0
 
