@@ -36,14 +36,39 @@ RETRY = 0.6         # the bounds of the next attempt, against the last one's
 SLACK = 1e-9        # relative: what rounding may add to a checked value
 
 
+def sampled(trajectory: Trajectory, cycles: int) -> np.ndarray:
+    """(cycles + 1, 3) position, velocity and acceleration of a one-DOF ruckig trajectory at
+    whole cycles (its time unit), from its phases at once (at_time per cycle costs the cycle
+    more than the rest of a ramp's planning). As at_time: a brake phase first if the state was
+    past the bounds; past the end the final acceleration is kept (zero jerk)."""
+    profile = trajectory.profiles[0][0]
+    brake = profile.brake
+    used = [k for k in range(2) if brake.duration > 0.0 and brake.t[k] > 0.0]
+    durations = np.array([brake.t[k] for k in used] + list(profile.t))
+    j, a, v, p = (np.array([getattr(brake, name)[k] for k in used]
+                           + list(getattr(profile, name))[:7])
+                  for name in ("j", "a", "v", "p"))
+    times = np.arange(cycles + 1, dtype=float)
+    edges = np.concatenate([[0.0], np.cumsum(durations)])
+    i = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, len(durations) - 1)
+    r = np.minimum(times, trajectory.duration) - edges[i]
+    states = np.stack([p[i] + r * (v[i] + r * (a[i] / 2.0 + r * j[i] / 6.0)),
+                       v[i] + r * (a[i] + r * j[i] / 2.0), a[i] + r * j[i]], axis=1)
+    past = np.maximum(times - trajectory.duration, 0.0)
+    states[:, 0] += past * (states[:, 1] + past * states[:, 2] / 2.0)
+    states[:, 1] += past * states[:, 2]
+    return states
+
+
 def hermite(positions: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Positions (K, 6) and their derivatives per sample (K, 6) at play positions sigma (K,) on
-    the samples (N, 6): the quintic Hermite curve through them, with each sample's velocity and
+    """Positions (K, M) and their derivatives per sample (K, M) at play positions sigma (K,) on
+    the samples (N, M) of M joints: the quintic Hermite curve through them, with each sample's velocity and
     acceleration from central differences (the trajectory held at rest past its ends). Exact at
     whole samples, C2 between them."""
     n = len(positions)
     if n == 1:
-        return np.repeat(positions, len(sigma), axis=0), np.zeros((len(sigma), 6))
+        held = np.repeat(positions, len(sigma), axis=0)
+        return held, np.zeros_like(held)
     i = np.clip(np.floor(sigma).astype(int), 0, n - 2)
     t = (sigma - i)[:, None]
     p = [positions[np.clip(i + k, 0, n - 1)] for k in (-1, 0, 1, 2)]
@@ -168,8 +193,7 @@ class RampPlanner:
             return None
         trajectory = self._trajectory
         cycles = max(1, int(math.ceil(trajectory.duration - 1e-9)))
-        states = np.array([[v[0] for v in trajectory.at_time(float(t))[:2]]
-                           for t in range(cycles + 1)])
+        states = sampled(trajectory, cycles)
         wanted, speed = states[:, 0], states[:, 1]
         # Where along the path the joint is there: search the samples, then Newton on the curve.
         hi = min(last, int(sigma) + 2 + int(math.ceil(cycles * max(rate, 1e-9))) * 2)
@@ -179,14 +203,15 @@ class RampPlanner:
         guess = int(sigma) + np.clip(np.searchsorted(along, wanted) - 1, 0, len(along) - 2)
         found = np.maximum(guess + (wanted - along[guess - int(sigma)]) / np.maximum(
             along[guess - int(sigma) + 1] - along[guess - int(sigma)], 1e-15), sigma)
-        for _ in range(4):
-            value, d = hermite(positions, found)
-            found = np.clip(found - (sign * value[:, k] - wanted)
-                            / np.where(np.abs(d[:, k]) > 1e-15, sign * d[:, k], np.inf),
+        joint = positions[:, k:k + 1]         # the curve of that joint alone: a sixth the cost
+        for _ in range(3):
+            value, d = hermite(joint, found)
+            found = np.clip(found - (sign * value[:, 0] - wanted)
+                            / np.where(np.abs(d[:, 0]) > 1e-15, sign * d[:, 0], np.inf),
                             sigma, last)
         found[0] = sigma
         found = np.maximum.accumulate(found)
-        d = sign * hermite(positions, found)[1][:, k]
+        d = sign * hermite(joint, found)[1][:, 0]
         rates = np.where(d > 1e-15, speed / np.maximum(d, 1e-15), 0.0)
         rates[0], rates[-1] = rate, 0.0
         changes = np.gradient(rates)
@@ -263,8 +288,7 @@ class RampPlanner:
             return None
         trajectory = self._trajectory
         cycles = max(1, int(math.ceil(trajectory.duration - 1e-9)))
-        states = np.array([[v[0] for v in trajectory.at_time(float(k))]
-                           for k in range(cycles + 1)])
+        states = sampled(trajectory, cycles)
         if target == 1.0:
             states[-1, 0] = round(states[-1, 0])    # the landing sample, exactly
             states[-1, 1:] = (1.0 if states[-1, 0] < last else 0.0), 0.0
