@@ -115,3 +115,36 @@ def test_the_planned_trajectory_itself_keeps_the_position_second_difference_with
             m = motion([trajectory], limits)
             positions, velocities = play(m, {}, 2 * len(trajectory))
             assert_within(limits, positions, velocities, (name, speed, accel))
+
+
+def test_a_ramps_cycles_are_ruckigs_own_states():
+    """ramps.sampled reads a one-DOF ruckig profile at whole cycles from its phases at once:
+    the same states as ruckig's at_time, a brake phase and the time past the end included."""
+    from ruckig import (ControlInterface, DurationDiscretization, InputParameter, Result,
+                        Ruckig, Trajectory)
+
+    from landscape.server.cycle.ramps import sampled
+    rng = np.random.default_rng(3)
+    otg, inp, trajectory = Ruckig(1, 1.0), InputParameter(1), Trajectory(1)
+    braked = 0
+    for k in range(400):
+        inp.current_position = [rng.uniform(0, 100)]
+        inp.current_velocity = [rng.uniform(-0.2, 1.5)]          # beyond 1: a brake phase
+        inp.current_acceleration = [rng.uniform(-0.05, 0.05)]
+        inp.max_velocity, inp.max_acceleration = [1.0], [rng.uniform(1e-3, 0.1)]
+        inp.max_jerk = [rng.uniform(1e-4, 0.05)]
+        inp.target_velocity, inp.target_acceleration = [float(rng.choice([0, 0.5, 1]))], [0.0]
+        if k % 2:
+            inp.control_interface = ControlInterface.Position
+            inp.duration_discretization = DurationDiscretization.Discrete
+            inp.target_position = [inp.current_position[0] + rng.uniform(1, 50)]
+        else:
+            inp.control_interface = ControlInterface.Velocity
+            inp.duration_discretization = DurationDiscretization.Continuous
+        assert otg.calculate(inp, trajectory) in (Result.Working, Result.Finished)
+        braked += trajectory.profiles[0][0].brake.duration > 0
+        cycles = int(np.ceil(trajectory.duration - 1e-9)) + 2
+        theirs = np.array([[v[0] for v in trajectory.at_time(float(t))]
+                           for t in range(cycles + 1)])
+        assert np.allclose(sampled(trajectory, cycles), theirs, rtol=0, atol=1e-9)
+    assert braked > 50
