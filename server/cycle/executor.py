@@ -94,6 +94,7 @@ class Executor:
         self._last_state = None
         self._reports: list[dict] = []   # reports of this cycle, posted after its row
         self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
+        self._last_wanted = np.zeros(6)   # the velocity a sensor loop wanted, last cycle
         self._tracker: PositionTracker | None = None    # a sensor loop's setpoints (jerk)
         self._velocity = np.zeros(6)                    # the commanded velocity, last cycle
         self._limits = None if arm is None else (np.asarray(arm.max_velocity),
@@ -223,9 +224,15 @@ class Executor:
                 return self._hold, motion.velocity()
             target = self._shifted(motion, sensors, False)
             if motion.compliance is not None or motion.force_settle is not None:
-                self._tracked(target)
+                self._tracked(target, resting=True)
             else:
                 self._hold = target
+        elif self._tracker is not None:
+            self._tracked(self._last_setpoint, resting=True)
+        # A sensor loop that ended with its setpoints moving: they come to rest on its last
+        # target within the limits (not dead in a cycle) before the arm can count as settled.
+        if self._tracker is not None and not self._tracker.at_rest:
+            return self._hold, self._tracker.velocity.copy()
         # At the end of the motion or of a stop ramp: hold until the arm has settled there, so
         # "done" and "paused" mean the arm is at rest where the command says.
         motion.settle_cycles += 1
@@ -303,10 +310,12 @@ class Executor:
             motion.outcome["guard"]["settle"] = note
         return settle is not None and not settle.finished
 
-    def _tracked(self, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _tracked(self, target: np.ndarray, resting: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray]:
         """A sensor loop's setpoint, reached within the arm's velocity, acceleration and jerk
         limits (jerk_tracker.py) from the state the last setpoints were in: the hand-over into
-        the loop (a compliance starting, a guarded stop's force settling) is continuous."""
+        the loop (a compliance starting, a guarded stop's force settling) is continuous;
+        `resting`: the loop has ended, the setpoints come to rest on the target."""
         tracker, dt = self._tracker, self.cycle_time
         if tracker is None:
             past = self._setpoints
@@ -314,10 +323,15 @@ class Executor:
                             else (past[0] - 2.0 * past[1] + past[2]) / (dt * dt))
             tracker = self._tracker = PositionTracker(self._hold, dt, self._velocity,
                                                       acceleration)
-            self._last_setpoint = target
-        wanted = (target - self._last_setpoint) / dt
-        self._last_setpoint = target
-        tracker.step(target, wanted, *self._limits)
+            self._last_setpoint, self._last_wanted = target, self._velocity
+        # The wanted motion's velocity over the last cycle and its change: at the target, at
+        # the cycle's end, it moves at the first plus half the second. A state consistent so
+        # is reached in one cycle, a smooth wanted motion followed exactly (not so, ruckig's
+        # profile takes longer, lags, and a force loop through it rings).
+        mean = np.zeros(6) if resting else (target - self._last_setpoint) / dt
+        change = np.zeros(6) if resting else mean - self._last_wanted
+        self._last_setpoint, self._last_wanted = target, mean
+        tracker.step(target, mean + change / 2.0, *self._limits, change / dt)
         self._hold = tracker.position.copy()
         return self._hold, tracker.velocity.copy()
 

@@ -88,9 +88,14 @@ class PositionTracker(_Tracker):
         self._input.minimum_duration = dt
 
     def step(self, wanted: np.ndarray, wanted_velocity: np.ndarray, velocity: np.ndarray,
-             acceleration: np.ndarray, jerk: np.ndarray) -> np.ndarray:
-        """The next setpoint (rad) towards `wanted` (rad) moving at `wanted_velocity` (rad/s)."""
+             acceleration: np.ndarray, jerk: np.ndarray,
+             wanted_acceleration: np.ndarray | None = None) -> np.ndarray:
+        """The next setpoint (rad) towards `wanted` (rad) moving at `wanted_velocity` (rad/s)
+        and, if given, changing it at `wanted_acceleration` (rad/s^2: without it a wanted
+        motion that slows down is followed with an acceleration step to make up, and rings)."""
         self._input.target_position = list(wanted)
         self._input.target_velocity = list(np.clip(wanted_velocity, -velocity, velocity))
-        self._input.target_acceleration = [0.0] * 6
+        self._input.target_acceleration = (
+            [0.0] * 6 if wanted_acceleration is None
+            else list(np.clip(wanted_acceleration, -acceleration, acceleration)))
         return self._step(velocity, acceleration, jerk)
