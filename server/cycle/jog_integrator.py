@@ -53,6 +53,7 @@ RANGE_MARGIN = 1e-3       # rad: jogging stops this far inside the joint range
 TRACKING = 0.2            # of the tip's distance to its reference made good per cycle
 HEADROOM = 0.95           # of the speed limits a Cartesian jog asks for: the rest corrects
                           # (and the joints' jerk-limited tracking overshoots by up to 3 %)
+ON_REFERENCE = 1e-7       # m and rad: a stopping Cartesian jog's tip counts as on its line
 STALE_CYCLES = 10         # a clearance older than this is not trusted (the guard sends every 2)
 
 
@@ -126,16 +127,20 @@ class JogIntegrator:
         if self._silent > limits.deadman:
             self.end("aborted", f"deadman: no jog request for {limits.deadman * dt * 1000:g} ms;"
                                 f" the arm stopped")
-        stopping = self.ending is not None or not self._pressed
+        # A guard fallen silent with nothing near holds the arm: braking as a stop does.
+        stopping = self.ending is not None or not self._pressed or self._guard_silent()
         self.tip.set_tool(self.tool_offset)
         if self._frame == "joint":
             self._reference = None
             qd = self._joint_step(stopping)
         else:
             qd = self._cartesian_step(stopping)
-        limited = self._within_range(self._clear_of_obstacles(qd))
-        if not np.array_equal(limited, qd):
-            self._reference = None    # a joint range or an obstacle decides: off the line
+        cleared = self._clear_of_obstacles(qd)
+        limited = self._within_range(cleared)
+        if not np.array_equal(limited, cleared):
+            self._reference = None    # a joint range decides: off the line
+        elif self._reference is not None and not np.array_equal(cleared, qd):
+            self._slowed(cleared, qd)  # an obstacle slows the jog: along its line
         # A joint jog speeds up within the set limits; braking, and following a Cartesian
         # jog's joints (its twist keeps the set limits), within the arm's.
         braking = (stopping or self._frame != "joint"
@@ -155,21 +160,25 @@ class JogIntegrator:
         """qd scaled down as a whole (its direction holds: the arm does not slide along what
         it nears) so that its approach to the nearest obstacle is at most the rate allowed,
         reached within the arm's full deceleration. Figures older than STALE_CYCLES allow no
-        approach; no figures from a late guard hold the arm."""
+        approach (no figures at all: _guard_silent)."""
         clearance = self._clearance
-        if self._clearance_age is not None:
-            self._clearance_age += 1
-            if self._clearance_age > STALE_CYCLES:
-                if clearance is None:
-                    return np.zeros(6)
-                clearance = (clearance[0], 0.0)
         if clearance is None:
             return qd
+        if self._clearance_age is not None and self._clearance_age > STALE_CYCLES:
+            clearance = (clearance[0], 0.0)
         gradient, rate = clearance
         approach = -float(gradient @ qd)
         if approach <= rate:
             return qd
         return qd * (rate / approach)
+
+    def _guard_silent(self) -> bool:
+        """Whether the guard's last figures, which said nothing is near, are too old to trust
+        (they age a cycle per call); figures of something near are _clear_of_obstacles'."""
+        if self._clearance_age is None:
+            return False
+        self._clearance_age += 1
+        return self._clearance_age > STALE_CYCLES and self._clearance is None
 
     # ---- joint jogs -------------------------------------------------------------------------
 
@@ -187,8 +196,11 @@ class JogIntegrator:
             twist.velocity = jacobian @ self.qd
             twist.acceleration = np.zeros(6)
         if stopping:
-            if twist.at_rest and not np.any(twist.velocity):
-                return np.zeros(6)    # at rest on the reference
+            # At rest on the reference; the joints, which follow the twist's braking a little
+            # behind, are brought back onto it first.
+            if (twist.at_rest and not np.any(twist.velocity)
+                    and np.max(np.abs(tip.pose_error(self._reference))) < ON_REFERENCE):
+                return np.zeros(6)
             wanted, accel = np.zeros(6), np.repeat(limits.cartesian_stop, 3)
         else:
             wanted = self._base_twist()
@@ -205,6 +217,20 @@ class JogIntegrator:
         reference[:3, :3] = pin.exp3(self._twist[3:] * dt) @ reference[:3, :3]
         qd = damped_solve(jacobian, self._twist + correction)
         return qd / self._scale(qd, jacobian)   # the correction too stays within the limits
+
+    def _slowed(self, cleared: np.ndarray, qd: np.ndarray) -> None:
+        """A Cartesian jog slowed by the guard (qd scaled down as a whole to `cleared`): its
+        twist and this cycle's step of its line's reference scaled alike, so that the tip
+        keeps to the line (the joints' tracking lags a little; the line's correction makes
+        it up)."""
+        factor = float(cleared @ qd / max(float(qd @ qd), 1e-300))
+        twist, reference = self._twist_tracker, self._reference
+        back = (factor - 1.0) * self._twist * self.dt
+        reference[:3, 3] += back[:3]
+        reference[:3, :3] = pin.exp3(back[3:]) @ reference[:3, :3]
+        twist.velocity = twist.velocity * factor
+        twist.acceleration = twist.acceleration * factor
+        self._twist = twist.velocity.copy()
 
     def _base_twist(self) -> np.ndarray:
         """The request's twist in base axes."""
