@@ -90,6 +90,8 @@ def flat_turns(grid: np.ndarray, xs: np.ndarray, caps: np.ndarray, window: float
             else:
                 hi += 1
             level = min(x[lo], x[hi])
+        if level <= 0.0:   # a rest end reached first (a short move): the speed that lasts so
+            level = min(x[i], ((g[hi] - g[lo]) / window) ** 2)
         cap[lo:hi + 1] = np.minimum(cap[lo:hi + 1], level)
     capped = xs >= caps * (1.0 - 1e-9)
     for i in valleys[~capped[valleys]].tolist():

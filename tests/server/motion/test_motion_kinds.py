@@ -126,6 +126,18 @@ def test_every_kind_of_motion_keeps_the_jerk_limit_at_every_sample(kind):
     assert tr.duration <= 1.15 * free.duration + 0.04
 
 
+@pytest.mark.parametrize("length", [1.5e-9, 1e-6, 1e-4, 1e-3])
+def test_a_tiny_move_is_timed_within_the_jerk_limit(length):
+    """A PathMove from where the arm stands (measured, a few nrad from its setpoint) to its
+    first point is a section of its own: it was refused, "the path speed drops to zero"
+    (flat_turns cut the only peak of a move shorter than its window to zero speed)."""
+    W = np.array([Q_HOME, Q_HOME + length * np.array([1.0, -0.5, 0.3, 0.0, 0.2, 0.0])])
+    limits = Limits.scaled(ARM, 25, 50)
+    tr = time_path(W, limits, DT)
+    assert np.allclose(tr.positions[[0, -1]], W) and tr.duration <= 0.1
+    assert (peak_jerk(tr.positions) / limits.jerk).max() <= 1 + 1e-6
+
+
 def test_a_joint_move_stays_on_its_line_and_ramps_its_acceleration():
     """Before issue 30 the acceleration stepped from 0 to its limit in one cycle: 136 times the
     limit per second. Now it ramps over the jerk limit's 20 ms, the samples on the line."""
