@@ -121,7 +121,7 @@ class RampPlanner:
             options = [(1.0, None), *((steady, start) for start in calm
                                       for steady in STEADY_RATES),
                        *((RETRY ** k, None) for k in range(1, 4)),
-                       *((RETRY ** k, "end") for k in range(3))]
+                       *((RETRY ** k, "end") for k in range(6))]   # down to 0.08: one fits
         for k in range(min(ATTEMPTS, len(options))):
             option = options[(self._tries + k) % len(options)]
             if option[1] == "joint":
