@@ -165,7 +165,8 @@ def main() -> None:
     a = np.array(arm.max_acceleration)
     cartesian = np.array([arm.max_linear_acceleration, arm.max_angular_acceleration])
     limits = JogLimits(np.array(arm.max_velocity) * 0.25, a * 0.5, a, arm.lower, arm.upper,
-                       cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, 10 ** 9)
+                       cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, 10 ** 9,
+                       np.array(arm.max_jerk) * 0.5, np.array(arm.max_jerk))
     mailbox.inbox.append({"op": "jog", "id": "j", "limits": limits, "tool_offset": CUP})
     velocity = {"op": "jog_velocity", "frame": "tool", "deadman": True,
                 "velocity": np.array([0.02, 0.0, 0.0, 0.0, 0.0, 0.05])}

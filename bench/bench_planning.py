@@ -23,11 +23,16 @@ result (max relative difference in x = sdot^2), its time (best of 3), our solver
 over it, and the whole time_path over it (the issue 18 goal: at most 0.1 for 100 waypoints).
 For the lines: the largest distance of the timed 4 ms samples from the line, and the peak speed.
 
+Everything here is timed without the jerk limit: TOPP-RA's timing, against its optimum (issue
+18). The jerk-limited timing the server plans with, its cost over this and its planning time:
+bench_jerk.py.
+
 Prints the tables; no pass/fail.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import time
 
@@ -129,6 +134,7 @@ def main() -> None:
 
     plan_rows, quality_rows = [], []
     for name, W, lim, tool in cases:
+        lim = dataclasses.replace(lim, jerk=None)   # TOPP-RA's own (bench_jerk: with the jerk)
         repeat = max(1, args.repeat if len(W) <= 200 else args.repeat // 3)
         total, tr = timed(lambda: time_path(W, lim, DT, tool_path=tool), repeat)
         s_times, (s, keep) = timed(lambda: chord_parameters(W), repeat)

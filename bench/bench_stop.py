@@ -147,9 +147,9 @@ class Arrivals:
         self.times: list[tuple[float, float]] = []   # (arrived, in the pipe), unix s
         request_stop = motions.request_stop
 
-        def stamped():
+        def stamped(*args):   # (gentle: StopMotion's deceleration, issue 30)
             arrived = time.time()
-            motion = request_stop()
+            motion = request_stop(*args)
             self.times.append((arrived, time.time()))
             return motion
         motions.request_stop = stamped

@@ -41,6 +41,7 @@ BENCHES = {
                     ["--seconds", "3", "--lock-step-seconds", "3"]),
     "bench_collision": ([], ["--repeat", "2"]),
     "bench_planning": ([], ["--repeat", "2", "--sizes", "10", "100"]),
+    "bench_jerk": ([], ["--quick"]),
     "bench_kinematics": ([], ["--poses", "200"]),
     "bench_crcl": ([], []),
     "bench_dashboard": (["8"], ["5"]),

@@ -4,8 +4,9 @@ Every number comes from ../shared/robot/tx90.md (manufacturer data D28082904C). 
 metres, angles in radians, velocities in rad/s, accelerations in rad/s^2, efforts in N*m,
 masses in kg. Joint arrays have shape (6,), joint 1 first.
 
-Acceleration limits are not published; we choose them (see `_ACCEL_PER_VELOCITY`) and make
-them configuration: a cell file may override `max_acceleration`.
+Acceleration and jerk limits are not published; we choose them (see `_ACCEL_PER_VELOCITY` and
+`JERK_RAMP`) and make them configuration: a cell file may override `max_acceleration` and
+`max_jerk`.
 """
 from __future__ import annotations
 
@@ -20,6 +21,14 @@ _DEG = math.pi / 180.0
 # Main axes reach full speed in 1/3 s, wrist axes in 1/5 s: a plausible, conservative choice
 # for a 50 kg-class arm with a 6 kg payload (the TX90's nominal load).
 _ACCEL_PER_VELOCITY = (3.0, 3.0, 3.0, 5.0, 5.0, 5.0)
+
+# The jerk limit: each joint ramps its acceleration from zero to its maximum in 20 ms, so
+# max_jerk = max_acceleration / JERK_RAMP (50 times the acceleration limit per second). No jerk
+# figure is published (tx90.md); industrial controllers ramp acceleration over tens of
+# milliseconds, and 20 ms is the shortest of those that keeps a rest-to-rest joint move within
+# about 3 % of its jerk-free time (ruckig measured it at 1.028 x; 50 ms ramps cost 7 %), while
+# each 4 ms cycle changes the acceleration by a fifth of its limit at most, not all of it.
+JERK_RAMP = 0.020   # s
 
 JOINT_AXES = ("z", "y", "y", "z", "y", "z")
 
@@ -46,6 +55,7 @@ class ArmModel:
     joint_max: tuple[float, ...] = tuple(d * _DEG for d in (180, 147.5, 145, 270, 140, 270))
     max_velocity: tuple[float, ...] = tuple(d * _DEG for d in (400, 400, 430, 540, 475, 760))
     max_acceleration: tuple[float, ...] = field(default=())
+    max_jerk: tuple[float, ...] = field(default=())   # rad/s^3; default: see JERK_RAMP
     max_effort: tuple[float, ...] = (318.0, 166.0, 76.0, 34.0, 29.0, 11.0)
     # Tool-tip Cartesian limits (m/s, rad/s, m/s^2, rad/s^2): not published either; our choice,
     # well inside what the joint limits allow near the middle of the workspace.
@@ -60,13 +70,17 @@ class ArmModel:
         if not self.max_acceleration:
             accel = tuple(k * v for k, v in zip(_ACCEL_PER_VELOCITY, self.max_velocity))
             object.__setattr__(self, "max_acceleration", accel)
-        for name in ("joint_min", "joint_max", "max_velocity", "max_acceleration", "max_effort"):
+        if not self.max_jerk:
+            jerk = tuple(a / JERK_RAMP for a in self.max_acceleration)
+            object.__setattr__(self, "max_jerk", jerk)
+        for name in ("joint_min", "joint_max", "max_velocity", "max_acceleration", "max_jerk",
+                     "max_effort"):
             if len(getattr(self, name)) != 6:
                 raise ValueError(f"{name} needs 6 values")
         if any(lo >= hi for lo, hi in zip(self.joint_min, self.joint_max)):
             raise ValueError("every joint_min must be below its joint_max")
-        if min(self.max_velocity) <= 0 or min(self.max_acceleration) <= 0:
-            raise ValueError("velocity and acceleration limits must be positive")
+        if min(min(self.max_velocity), min(self.max_acceleration), min(self.max_jerk)) <= 0:
+            raise ValueError("velocity, acceleration and jerk limits must be positive")
 
     @property
     def lower(self) -> np.ndarray:
@@ -84,6 +98,8 @@ class ArmModel:
                 (self.a2, 0.0, 0.0), (0.0, 0.0, self.c3), (0.0, 0.0, self.c4))
 
     def with_overrides(self, **values) -> "ArmModel":
+        if "max_acceleration" in values and "max_jerk" not in values:
+            values["max_jerk"] = ()     # ramps of JERK_RAMP at the new accelerations
         return replace(self, **values)
 
 

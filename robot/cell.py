@@ -8,10 +8,11 @@ named I/O, records.cfx for the recorder), plus what a simulator needs: the arm v
 reference, with every key commented.
 
 Units: metres, kilograms, seconds, newtons; angles in degrees where the key ends in `_deg`,
-radians everywhere else (so arm overrides such as `max_acceleration` are rad/s^2, as in
-`ArmModel`). Poses are `xyz` (m) plus `rpy_deg`, fixed-axis X-Y-Z (R = Rz(yaw) Ry(pitch) Rx(roll),
-DESIGN.md section 6), in the world frame unless said otherwise. Unknown keys are errors, so a
-typo never silently falls back to a default; every error names the file and the key.
+radians everywhere else (so arm overrides such as `max_acceleration` are rad/s^2 and `max_jerk`
+rad/s^3, as in `ArmModel`). Poses are `xyz` (m) plus `rpy_deg`, fixed-axis X-Y-Z (R = Rz(yaw)
+Ry(pitch) Rx(roll), DESIGN.md section 6), in the world frame unless said otherwise. Unknown
+keys are errors, so a typo never silently falls back to a default; every error names the file
+and the key.
 """
 from __future__ import annotations
 
@@ -63,6 +64,7 @@ class ArmTable(Table):
     # Overrides of sim/arm.py, SI units; the joint ranges in degrees are the cell limits.
     max_velocity: JointLimits | None = None
     max_acceleration: JointLimits | None = None
+    max_jerk: JointLimits | None = None
     max_effort: JointLimits | None = None
     max_linear_velocity: Positive | None = None
     max_angular_velocity: Positive | None = None

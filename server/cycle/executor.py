@@ -18,13 +18,16 @@ acceleration, with the payload the server declared) go into every row beside the
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
-  server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2 (ramps that start and
-                    resume), "stop_acceleration": (6,) rad/s^2 (stops: the arm's own),
+  server -> cycle  {"op": "run", "id": str, "acceleration": (6,) rad/s^2 and "jerk": (6,)
+                    rad/s^3 (ramps that resume: the set ones), "stop_acceleration" and
+                    "stop_jerk" (stops, aborts and a guard's braking: the arm's own, or the set
+                    ones where StopMotion asks for them),
                     "arrays": SharedArrays of run_arrays.pack_run, optional "guard": GuardSpec,
                     "comply": ComplySpec}: segments played in order; a mark reports its label
                     when its sample is passed
                    {"op": "comply", "id", "spec": ComplySpec}: compliance for the running motion
-                   {"op": "stop"}  {"op": "resume"}  {"op": "abort"}
+                   {"op": "stop", optional "acceleration", "jerk": this stop's limits}
+                   {"op": "resume"}  {"op": "abort"}
                    {"op": "payload", "parameters": (10,)}: what the flange carries now
                     (arm_dynamics.py)
                    the jog messages (jog_control.py) and the I/O ones (cycle_inputs.py)
@@ -35,8 +38,9 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                    {"op": "failed", "id", "message"}  {"op": "aborted", "id"}
                    a guarded motion's end adds "guard": {"event": "triggered" | "envelope" |
                    "full distance", "values": (3,), "position": (6,) rad} (at the trigger),
-                   once triggered "rest": (3,) (the reading at rest) and "settle": why the
-                   force did not settle, if it did not; a compliant one's
+                   once triggered "rest": (3,) (the reading at rest), "peak": (3,) (the
+                   reading furthest past the threshold since) and "settle": why the force did
+                   not settle, if it did not; a compliant one's
                    "comply": {"offset": (3,) m, "force": (3,) N, "panic": code or None}
 """
 from __future__ import annotations
@@ -50,6 +54,7 @@ from landscape.server.cycle.feedback import (CMD, ENABLE, ESTOP, IO, MODEL_TAU, 
                                        TIME, WALL, WIDTH, Q, FeedbackRing)
 from landscape.server.cycle.force_loops import (RANGE_KIND, Admittance, ForceSettle, ThresholdMonitor,
                                             vector)
+from landscape.server.cycle.jerk_tracker import PositionTracker
 from landscape.server.cycle.jog_integrator import JogIntegrator
 from landscape.server.cycle.playback import Motion, brake
 from landscape.server.cycle.run_arrays import Segments
@@ -89,6 +94,12 @@ class Executor:
         self._last_state = None
         self._reports: list[dict] = []   # reports of this cycle, posted after its row
         self._last_setpoint: np.ndarray | None = None   # a compliant motion's, last cycle
+        self._last_wanted = np.zeros(6)   # the velocity a sensor loop wanted, last cycle
+        self._tracker: PositionTracker | None = None    # a sensor loop's setpoints (jerk)
+        self._velocity = np.zeros(6)                    # the commanded velocity, last cycle
+        self._limits = None if arm is None else (np.asarray(arm.max_velocity),
+                                                 np.asarray(arm.max_acceleration),
+                                                 np.asarray(arm.max_jerk))
         self._sensors = sensors or CycleSensors()
         self._io = io or IoMonitor()
         self._wall = 0.0   # this cycle's time stamp (unix s)
@@ -133,6 +144,7 @@ class Executor:
         else:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
+        self._velocity = np.asarray(vel, dtype=float)
         model = self.model_torques(fbk, pos)
 
         key = (state.enable, state.estop)
@@ -183,6 +195,8 @@ class Executor:
         self._sequence += 1
 
     def _play(self, motion: Motion, fbk, sensors) -> tuple[np.ndarray, np.ndarray]:
+        if motion.stopped_by is not None:
+            self._peak(motion, sensors)
         if motion.settling is None:
             motion.advance()
             marks = motion.marks
@@ -203,13 +217,22 @@ class Executor:
                 motion.settling = None
             if motion.settling is None:
                 # outlives the motion's arrays
-                self._hold = self._shifted(motion, sensors, running and motion.settling is None)
-                velocity = motion.sample(motion.velocities) * motion.rate
+                target = self._shifted(motion, sensors, running and motion.settling is None)
                 if motion.compliance is not None or motion.force_settle is not None:
-                    velocity = velocity + (self._hold - self._last_setpoint) / self.cycle_time
-                self._last_setpoint = self._hold
-                return self._hold, velocity
-            self._hold = self._shifted(motion, sensors, False)
+                    return self._tracked(target)
+                self._hold = target
+                return self._hold, motion.velocity()
+            target = self._shifted(motion, sensors, False)
+            if motion.compliance is not None or motion.force_settle is not None:
+                self._tracked(target, resting=True)
+            else:
+                self._hold = target
+        elif self._tracker is not None:
+            self._tracked(self._last_setpoint, resting=True)
+        # A sensor loop that ended with its setpoints moving: they come to rest on its last
+        # target within the limits (not dead in a cycle) before the arm can count as settled.
+        if self._tracker is not None and not self._tracker.at_rest:
+            return self._hold, self._tracker.velocity.copy()
         # At the end of the motion or of a stop ramp: hold until the arm has settled there, so
         # "done" and "paused" mean the arm is at rest where the command says.
         motion.settle_cycles += 1
@@ -259,6 +282,18 @@ class Executor:
             motion.outcome["message"] = compliance.problem
             brake(motion, "failed")
 
+    @staticmethod
+    def _peak(motion: Motion, sensors) -> None:
+        """A guard that fired: the reading furthest past its threshold since (each watched
+        component, signed as read), for the final report ("peak")."""
+        guard = motion.stopped_by
+        value = guard.reading(sensors)
+        report = motion.outcome["guard"]
+        peak = np.array(report.get("peak", value), dtype=float)
+        further = guard.watched & (np.sign(guard.thresholds) * (value - peak) > 0)
+        peak[further] = value[further]
+        report["peak"] = peak.tolist()
+
     def _settling_force(self, motion: Motion) -> bool:
         """Whether a motion braked on a force threshold settles its force now (starting
         that once it is at a stop: ForceSettle)."""
@@ -275,10 +310,35 @@ class Executor:
             motion.outcome["guard"]["settle"] = note
         return settle is not None and not settle.finished
 
+    def _tracked(self, target: np.ndarray, resting: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """A sensor loop's setpoint, reached within the arm's velocity, acceleration and jerk
+        limits (jerk_tracker.py) from the state the last setpoints were in: the hand-over into
+        the loop (a compliance starting, a guarded stop's force settling) is continuous;
+        `resting`: the loop has ended, the setpoints come to rest on the target."""
+        tracker, dt = self._tracker, self.cycle_time
+        if tracker is None:
+            past = self._setpoints
+            acceleration = (np.zeros(6) if past is None
+                            else (past[0] - 2.0 * past[1] + past[2]) / (dt * dt))
+            tracker = self._tracker = PositionTracker(self._hold, dt, self._velocity,
+                                                      acceleration)
+            self._last_setpoint, self._last_wanted = target, self._velocity
+        # The wanted motion's velocity over the last cycle and its change: at the target, at
+        # the cycle's end, it moves at the first plus half the second. A state consistent so
+        # is reached in one cycle, a smooth wanted motion followed exactly (not so, ruckig's
+        # profile takes longer, lags, and a force loop through it rings).
+        mean = np.zeros(6) if resting else (target - self._last_setpoint) / dt
+        change = np.zeros(6) if resting else mean - self._last_wanted
+        self._last_setpoint, self._last_wanted = target, mean
+        tracker.step(target, mean + change / 2.0, *self._limits, change / dt)
+        self._hold = tracker.position.copy()
+        return self._hold, tracker.velocity.copy()
+
     def _shifted(self, motion: Motion, sensors, active: bool) -> np.ndarray:
         """The motion's setpoint now: planned, shifted by its compliance or its force settling
         if it has one."""
-        planned = motion.sample(motion.positions)
+        planned = motion.position()
         if motion.force_settle is not None:
             return motion.force_settle.shift(planned, sensors)
         compliance = motion.compliance
@@ -295,7 +355,7 @@ class Executor:
             motion.outcome["guard"] = {"event": "full distance"}
         if comply is not None:
             motion.compliance = Admittance(comply, self._tip, self.cycle_time)
-            self._last_setpoint = motion.sample(motion.positions).copy()
+            self._last_setpoint = motion.position().copy()
 
     # ---- messages ----------------------------------------------------------------------------
 
@@ -314,6 +374,7 @@ class Executor:
             self._motion = Motion({**msg, "segments": Segments(self._arrays.open())},
                                    self.cycle_time)
             self._motion.stop_limit = np.asarray(msg["stop_acceleration"], dtype=float)
+            self._motion.stop_jerk = np.asarray(msg.get("stop_jerk", msg.get("jerk")), dtype=float)
             self._reports.append({"op": "started", "id": msg["id"], "wall_time": self._wall})
             if msg.get("comply") is not None and self._tip is None:
                 self._end("failed", message="this controller has no arm model for comply")
@@ -327,20 +388,17 @@ class Executor:
         elif op in ("stop", "abort") and motion is not None and motion.stopped_by is not None:
             motion.unsettled = f"{op} before the force settled"   # a guarded stop's: no more
         elif op == "stop" and motion is not None and not motion.paused and motion.settling is None:
-            motion.limit = motion.stop_limit   # stops brake at the arm's full deceleration
-            motion.target_rate = 0.0
+            # At the run's stop limits, or the message's (StopMotion at the set deceleration).
+            motion.stop(msg.get("acceleration"), msg.get("jerk"))
         elif op == "resume" and motion is not None and motion.paused:
-            motion.limit = motion.run_limit
-            motion.paused = False
-            motion.target_rate = 1.0
+            motion.resume()
             self._reports.append({"op": "resumed", "id": motion.id})
         elif op == "abort" and motion is not None:
             if motion.paused:
                 self._end("aborted")
             elif motion.settling is None:  # never drop a moving arm: stop along the path first
-                motion.limit = motion.stop_limit
                 motion.abort_when_paused = True
-                motion.target_rate = 0.0
+                motion.stop()
 
     def _handle_jog(self, msg: dict, fbk) -> None:
         op, jog = msg["op"], self._jog
@@ -370,6 +428,7 @@ class Executor:
     def _end(self, how: str, **details) -> None:
         self._reports.append({"op": how, "id": self._motion.id, **details})
         self._motion = None
+        self._tracker = None
         self._sensors.watch_range = False
         if self._arrays is not None:
             self._arrays.close()

@@ -10,7 +10,9 @@ the tip keeps its line and its orientation instead of drifting.
 Every cycle the wanted motion is scaled down as a whole (its direction holds) to the joint jog
 speeds and to the manual-mode tip speed (ISO 10218-1: 250 mm/s); the velocity moves towards it
 within the acceleration limits, at the arm's full deceleration when stopping; and each joint
-brakes so as to stop before the end of its range.
+brakes so as to stop before the end of its range. The joints follow that velocity through a
+jerk-limited tracker (jerk_tracker.py: the set jerk, the arm's when stopping), so a jog, its
+stops and its deadman never step an acceleration (issue 30).
 
 The deadman: no request for `deadman` cycles, or a request with the deadman released, brakes
 the arm to rest along its direction. Silence ends the session ("aborted", saying why); a
@@ -43,12 +45,15 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from landscape.server.cycle.jerk_tracker import VelocityTracker
 from landscape.server.cycle.tip_model import TipModel, damped_solve
 
 MANUAL_TIP_SPEED = 0.25   # m/s, reduced speed for manual jogging (ISO 10218-1, 5.6)
 RANGE_MARGIN = 1e-3       # rad: jogging stops this far inside the joint range
 TRACKING = 0.2            # of the tip's distance to its reference made good per cycle
-HEADROOM = 0.98           # of the speed limits a Cartesian jog asks for: the rest corrects
+HEADROOM = 0.95           # of the speed limits a Cartesian jog asks for: the rest corrects
+                          # (and the joints' jerk-limited tracking overshoots by up to 3 %)
+ON_REFERENCE = 1e-7       # m and rad: a stopping Cartesian jog's tip counts as on its line
 STALE_CYCLES = 10         # a clearance older than this is not trusted (the guard sends every 2)
 
 
@@ -58,7 +63,7 @@ class JogLimits:
     acceleration), stop_acceleration (rad/s^2, the arm's own), lower / upper (rad, the joint
     range); (2,) cartesian_acceleration and cartesian_stop: linear m/s^2 and angular rad/s^2
     of the tip, set and the arm's; tip_speed (m/s); deadman (cycles without a request before
-    the arm stops)."""
+    the arm stops); jerk and stop_jerk (6,) rad/s^3, the set and the arm's."""
 
     velocity: np.ndarray
     acceleration: np.ndarray
@@ -69,6 +74,8 @@ class JogLimits:
     cartesian_stop: np.ndarray
     tip_speed: float
     deadman: int
+    jerk: np.ndarray
+    stop_jerk: np.ndarray
 
 
 class JogIntegrator:
@@ -78,6 +85,9 @@ class JogIntegrator:
         self.tool_offset = tool_offset
         self.q = np.array(q, dtype=float)
         self.qd = np.zeros(6)
+        self._tracker = VelocityTracker(self.q, dt)
+        self._twist_tracker = VelocityTracker(np.zeros(6), dt)   # Cartesian jogs' twist
+        self._wanted: np.ndarray | None = None    # the joint velocity wanted last cycle
         self._clearance: tuple[np.ndarray, float] | None = None   # gradient (6,) m/rad, m/s
         self._clearance_age = 0 if guarded else None   # cycles since the guard's figures
         self.ending: tuple[str, str] | None = None   # (report, message) once it must stop
@@ -108,7 +118,7 @@ class JogIntegrator:
 
     @property
     def finished(self) -> bool:
-        return self.ending is not None and not np.any(self.qd)
+        return self.ending is not None and self._tracker.at_rest
 
     def step(self) -> tuple[np.ndarray, np.ndarray]:
         """The next setpoint (position rad, velocity rad/s)."""
@@ -117,66 +127,89 @@ class JogIntegrator:
         if self._silent > limits.deadman:
             self.end("aborted", f"deadman: no jog request for {limits.deadman * dt * 1000:g} ms;"
                                 f" the arm stopped")
-        stopping = self.ending is not None or not self._pressed
+        # A guard fallen silent with nothing near holds the arm: braking as a stop does.
+        stopping = self.ending is not None or not self._pressed or self._guard_silent()
         self.tip.set_tool(self.tool_offset)
         if self._frame == "joint":
             self._reference = None
             qd = self._joint_step(stopping)
         else:
             qd = self._cartesian_step(stopping)
-        limited = self._within_range(self._clear_of_obstacles(qd))
-        if not np.array_equal(limited, qd):
-            self._reference = None    # a joint range or an obstacle decides: off the line
-        q = self.q + limited * dt
-        self.q, self.qd = np.clip(q, limits.lower, limits.upper), limited
+        cleared = self._clear_of_obstacles(qd)
+        limited = self._within_range(cleared)
+        if not np.array_equal(limited, cleared):
+            self._reference = None    # a joint range decides: off the line
+        elif self._reference is not None and not np.array_equal(cleared, qd):
+            self._slowed(cleared, qd)  # an obstacle slows the jog: along its line
+        # A joint jog speeds up within the set limits; braking, and following a Cartesian
+        # jog's joints (its twist keeps the set limits), within the arm's.
+        braking = (stopping or self._frame != "joint"
+                   or np.any(np.abs(limited) < np.abs(self.qd) - 1e-12))
+        tracker = self._tracker
+        # A Cartesian jog's joint velocities change smoothly: followed with their trend.
+        trend = None
+        if self._frame != "joint" and not stopping and self._wanted is not None:
+            trend = (limited - self._wanted) / dt
+        self._wanted = limited
+        tracker.step(limited, limits.stop_acceleration if braking else limits.acceleration,
+                     limits.stop_jerk if braking else limits.jerk, trend)
+        self.q, self.qd = tracker.position.copy(), tracker.velocity.copy()
         return self.q, self.qd
 
     def _clear_of_obstacles(self, qd: np.ndarray) -> np.ndarray:
         """qd scaled down as a whole (its direction holds: the arm does not slide along what
         it nears) so that its approach to the nearest obstacle is at most the rate allowed,
         reached within the arm's full deceleration. Figures older than STALE_CYCLES allow no
-        approach; no figures from a late guard hold the arm."""
+        approach (no figures at all: _guard_silent)."""
         clearance = self._clearance
-        if self._clearance_age is not None:
-            self._clearance_age += 1
-            if self._clearance_age > STALE_CYCLES:
-                if clearance is None:
-                    return self.qd + _limited(-self.qd, self.limits.stop_acceleration * self.dt)
-                clearance = (clearance[0], 0.0)
         if clearance is None:
             return qd
+        if self._clearance_age is not None and self._clearance_age > STALE_CYCLES:
+            clearance = (clearance[0], 0.0)
         gradient, rate = clearance
         approach = -float(gradient @ qd)
         if approach <= rate:
             return qd
-        wanted = qd * (rate / approach)
-        return self.qd + _limited(wanted - self.qd, self.limits.stop_acceleration * self.dt)
+        return qd * (rate / approach)
+
+    def _guard_silent(self) -> bool:
+        """Whether the guard's last figures, which said nothing is near, are too old to trust
+        (they age a cycle per call); figures of something near are _clear_of_obstacles'."""
+        if self._clearance_age is None:
+            return False
+        self._clearance_age += 1
+        return self._clearance_age > STALE_CYCLES and self._clearance is None
 
     # ---- joint jogs -------------------------------------------------------------------------
 
     def _joint_step(self, stopping: bool) -> np.ndarray:
-        limits = self.limits
-        wanted = np.zeros(6) if stopping else self._velocity / self._scale(self._velocity)
-        accel = limits.stop_acceleration if stopping else limits.acceleration
-        return self.qd + _limited(wanted - self.qd, accel * self.dt)
+        return np.zeros(6) if stopping else self._velocity / self._scale(self._velocity)
 
     # ---- Cartesian jogs ---------------------------------------------------------------------
 
     def _cartesian_step(self, stopping: bool) -> np.ndarray:
         limits, dt, tip = self.limits, self.dt, self.tip
         jacobian = tip.jacobian(self.q).copy()
+        twist = self._twist_tracker
         if self._reference is None:   # (re)anchored where the tip is, moving as it moves
             self._reference = tip.forward(self.q).copy()
-            self._twist = jacobian @ self.qd
+            twist.velocity = jacobian @ self.qd
+            twist.acceleration = np.zeros(6)
         if stopping:
-            if not np.any(self._twist):
-                return np.zeros(6)    # at rest on the reference
-            wanted, accel = np.zeros(6), limits.cartesian_stop
+            # At rest on the reference; the joints, which follow the twist's braking a little
+            # behind, are brought back onto it first.
+            if (twist.at_rest and not np.any(twist.velocity)
+                    and np.max(np.abs(tip.pose_error(self._reference))) < ON_REFERENCE):
+                return np.zeros(6)
+            wanted, accel = np.zeros(6), np.repeat(limits.cartesian_stop, 3)
         else:
             wanted = self._base_twist()
             wanted = wanted / self._scale(damped_solve(jacobian, wanted), jacobian, HEADROOM)
-            accel = limits.cartesian_acceleration
-        self._twist = self._twist + _limited(wanted - self._twist, np.repeat(accel, 3) * dt)
+            accel = np.repeat(limits.cartesian_acceleration, 3)
+        # The twist ramps its acceleration up as the joints do theirs (the same ramp time).
+        ramp = float(np.max(limits.stop_acceleration / limits.stop_jerk))
+        twist.step(wanted, accel, accel / ramp)
+        self._twist = twist.velocity.copy()
         reference = self._reference
         # The tip model's last pose is the tip's now (every call above was at self.q).
         correction = TRACKING / dt * tip.pose_error(reference)   # before it moves on
@@ -184,6 +217,20 @@ class JogIntegrator:
         reference[:3, :3] = pin.exp3(self._twist[3:] * dt) @ reference[:3, :3]
         qd = damped_solve(jacobian, self._twist + correction)
         return qd / self._scale(qd, jacobian)   # the correction too stays within the limits
+
+    def _slowed(self, cleared: np.ndarray, qd: np.ndarray) -> None:
+        """A Cartesian jog slowed by the guard (qd scaled down as a whole to `cleared`): its
+        twist and this cycle's step of its line's reference scaled alike, so that the tip
+        keeps to the line (the joints' tracking lags a little; the line's correction makes
+        it up)."""
+        factor = float(cleared @ qd / max(float(qd @ qd), 1e-300))
+        twist, reference = self._twist_tracker, self._reference
+        back = (factor - 1.0) * self._twist * self.dt
+        reference[:3, 3] += back[:3]
+        reference[:3, :3] = pin.exp3(back[3:]) @ reference[:3, :3]
+        twist.velocity = twist.velocity * factor
+        twist.acceleration = twist.acceleration * factor
+        self._twist = twist.velocity.copy()
 
     def _base_twist(self) -> np.ndarray:
         """The request's twist in base axes."""
@@ -209,15 +256,14 @@ class JogIntegrator:
                    tip_speed / limits.tip_speed / share)
 
     def _within_range(self, qd: np.ndarray) -> np.ndarray:
-        """Each joint slow enough to stop before its range ends (at the arm's deceleration)."""
+        """Each joint slow enough to stop before its range ends (at the arm's deceleration and
+        jerk, after the tracker's lag of one acceleration ramp)."""
         limits = self.limits
+        a, j = limits.stop_acceleration, limits.stop_jerk
         room = np.where(qd > 0, limits.upper - RANGE_MARGIN - self.q,
                         self.q - (limits.lower + RANGE_MARGIN))
-        top = np.sqrt(2.0 * limits.stop_acceleration * np.maximum(room, 0.0))
+        room = np.maximum(room - np.abs(self.qd) * (a / j + self.dt), 0.0)
+        # The stop from v with the deceleration ramped up: v^2 / 2a + v a / 2j <= room.
+        top = 0.5 * (np.sqrt((a * a / j) ** 2 + 8.0 * a * room) - a * a / j)
         return np.clip(qd, -top, top)
 
-
-def _limited(change: np.ndarray, most: np.ndarray) -> np.ndarray:
-    """`change` scaled down as a whole so that no component exceeds its `most` (>= 0)."""
-    excess = float(np.max(np.abs(change) / most))
-    return change / excess if excess > 1.0 else change

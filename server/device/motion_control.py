@@ -220,8 +220,10 @@ class MotionControl:
         return motion
 
     def _ramps(self) -> dict:
-        return {"acceleration": self.settings.current.joint_accelerations,
-                "stop_acceleration": np.asarray(self.arm.max_acceleration)}
+        settings = self.settings.current
+        return {"acceleration": settings.joint_accelerations, "jerk": settings.joint_jerks,
+                "stop_acceleration": np.asarray(self.arm.max_acceleration),
+                "stop_jerk": np.asarray(self.arm.max_jerk)}
 
     def _begin(self, motion: RunningMotion, message: dict) -> None:
         """Register the motion, hand it to the cycle, then Moving and "started" (all under the
@@ -260,18 +262,21 @@ class MotionControl:
 
     # ---- 3.6 interruptions -----------------------------------------------------------------
 
-    def stop_motion(self, timeout: float = 10.0) -> None:
+    def stop_motion(self, timeout: float = 10.0, gentle: bool = False) -> None:
         """Seed 3.6.1: decelerate along the path and hold (Paused); blocks until at rest."""
-        self.wait_at_rest(self.request_stop(), timeout)
+        self.wait_at_rest(self.request_stop(gentle), timeout)
 
-    def request_stop(self) -> RunningMotion:
+    def request_stop(self, gentle: bool = False) -> RunningMotion:
         """StopMotion's first half, which waits for nothing: the stop is on its way to the
-        cycle when this returns (the running motion, for wait_at_rest)."""
+        cycle when this returns (the running motion, for wait_at_rest). It brakes at the arm's
+        full deceleration and jerk, or `gentle`, at the set ones (a jog ends at full)."""
         with self.state.atomic() as state:
             motion = self._motion
             if motion is None or state.state is not State.MOVING:
                 raise WrongState("no motion is running", state=state.state.value)
-            self.send({"op": "stop"})
+            settings = self.settings.current
+            self.send({"op": "stop", **({"acceleration": settings.joint_accelerations,
+                                         "jerk": settings.joint_jerks} if gentle else {})})
             return motion
 
     def wait_at_rest(self, motion: RunningMotion, timeout: float = 10.0) -> None:

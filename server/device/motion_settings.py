@@ -133,6 +133,11 @@ class MotionSettings:
     def joint_accelerations(self) -> np.ndarray:
         return np.array(self.arm.max_acceleration) * self.accel_percent / 100.0
 
+    @property
+    def joint_jerks(self) -> np.ndarray:
+        """The jerk limits with the acceleration percent (the ramps keep their duration)."""
+        return np.array(self.arm.max_jerk) * self.accel_percent / 100.0
+
 
 def _checked_frame(name: str, matrix: np.ndarray, max_offset: float) -> np.ndarray:
     m = np.asarray(matrix, dtype=float)

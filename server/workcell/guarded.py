@@ -127,6 +127,8 @@ class GuardedMotion:
             unit = "N" if kind == FORCE else "m"
             rest = (f"; at rest {vector(guard['rest'][:len(values)])} {unit}"
                     if "rest" in guard else "")
+            if "peak" in guard:   # how far past the threshold it went while braking
+                rest += f"; peak {vector(guard['peak'][:len(values)])} {unit}"
             settle = f" ({guard['settle']})" if "settle" in guard else ""
             return (f"triggered: reading {vector(values)} {unit} with the tip at "
                     f"{vector(self._tip_in_world(guard['position']))} m (world frame)"

@@ -63,7 +63,8 @@ class ManualControl:
         limits = JogLimits(settings.joint_velocities, settings.joint_accelerations,
                            np.asarray(arm.max_acceleration), arm.lower, arm.upper,
                            cartesian * settings.accel_percent / 100.0, cartesian,
-                           MANUAL_TIP_SPEED, math.ceil(timeout / self.link.cycle_time))
+                           MANUAL_TIP_SPEED, math.ceil(timeout / self.link.cycle_time),
+                           settings.joint_jerks, np.asarray(arm.max_jerk))
         motion = self.motions.start_jog({"limits": limits, "tool_offset": settings.tool_offset,
                                            "guarded": True})   # JogSession starts the guard
         guard = JogGuard(self.link, self.motions, self.collisions, motion)

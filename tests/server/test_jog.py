@@ -211,7 +211,9 @@ def test_silence_stops_the_arm_at_full_deceleration_once_the_deadman_runs_out(ar
     speed = np.abs(np.diff(rows[:, CMD][:, 0])) / dt
     cruising = int(np.flatnonzero(speed >= speed[0] - 1e-9)[-1])
     rest = cruising + int(np.argmax(speed[cruising:] < 1e-9))
-    braking = speed[0] / arm.server.device.arm.max_acceleration[0]
+    # The arm's full deceleration, ramped up and down at its jerk limit (issue 30): v/a + a/j.
+    a, j = arm.server.device.arm.max_acceleration[0], arm.server.device.arm.max_jerk[0]
+    braking = speed[0] / a + a / j
     print(f"\ndeadman: stopped {took * 1000:.0f} ms after the last request (timeout 200 ms, "
           f"braking {braking * 1000:.0f} ms)")
     assert speed[0] > 0.1 and (rest - cruising) * dt <= braking + 2 * dt

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from landscape.server.cycle.jog_integrator import (MANUAL_TIP_SPEED, STALE_CYCLES, JogIntegrator,
+from landscape.server.cycle.jog_integrator import (HEADROOM, MANUAL_TIP_SPEED, STALE_CYCLES,
+                                                   JogIntegrator,
                                           JogLimits)
 from landscape.server.cycle.tip_model import TipModel
 from landscape.robot.arm import arm_model
@@ -21,7 +22,8 @@ def _jog(deadman_cycles: int = 50, guarded: bool = False) -> JogIntegrator:
     a = np.array(ARM.max_acceleration)
     cartesian = np.array([ARM.max_linear_acceleration, ARM.max_angular_acceleration])
     limits = JogLimits(np.array(ARM.max_velocity) * 0.25, a * 0.5, a, ARM.lower, ARM.upper,
-                       cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, deadman_cycles)
+                       cartesian * 0.5, cartesian, MANUAL_TIP_SPEED, deadman_cycles,
+                       np.array(ARM.max_jerk) * 0.5, np.array(ARM.max_jerk))
     return JogIntegrator("j", START, limits, TipModel(ARM), np.eye(4), DT, guarded=guarded)
 
 
@@ -44,9 +46,82 @@ def test_a_cartesian_jog_keeps_its_line_and_orientation_at_the_manual_speed():
     direction = np.array([0.3, 0.2, 0.0]) / np.linalg.norm([0.3, 0.2, 0.0])
     off_line = moved - (moved @ direction) * direction
     assert np.linalg.norm(off_line) < 5e-5 * np.linalg.norm(moved) / 0.05   # 50 um per 5 cm
-    assert np.allclose(now[:3, :3], start[:3, :3], atol=1e-6)
+    # The joints follow the jog through a jerk-limited tracker (issue 30), a cycle or two
+    # behind the line's own correction: the tool turns by 0.1 mrad at most.
+    assert np.allclose(now[:3, :3], start[:3, :3], atol=1e-4)
     assert max(speeds) <= MANUAL_TIP_SPEED * (1 + 1e-3)   # a chord of the step, not J qd
-    assert speeds[-1] == pytest.approx(0.98 * MANUAL_TIP_SPEED, rel=1e-3)   # the headroom
+    assert speeds[-1] == pytest.approx(HEADROOM * MANUAL_TIP_SPEED, rel=1e-3)   # the headroom
+
+
+def test_a_cartesian_jog_that_ends_comes_to_rest_on_its_line():
+    """The joints follow the twist's jerk-limited braking a little behind (issue 30), so the
+    tip leaves the line while the jog stops; it ended 0.27 mm off it, the tool turned by
+    6 mrad, once the twist was at rest. Now the joints are brought back onto it first."""
+    jog, tip = _jog(), TipModel(ARM)
+    start = tip.forward(START).copy()
+    for k in range(1000):
+        if jog.finished:
+            break
+        if k < 150:
+            jog.command(_request("base", [0, 0, 0.25, 0, 0, 0]))    # up
+        elif k == 150:
+            jog.end("done")
+        q, _ = jog.step()
+    assert jog.finished
+    now = tip.forward(q)
+    moved = now[:3, 3] - start[:3, 3]
+    assert moved[2] > 0.1
+    assert np.linalg.norm(moved[:2]) < 1e-6
+    assert np.allclose(now[:3, :3], start[:3, :3], atol=1e-6)
+
+
+def test_a_silent_guard_holds_a_cartesian_jog_on_its_line():
+    """A guard whose figures stop coming (its thread starved: a busy machine) holds the arm;
+    a Cartesian jog brakes along its line then, as a stop does, and goes on along it when
+    the figures come back. It braked joint by joint and re-anchored its line where it came
+    to rest, 0.2 mm off (test_jog's jogs failed so under load)."""
+    jog, tip = _jog(guarded=True), TipModel(ARM)
+    start = tip.forward(START).copy()
+    for k in range(1000):
+        if jog.finished:
+            break
+        if k < 100 or k >= 200:     # the guard's figures: nothing near; silent in between
+            jog.keep_clear({"gradient": None, "rate": 0.0})
+        if k < 300:
+            jog.command(_request("base", [0, 0, 0.25, 0, 0, 0]))
+        elif k == 300:
+            jog.end("done")
+        q, qd = jog.step()
+        if k == 199:
+            assert np.abs(qd).max() < 1e-9                 # held
+    assert jog.finished
+    moved = tip.forward(q)[:3, 3] - start[:3, 3]
+    assert moved[2] > 0.1
+    assert np.linalg.norm(moved[:2]) < 1e-6
+    assert np.allclose(tip.forward(q)[:3, :3], start[:3, :3], atol=1e-6)
+
+
+def test_a_cartesian_jog_the_guard_slows_keeps_its_line():
+    """The guard slows a jog near something (its joint velocity scaled down as a whole): a
+    Cartesian jog slows along its line. Its line was dropped and taken up again where the
+    joints, following a cycle behind, had got to: 0.2 mm off over 14 cm (test_jog)."""
+    jog, tip = _jog(guarded=True), TipModel(ARM)
+    start = tip.forward(START).copy()
+    rise = tip.jacobian(START)[2].copy()       # m/rad: how the tip's height follows each joint
+    for k in range(1000):
+        if jog.finished:
+            break
+        if k < 300:   # the clearance above falls as the tip rises: at most 0.1 m/s closer
+            jog.keep_clear({"gradient": -rise, "rate": 0.1})
+            jog.command(_request("base", [0, 0, 0.25, 0, 0, 0]))
+        elif k == 300:
+            jog.end("done")
+        q, _ = jog.step()
+    assert jog.finished
+    moved = tip.forward(q)[:3, 3] - start[:3, 3]
+    assert 0.05 < moved[2] < 0.25 * 300 * DT * 0.6             # up, slowed
+    assert np.linalg.norm(moved[:2]) < 1e-6
+    assert np.allclose(tip.forward(q)[:3, :3], start[:3, :3], atol=1e-6)
 
 
 def test_silence_brakes_to_rest_and_ends_the_session_saying_why():
@@ -58,8 +133,10 @@ def test_silence_brakes_to_rest_and_ends_the_session_saying_why():
     while not jog.finished:
         jog.step()
         cycles += 1
-    braking = 2.0 / ARM.max_acceleration[5] / DT
-    assert 50 < cycles <= 50 + math.ceil(braking) + 2
+    # Braking from 2 rad/s with the deceleration ramped up within the jerk limit (issue 30).
+    a, j = ARM.max_acceleration[5], ARM.max_jerk[5]
+    braking = (2.0 / a + a / j) / DT
+    assert 50 < cycles <= 50 + math.ceil(braking) + 3
     assert jog.ending[0] == "aborted" and "deadman" in jog.ending[1]
 
 

@@ -195,6 +195,20 @@ def test_a_line_through_the_wrist_singularity_is_refused_before_anything_moves(a
     assert np.max(np.abs(arm.joints() - before)) < 1e-6
 
 
+def ruckig_stop(v: float, a0: float, a: float, j: float) -> float:
+    """The distance of the time-optimal jerk-limited stop from speed v and acceleration a0
+    (along v) within acceleration a and jerk j: ruckig's."""
+    from ruckig import ControlInterface, InputParameter, Ruckig, Trajectory
+    inp = InputParameter(1)
+    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [v], [a0]
+    inp.target_velocity, inp.target_acceleration = [0.0], [0.0]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [10 * v], [a], [j]
+    inp.control_interface = ControlInterface.Velocity
+    trajectory = Trajectory(1)
+    Ruckig(1).calculate(inp, trajectory)
+    return trajectory.at_time(trajectory.duration)[0][0]
+
+
 def test_stop_takes_no_longer_than_the_limits_need(tmp_path):
     arm = Arm(tmp_path, pace=1.0)   # real time: the stop lands long before the planned braking
     try:
@@ -208,9 +222,13 @@ def test_stop_takes_no_longer_than_the_limits_need(tmp_path):
         speed = np.abs(data["cmd_vel"][:, 0])
         start = int(np.argmax(speed))
         travelled = abs(data["cmd_pos"][-1, 0] - data["cmd_pos"][start, 0])
-        # A stop brakes at the arm's full deceleration, whatever the set acceleration.
-        v, a = speed[start], arm.server.device.arm.max_acceleration[0]
-        shortest = v * v / (2 * a)
+        # A stop brakes at the arm's full deceleration, whatever the set acceleration, and
+        # ramps its deceleration within the jerk limit (issue 30): the shortest stop is
+        # ruckig's time-optimal one from the peak speed, where the acceleration is zero
+        # (before: v^2 / 2a).
+        arm_model = arm.server.device.arm
+        v, a, j = speed[start], arm_model.max_acceleration[0], arm_model.max_jerk[0]
+        shortest = ruckig_stop(v, 0.0, a, j)
         decel = np.abs(np.diff(data["cmd_vel"][start:, 0])).max() / 0.004
         print(f"stop from {v:.2f} rad/s: {travelled:.4f} rad, shortest possible {shortest:.4f} rad"
               f", peak deceleration {decel:.2f} of {a:.2f} rad/s^2")

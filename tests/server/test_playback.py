@@ -21,34 +21,37 @@ PATHS = {
 
 
 def motion(segments, limits: Limits) -> Motion:
-    return Motion({"id": "m", "acceleration": limits.acceleration, "segments": [
-        {"positions": t.positions, "velocities": t.velocities} for t in segments]}, DT)
+    return Motion({"id": "m", "acceleration": limits.acceleration, "jerk": limits.jerk,
+                   "segments": [{"positions": t.positions, "velocities": t.velocities}
+                                for t in segments]}, DT)
 
 
 def play(m: Motion, commands: dict[int, str], max_cycles: int):
     """The positions and velocities the executor commands, cycle by cycle, as Executor._play
     does (segments back to back, held at rest before and after); commands: cycle -> "stop",
     "resume" or "restart" (resume as soon as the rate reaches 0)."""
-    positions = [m.sample(m.positions)] * 2             # at rest before the start
-    velocities = [np.zeros(6)] * 2
+    positions = [m.position()] * 3                      # at rest before the start
+    velocities = [np.zeros(6)] * 3
     restart = False
     for cycle in range(max_cycles):
         what = commands.get(cycle)
         if what == "stop":
-            m.target_rate = 0.0
+            m.stop()
         elif what == "resume":
-            m.target_rate = 1.0
+            m.resume()
         elif what == "restart":
-            m.target_rate, restart = 0.0, True
+            m.stop()
+            restart = True
         if restart and m.rate == 0.0 and m.target_rate == 0.0:
-            m.target_rate, restart = 1.0, False
+            m.resume()
+            restart = False
         m.advance()
         if m.s >= m.last and not m.next_segment():
-            positions += [m.sample(m.positions)] * 2   # held at the end
-            velocities += [np.zeros(6)] * 2
+            positions += [m.position()] * 3            # held at the end
+            velocities += [np.zeros(6)] * 3
             return np.array(positions), np.array(velocities)
-        positions.append(m.sample(m.positions))
-        velocities.append(m.sample(m.velocities) * m.rate)
+        positions.append(m.position())
+        velocities.append(m.velocity())
     raise AssertionError("the motion did not end")
 
 
@@ -58,6 +61,9 @@ def assert_within(limits: Limits, positions, velocities, where):
     assert np.all(ratio <= 1 + TOL), (where, "position second difference / limit", ratio)
     vel_accel = np.abs(np.diff(velocities, axis=0)) / DT
     assert np.all(vel_accel <= limits.acceleration * (1 + TOL)), (where, vel_accel.max(axis=0))
+    jerk = np.abs(np.diff(positions, 3, axis=0)) / DT**3
+    ratio = (jerk / limits.jerk).max(axis=0)
+    assert np.all(ratio <= 1 + TOL), (where, "position third difference / jerk limit", ratio)
 
 
 @pytest.mark.parametrize("name", PATHS)
@@ -109,3 +115,36 @@ def test_the_planned_trajectory_itself_keeps_the_position_second_difference_with
             m = motion([trajectory], limits)
             positions, velocities = play(m, {}, 2 * len(trajectory))
             assert_within(limits, positions, velocities, (name, speed, accel))
+
+
+def test_a_ramps_cycles_are_ruckigs_own_states():
+    """ramps.sampled reads a one-DOF ruckig profile at whole cycles from its phases at once:
+    the same states as ruckig's at_time, a brake phase and the time past the end included."""
+    from ruckig import (ControlInterface, DurationDiscretization, InputParameter, Result,
+                        Ruckig, Trajectory)
+
+    from landscape.server.cycle.ramps import sampled
+    rng = np.random.default_rng(3)
+    otg, inp, trajectory = Ruckig(1, 1.0), InputParameter(1), Trajectory(1)
+    braked = 0
+    for k in range(400):
+        inp.current_position = [rng.uniform(0, 100)]
+        inp.current_velocity = [rng.uniform(-0.2, 1.5)]          # beyond 1: a brake phase
+        inp.current_acceleration = [rng.uniform(-0.05, 0.05)]
+        inp.max_velocity, inp.max_acceleration = [1.0], [rng.uniform(1e-3, 0.1)]
+        inp.max_jerk = [rng.uniform(1e-4, 0.05)]
+        inp.target_velocity, inp.target_acceleration = [float(rng.choice([0, 0.5, 1]))], [0.0]
+        if k % 2:
+            inp.control_interface = ControlInterface.Position
+            inp.duration_discretization = DurationDiscretization.Discrete
+            inp.target_position = [inp.current_position[0] + rng.uniform(1, 50)]
+        else:
+            inp.control_interface = ControlInterface.Velocity
+            inp.duration_discretization = DurationDiscretization.Continuous
+        assert otg.calculate(inp, trajectory) in (Result.Working, Result.Finished)
+        braked += trajectory.profiles[0][0].brake.duration > 0
+        cycles = int(np.ceil(trajectory.duration - 1e-9)) + 2
+        theirs = np.array([[v[0] for v in trajectory.at_time(float(t))]
+                           for t in range(cycles + 1)])
+        assert np.allclose(sampled(trajectory, cycles), theirs, rtol=0, atol=1e-9)
+    assert braked > 50

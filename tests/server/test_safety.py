@@ -185,12 +185,14 @@ def test_losing_the_lock_holder_stops_at_full_deceleration_whatever_the_setting(
     took = unlocked.time - lost.time    # paced at real time: wall seconds are simulated ones
     print(f"lock holder lost: at rest, drives off and unlocked in {took * 1000:.0f} ms")
     # Joint 1's setpoints from the close on: braking from its last speed to rest takes what
-    # the arm's full deceleration allows (cycles, not wall time), not the 10 % set.
+    # the arm's full deceleration allows (cycles, not wall time), not the 10 % set, ramped up
+    # and down at the arm's jerk limit (issue 30: v/a + a/j).
     rows = np.array([ring.row(s) for s in range(first, ring.head + 1)])
     speed = np.abs(np.diff(rows[:, CMD][:, 0])) / dt
     peak = int(np.argmax(speed))
     rest = peak + int(np.argmax(speed[peak:] < 1e-6))
-    braking = speed[peak] / arm.server.device.arm.max_acceleration[0]
+    a, j = arm.server.device.arm.max_acceleration[0], arm.server.device.arm.max_jerk[0]
+    braking = speed[peak] / a + a / j
     assert (rest - peak) * dt <= braking + 2 * dt, ((rest - peak) * dt, braking)
     assert rows[-1, ENABLE] == EnableState.DISABLED.value
 

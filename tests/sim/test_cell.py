@@ -48,6 +48,20 @@ def test_load_from_a_file_and_overrides(tmp_path):
     assert cell.arm.max_linear_velocity == 1.5
     assert cell.recorder.every_nth == 2
     assert cell.source == str(path)
+    # The jerk limit follows the accelerations given (20 ms ramps) unless it is given too.
+    assert cell.arm.max_jerk == pytest.approx((500, 500, 500, 1000, 1000, 1000))
+
+
+def test_the_jerk_limit_is_a_key_of_the_arm_table():
+    """Issue 30: the arm's jerk limit per joint (rad/s^3) is settable in the cell file."""
+    given = 'variant = "TX90"' + chr(10) + 'max_jerk = [900, 900, 1000, 2000, 2000, 3000]'
+    cell = parse_cell(edited('variant = "TX90"', given))
+    assert cell.arm.max_jerk == (900, 900, 1000, 2000, 2000, 3000)
+    assert parse_cell(edited("", "")).arm.max_jerk == pytest.approx(
+        tuple(a / 0.020 for a in cell.arm.max_acceleration))
+    bad = 'variant = "TX90"' + chr(10) + 'max_jerk = [0, 1, 1, 1, 1, 1]'
+    with pytest.raises(CellError, match="arm.max_jerk"):
+        parse_cell(edited('variant = "TX90"', bad))
 
 
 def test_cell_limits_narrow_the_joint_range():

@@ -11,7 +11,7 @@ import numpy as np
 
 from landscape.server.api import cell_view, convert, services
 from landscape.server.device.device import Device
-from landscape.server.errors import ControllerFailure, Stopped
+from landscape.server.errors import ControllerFailure, ParamError, Stopped
 from landscape.server.planning.process import StreamRef
 from landscape.server.api.guard import blocking, guarded, lease_of, on_loop
 from landscape.server.api.read_cache import ReplyCache, by_version
@@ -25,6 +25,9 @@ from landscape.v1 import (control_pb2, end_effector_pb2, motion_pb2, sensing_pb2
                           types_pb2)
 
 JOG_END_TIMEOUT = 5.0   # s for a jogging arm to come to rest once its stream ends
+# StopMotion's decelerations (issue 30): whether the stop brakes at the set limits.
+STOP_DECELERATIONS = {motion_pb2.STOP_DECELERATION_FULL: False,
+                      motion_pb2.STOP_DECELERATION_SET: True}
 
 # What the cached reads' replies depend on (read_cache.py).
 _SETTINGS = by_version(lambda s: (s.device.settings,))
@@ -245,7 +248,13 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
     # come to rest takes a thread (DESIGN.md 5: a stop never waits behind anything).
     async def StopMotion(self, request, context):
         motions = self.device.motions
-        motion = motions.request_stop()
+        gentle = False
+        if request.HasField("deceleration"):   # unset: the arm's full deceleration
+            if request.deceleration not in STOP_DECELERATIONS:
+                raise ParamError("deceleration must be STOP_DECELERATION_FULL or "
+                                 f"STOP_DECELERATION_SET, got {request.deceleration}")
+            gentle = STOP_DECELERATIONS[request.deceleration]
+        motion = motions.request_stop(gentle)
         await self.dispatch.run(self.dispatch.immediate, motions.wait_at_rest, motion)
         return motion_pb2.StopMotionResponse(ret_val=convert.ok())
 

@@ -94,15 +94,16 @@ def tool_constraints(path: JointPath, grid: np.ndarray, limits: Limits, tool_pat
 
 
 def pass_plateaus(path: JointPath, grid: np.ndarray, passing: list[tuple[float, float]],
-                   limits: Limits, tool_path, dt: float) -> tuple[np.ndarray, tuple]:
+                   limits: Limits, tool_path, hold: float) -> tuple[np.ndarray, tuple]:
     """For waypoints passed at a fraction of the maximum speed ((s, fraction) pairs, see
-    time_path's pass_speeds): the grid with gridpoints added 1.5 cycles of travel before and
-    after each, and (grid indices, caps on x) holding the speed at the fraction over that
-    stretch. The plateau makes the samples on either side of the waypoint show the speed
-    asked for, not a V of the deceleration and acceleration around it."""
+    time_path's pass_speeds): the grid with gridpoints added `hold` s of travel (1.5 cycles;
+    a jerk filter's half window more) before and after each, and (grid indices, caps on x)
+    holding the speed at the fraction over that stretch. The plateau makes the samples on
+    either side of the waypoint show the speed asked for, not a V of the deceleration and
+    acceleration around it."""
     s = np.array([p for p, _ in passing])
     fraction = np.array([f for _, f in passing])
-    reach = 1.5 * dt * fraction / _pass_rate(path, s, limits, tool_path)   # rad of s
+    reach = hold * fraction / _pass_rate(path, s, limits, tool_path)   # rad of s
     lo, hi = path.path_interval
     ends = np.clip(np.concatenate([s - reach, s + reach]), lo, hi)
     grid = np.union1d(grid, ends)

@@ -38,6 +38,7 @@ import numpy as np
 
 from .constraints import (pass_plateaus, rotation_angle, rotation_vectors, speed_caps,
                           tool_constraints)
+from .jerk_timing import FilteredProfile, flat_turns, jerk_caps
 from .topp_ra import ConstAccelProfile, topp_ra, toppra_reference
 from .trajectory import JointPath, Limits, PlanningError, Trajectory
 
@@ -132,41 +133,89 @@ def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, t
                if 0 < i < len(W) - 1]
     plateau = None
     if passing:
-        grid, plateau = pass_plateaus(path, grid, passing, limits, tool_path, dt)
+        hold = 1.5 * dt if limits.jerk is None else 1.5 * dt + _ramp(limits)
+        grid, plateau = pass_plateaus(path, grid, passing, limits, tool_path, hold)
         knot_at = np.searchsorted(grid, path.s)
     caps, rows = tool_constraints(path, grid, limits, tool_path)
     if plateau is not None:
         at, xcap = plateau
         caps[at] = np.minimum(caps[at], xcap)
+    if limits.jerk is not None:
+        caps = np.minimum(caps, jerk_caps(path, grid, limits.jerk))
     xs = topp_ra(path, grid, limits.acceleration, caps, rows)
     profile = ConstAccelProfile(grid, xs)
     if profile.duration > max_duration:
         raise PlanningError("TOO_LONG", f"the motion would last {profile.duration:.4g} s, "
                             f"longer than the {max(max_duration, 0.0):.4g} s allowed",
                             index=int(index[0]))
-    knot_times = profile.times[knot_at]
+    section = _Section(W, index, keep, of_waypoint, path, limits, dt, tool_path, max_duration)
+    if limits.jerk is None:
+        return section.sampled(profile, profile.times[knot_at])[:3]
+    # Jerk-limited (jerk_timing.py): the window the limits ramp the acceleration in, or twice
+    # that where the path bends so much that the samples needed slowing down with the first.
+    ramp = _ramp(limits)
+    best = None
+    for window in (ramp, 2.0 * ramp):
+        flat = topp_ra(path, grid, limits.acceleration,
+                       np.minimum(caps, flat_turns(grid, xs, caps, window)), rows)
+        timed = section.sampled(FilteredProfile(ConstAccelProfile(grid, flat), window))
+        if best is None or len(timed[0]) < len(best[0]):
+            best = timed
+        if timed[3] <= 1.0 + 1e-3:
+            break
+    return best[:3]
 
-    stretch = 1.0
-    for _ in range(_MAX_RETIMES):
-        if profile.duration * stretch > max_duration + dt:
-            raise PlanningError("TOO_LONG", "the motion, slowed to keep the limits, would last "
-                                f"longer than the {max_duration:.4g} s allowed",
-                                index=int(index[0]))
-        n = max(1, math.ceil(profile.duration * stretch / dt - 1e-9))
-        stretch = n * dt / profile.duration                 # a whole number of cycles
-        s_k, sd_k = profile.sample(np.arange(n + 1) * (dt / stretch))
-        q, dq = path.evaluate(s_k, (0, 1))
-        v = dq * (sd_k / stretch)[:, None]
-        q[0], q[-1] = W[0], W[-1]                           # exact ends, at rest
-        v[0] = v[-1] = 0.0
-        _check_range(q, limits, index[keep][path_piece(path, s_k)])
-        excess = _excess(q, v, dt, limits, tool_path)
-        if excess <= 1.0 + LIMIT_SLACK:
-            samples = np.rint(knot_times * (stretch / dt)).astype(int)
-            return q, v, samples[of_waypoint].tolist()
-        stretch *= excess * (1.0 + 1e-4)   # the margin saves a round most times
-    raise PlanningError("LIMITS", "the sampled motion stays above the limits after re-timing",
-                        index=int(index[0]))
+
+class _Section:
+    """Sampling a profile of one rest-to-rest section every dt, checked against the limits and
+    slowed down uniformly where the samples exceed them."""
+
+    def __init__(self, W, index, keep, of_waypoint, path: JointPath, limits: Limits, dt: float,
+                 tool_path, max_duration: float):
+        self.W, self.index, self.keep, self.of_waypoint = W, index, keep, of_waypoint
+        self.path, self.limits, self.dt = path, limits, dt
+        self.tool_path, self.max_duration = tool_path, max_duration
+
+    def sampled(self, profile, knot_times: np.ndarray | None = None):
+        """(positions (n, 6), velocities (n, 6), sample of each waypoint, stretch): the profile
+        (duration, sample(t) -> (s, ds/dt)) sampled; a waypoint's sample is at its knot's time
+        (knot_times, s) or, without them, the sample nearest to it along the path."""
+        path, limits, dt, W, index = self.path, self.limits, self.dt, self.W, self.index
+        stretch = 1.0
+        for _ in range(_MAX_RETIMES):
+            if profile.duration * stretch > self.max_duration + dt:
+                raise PlanningError("TOO_LONG", "the motion, slowed to keep the limits, would "
+                                    f"last longer than the {self.max_duration:.4g} s allowed",
+                                    index=int(index[0]))
+            n = max(1, math.ceil(profile.duration * stretch / dt - 1e-9))
+            stretch = n * dt / profile.duration                 # a whole number of cycles
+            s_k, sd_k = profile.sample(np.arange(n + 1) * (dt / stretch))
+            q, dq = path.evaluate(s_k, (0, 1))
+            v = dq * (sd_k / stretch)[:, None]
+            q[0], q[-1] = W[0], W[-1]                           # exact ends, at rest
+            v[0] = v[-1] = 0.0
+            _check_range(q, limits, index[self.keep][path_piece(path, s_k)])
+            excess = _excess(q, v, dt, limits, self.tool_path)
+            if excess <= 1.0 + LIMIT_SLACK:
+                if knot_times is not None:
+                    samples = np.rint(knot_times * (stretch / dt)).astype(int)
+                else:
+                    samples = _nearest(s_k, path.s)
+                return q, v, samples[self.of_waypoint].tolist(), stretch
+            stretch *= excess * (1.0 + 1e-4)   # the margin saves a round most times
+        raise PlanningError("LIMITS", "the sampled motion stays above the limits after "
+                            "re-timing", index=int(index[0]))
+
+
+def _ramp(limits: Limits) -> float:
+    """s: the longest time a joint's jerk limit takes to ramp its acceleration limit up."""
+    return float(np.max(limits.acceleration / limits.jerk))
+
+
+def _nearest(s_k: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(M,) the index of the sample of s_k (nondecreasing) nearest to each of s (M,)."""
+    after = np.clip(np.searchsorted(s_k, s), 1, len(s_k) - 1)
+    return np.where(s - s_k[after - 1] < s_k[after] - s, after - 1, after)
 
 
 def duration_lower_bound(waypoints, limits: Limits, stops: Sequence[bool] | None = None,
@@ -229,6 +278,10 @@ def _excess(q, v, dt, limits: Limits, tool_path) -> float:
         held = np.concatenate([q[:1], q, q[-1:]])
         acc = np.abs(held[2:] - 2.0 * held[1:-1] + held[:-2]) / (dt * dt)
         ratio = max(ratio, math.sqrt(float(np.max(acc / limits.acceleration))))
+        if limits.jerk is not None:   # third differences, at rest before and after (1 / k^3)
+            held = np.concatenate([q[:1], q[:1], q, q[-1:], q[-1:]])
+            jerk = np.abs(np.diff(held, 3, axis=0)) / dt**3
+            ratio = max(ratio, float(np.max(jerk / limits.jerk)) ** (1.0 / 3.0))
     if tool_path is not None and len(q) > 1 and (limits.linear_velocity or limits.angular_velocity):
         poses = tool_path(q)
         if limits.linear_velocity:

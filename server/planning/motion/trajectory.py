@@ -79,6 +79,9 @@ class Limits:
     # timing.time_path) is a fraction of. None: the limits above.
     max_velocity: np.ndarray | None = field(default=None)
     max_linear_velocity: float | None = None
+    # rad/s^3 (6,): every sample's third difference over dt^3 keeps it (timing.time_path then
+    # times the path jerk-limited, jerk_timing.py). None: no jerk limit (bang-bang profiles).
+    jerk: np.ndarray | None = field(default=None)
 
     def __post_init__(self):
         for name in ("velocity", "acceleration"):
@@ -91,6 +94,11 @@ class Limits:
             v = getattr(self, name)
             if v is not None and not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be positive and finite, or None; got {v!r}")
+        if self.jerk is not None:
+            v = np.asarray(self.jerk, dtype=float)
+            if v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
+                raise ValueError(f"jerk limits must be 6 positive finite values, got {v!r}")
+            object.__setattr__(self, "jerk", v)
         for name in ("position_min", "position_max", "max_velocity"):
             v = getattr(self, name)
             if v is not None:
@@ -112,7 +120,8 @@ class Limits:
         Cartesian maximum times the percent; an explicit absolute value (LINEAR_SPEED,
         ANGULAR_SPEED, LINEAR_ACCEL, ANGULAR_ACCEL: m/s, rad/s, m/s^2, rad/s^2) is a cap of its
         own, NOT multiplied by the percent. The lower of the two holds. Joint ranges come from
-        the arm.
+        the arm. The jerk limits are the arm's times accel_percent / 100, so that every
+        acceleration ramps up in the same time whatever the percent.
         """
         for name, p in (("speed_percent", speed_percent), ("accel_percent", accel_percent)):
             if not 0.0 < p <= 100.0:
@@ -128,7 +137,8 @@ class Limits:
                    cap(arm.max_linear_acceleration, k_a, linear_acceleration),
                    cap(arm.max_angular_acceleration, k_a, angular_acceleration),
                    np.asarray(arm.joint_min, dtype=float), np.asarray(arm.joint_max, dtype=float),
-                   np.asarray(arm.max_velocity, dtype=float), float(arm.max_linear_velocity))
+                   np.asarray(arm.max_velocity, dtype=float), float(arm.max_linear_velocity),
+                   np.asarray(arm.max_jerk) * k_a)
 
 
 class Reason(enum.StrEnum):

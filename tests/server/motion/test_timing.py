@@ -3,9 +3,13 @@
 Every trajectory is checked where the cycle sees it: at each 4 ms sample, velocities and the
 forward-difference accelerations of Trajectory.accelerations() within the limits (relative
 slack LIMIT_SLACK = 1e-9: the planner re-times until the samples hold, it does not round).
+The optimality of TOPP-RA itself is checked on jerk-free limits (`jerk_free`); the
+jerk-limited timing the server uses (issue 30), and every kind of motion, in
+test_motion_kinds.py.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -20,6 +24,11 @@ from landscape.robot.arm import arm_model
 ARM = arm_model()
 DT = 0.004
 Q_HOME = np.array([0.0, 0.3, 1.4, 0.0, 0.9, 0.0])
+
+
+def jerk_free(limits: Limits) -> Limits:
+    """The same limits without a jerk limit: TOPP-RA's own, bang-bang timing."""
+    return dataclasses.replace(limits, jerk=None)
 
 
 def assert_within_limits(tr: Trajectory, limits: Limits) -> None:
@@ -55,7 +64,7 @@ def walk(n: int, seed: int, step: float = 0.4) -> np.ndarray:
     (5, 4.0, 100, 100),      # the fast wrist
 ])
 def test_single_joint_move_is_the_analytic_time_optimal_profile(joint, distance, speed, accel):
-    limits = Limits.scaled(ARM, speed, accel)
+    limits = jerk_free(Limits.scaled(ARM, speed, accel))
     goal = Q_HOME.copy()
     goal[joint] += distance
     tr = time_path([Q_HOME, goal], limits, DT)
@@ -76,7 +85,7 @@ def test_single_joint_move_is_the_analytic_time_optimal_profile(joint, distance,
 def test_multi_joint_straight_move_is_the_slowest_joints_profile():
     """On a straight joint line q0 + d * sigma(t), joint j bounds sigma' by v_j / |d_j| and
     sigma'' by a_j / |d_j|: the optimum is the trapezoid of sigma under the tightest bounds."""
-    limits = Limits.scaled(ARM, 80, 60)
+    limits = jerk_free(Limits.scaled(ARM, 80, 60))
     goal = Q_HOME + np.array([1.0, -0.4, 0.7, 2.0, -1.1, 3.0])
     tr = time_path([Q_HOME, goal], limits, DT)
     d = np.abs(goal - Q_HOME)
@@ -283,64 +292,11 @@ def test_a_waypoint_is_passed_at_its_pass_speed(fraction):
     tr = time_path(W, limits, DT, pass_speeds={1: fraction})
     assert_within_limits(tr, limits)
     sample = dict((i, k) for k, i in tr.marks)[1]
-    # At the waypoint's sample and the cycles either side: the speed holds for a moment.
+    # At the waypoint's sample and the cycles either side: the speed holds for a moment. (The
+    # jerk-limited timing may slow a whole section down by a few % where its samples exceed a
+    # limit elsewhere: issue 30.)
     for k in (sample - 1, sample, sample + 1):
         speed = np.max(np.abs(tr.velocities[k]) / np.array(ARM.max_velocity))
-        assert speed == pytest.approx(fraction, rel=0.01), k - sample
+        assert speed == pytest.approx(fraction, rel=0.025), k - sample
     free = time_path(W, limits, DT)
     assert tr.duration >= free.duration
-
-
-# ---- optimality ----------------------------------------------------------------------------------
-
-def fine_reference(W, limits, tool_path=None, parts: int = 8) -> float:
-    """The duration (s) of the TOPP-RA profile on our grid with each stage cut in `parts`: the
-    fine-grid optimum the sampled trajectory is held to (our solver equals toppra's, above)."""
-    from landscape.server.planning.motion.timing import tool_constraints
-    s, keep = chord_parameters(np.asarray(W, dtype=float))
-    path = JointPath(s, np.asarray(W, dtype=float)[keep])
-    grid, _ = gridpoints(path)
-    fine = np.append((grid[:-1, None] + np.diff(grid)[:, None] * (np.arange(parts) / parts)).ravel(),
-                     grid[-1])
-    caps, rows = tool_constraints(path, fine, limits, tool_path)
-    return ConstAccelProfile(fine, topp_ra(path, fine, limits.acceleration, caps, rows)).duration
-
-
-def motion_kinds():
-    from landscape.server.planning.motion.cartesian import arc, straight_line, tool_pose
-    from landscape.robot.units import pose_matrix
-    from landscape.robot.kinematics import Kinematics
-    kin = Kinematics(ARM)
-    tcp = pose_matrix([0.0, 0.0, 0.15], [0.0, 0.0, 0.0])
-    start = pose_matrix([0.5, -0.25, 0.55], [np.pi, 0.0, 0.0])
-    q0, _ = kin.reverse(start @ np.linalg.inv(tcp), Q_HOME)
-    goal = start.copy()
-    goal[:3, 3] += [0.0, 0.5, 0.0]
-    line = straight_line(kin, q0, goal, tcp=tcp)
-    via, end = goal.copy(), goal.copy()
-    via[:3, 3] += [-0.15, -0.15, 0.0]
-    end[:3, 3] += [-0.3, 0.0, 0.0]
-    tip = tool_pose(kin, tcp)
-    full = Limits.scaled(ARM, 100, 100)
-    return {
-        "joint move": ([Q_HOME, Q_HOME + [2.0, -0.5, 0.6, 1.5, -0.8, 2.5]], full, None),
-        "line 0.25 m/s": (line, Limits.scaled(ARM, 100, 100, linear_velocity=0.25), tip),
-        "line 2 m/s": (line, Limits.scaled(ARM, 100, 100, linear_velocity=2.0), tip),
-        "arc": (arc(kin, line[-1], via, end, tcp=tcp), full, tip),
-        "blended 30": (walk(30, seed=11, step=0.3), full, None),
-    }
-
-
-@pytest.mark.parametrize("kind", ["joint move", "line 0.25 m/s", "line 2 m/s", "arc",
-                                  "blended 30"])
-def test_every_kind_of_motion_is_within_1_percent_of_the_fine_grid_optimum(kind):
-    """Issue 18: the sampled trajectory (whole cycles, every limit checked per sample) within
-    1 % of the TOPP-RA optimum on an 8x finer grid -- or, for a motion so short that one cycle
-    is more than 1 % of it, the least whole number of cycles not below that optimum."""
-    W, limits, tip = motion_kinds()[kind]
-    tr = time_path(W, limits, DT, tool_path=tip)
-    reference = fine_reference(W, limits, tip)
-    print(f"{kind}: {tr.duration:.4f} s, fine grid {reference:.4f} s, "
-          f"{100 * (tr.duration / reference - 1):+.2f} %")
-    least_cycles = math.ceil(reference / DT - 1e-9) * DT
-    assert 0.995 * reference <= tr.duration <= max(1.01 * reference, least_cycles)
