@@ -146,10 +146,14 @@ def deadman(server) -> tuple[float, float]:
         except grpc.RpcError:
             pass   # ABORTED by the deadman
         requests.put(None)
+        # The stream may end before the jerk-limited braking does: read on until at rest.
+        wait_until(lambda: abs(server.device.feedback().velocity[0]) < 1e-6, timeout=5)
         rows = np.array([r for r in (ring.row(s) for s in range(first, ring.head + 1))
                          if r is not None])
         at_rest = rows[(np.abs(rows[:, QD][:, 0]) < 1e-6) & (rows[:, WALL] > last)]
-        braking = np.abs(rows[:, QD][:, 0]).max() / server.device.arm.max_acceleration[0]
+        arm = server.device.arm
+        a, j = arm.max_acceleration[0], arm.max_jerk[0]
+        braking = np.abs(rows[:, QD][:, 0]).max() / a + a / j   # ramped up and down
         return float(at_rest[0, WALL]) - last, braking
     finally:
         device.ManualControl(sensing_pb2.ManualControlRequest(
