@@ -102,7 +102,7 @@ export class Device {
     const stateBefore = ctx.deviceState;
     ctx.model.sample = sample;
     this.age = received - cycle;
-    this.fresh.sample(sample);
+    this.fresh.sample(sample, cycle);
     const units = sample.units;   // the backend asks for meters and radians (device_hub.py)
     this.arm.setJoints((sample.jointPositions || []).map((q) => toSI(q, 'angular', units)));
     this.arm.setEndEffector(sample.endEffector, sample.endEffectorState);

@@ -8,12 +8,14 @@ import { clock, duration, readable } from './words.js';
 
 export const STALE_AFTER_MS = 2000;
 const CHECK_MS = 250;
+const NEW_CONTROLLER_MS = 1000;   // a controller's start moved later by this: another one
 
 export class Freshness {
   constructor() {
     this.lastAt = 0;            // page clock (ms) of the newest sample
     this.lastTime = null;       // its controller time (s) and cycle number
     this.lastSequence = null;
+    this.lastStartedMs = null;  // when its controller started (wall clock, ms)
     this.staleSince = null;     // page clock (ms) of the newest sample before the gap
     this.why = '';              // what the backend said of the stream, while it fails
     this.listeners = [];
@@ -29,13 +31,20 @@ export class Freshness {
   // Age of the newest sample in ms (Infinity before the first).
   age(now = performance.now()) { return this.lastAt ? now - this.lastAt : Infinity; }
 
-  sample(sample) {
+  // `wallMs`: when the sample's cycle began (its wall-clock stamp, ms since the epoch).
+  sample(sample, wallMs) {
     const now = performance.now();
     const time = Number(sample.controllerTime);
     const sequence = Number(sample.sequence);
+    // When its controller started, by the wall clock: constant while one controller runs in
+    // real time, earlier and earlier on a clock faster than real time, later for a new one.
+    // A new one may have run longer than the old before the page sees it again: its clock
+    // and cycle count alone need not have begun again by then.
+    const startedMs = wallMs - time * 1000;
     if (this.stale) {
       const missing = now - this.staleSince;
-      const restarted = this.lastTime !== null && (time < this.lastTime || sequence < this.lastSequence);
+      const restarted = this.lastTime !== null && (time < this.lastTime
+        || sequence < this.lastSequence || startedMs > this.lastStartedMs + NEW_CONTROLLER_MS);
       const back = `Live again at ${clock(Date.now())} after ${duration(missing)} without state`
         + (restarted ? ': the device restarted (its controller clock began again).'
           : ': the same controller ran on (the link to it was broken).');
@@ -44,6 +53,7 @@ export class Freshness {
       this.emit({ stale: false, back, restarted });
     }
     [this.lastAt, this.lastTime, this.lastSequence] = [now, time, sequence];
+    this.lastStartedMs = startedMs;
   }
 
   // The backend's word that the state stream failed (google.rpc.Status).
