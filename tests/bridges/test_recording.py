@@ -17,7 +17,7 @@ from landscape.v1 import end_effector_pb2 as ee
 from landscape.v1 import recording_service_pb2 as rec
 from landscape.v1 import recording_service_pb2_grpc as rec_grpc
 
-from support import Arm, error_info, make_keys, start_secured_server
+from support import Arm, cell_file, error_info, make_keys, start_secured_server
 
 
 @pytest.fixture
@@ -122,8 +122,12 @@ def test_nothing_stored_yet_or_an_offset_past_the_end_is_refused(arm):
 
 
 def test_fetching_a_recording_needs_the_operator_role(tmp_path):
+    """A viewer is refused; an operator is let through to find nothing stored yet (the
+    recording goes to tmp_path: the default one, var/records, may hold a file from a run)."""
     keys = make_keys(tmp_path)
-    server = start_secured_server(keys)
+    cell = cell_file(tmp_path, {'path = "var/records/cs8.mcap"':
+                                f'path = "{tmp_path / "record.mcap"}"'})
+    server = start_secured_server(keys, cell=cell)
     try:
         credentials = grpc.ssl_channel_credentials(keys.certs.ca.read_bytes())
         with grpc.secure_channel(f"localhost:{server.port}", credentials) as channel:
