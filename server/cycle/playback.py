@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from landscape.server.cycle.ramps import RampPlanner, hermite
+from landscape.server.cycle.ramps import RampPlanner, hermite_at
 
 if TYPE_CHECKING:
     from landscape.server.cycle.force_loops import Admittance, ForceSettle, ThresholdMonitor
@@ -101,12 +101,12 @@ class Motion:
 
     def position(self) -> np.ndarray:
         """The planned position at the play position (the Hermite curve between samples)."""
-        return hermite(self.positions, np.array([self.s]))[0][0]
+        return hermite_at(self.positions, self.s)[0]
 
     def velocity(self) -> np.ndarray:
         """The commanded velocity (rad/s): the Hermite curve's at the play position and rate
         (central differences at whole samples, so its change keeps the acceleration limit)."""
-        return hermite(self.positions, np.array([self.s]))[1][0] * (self.rate / self.dt)
+        return hermite_at(self.positions, self.s)[1] * (self.rate / self.dt)
 
     # ---- stops and resumes -------------------------------------------------------------------
 
