@@ -201,6 +201,8 @@ def test_silence_stops_the_arm_at_full_deceleration_once_the_deadman_runs_out(ar
     wait_until(lambda: pendant.error is not None, timeout=5)
     assert pendant.error.code() is grpc.StatusCode.ABORTED
     assert "deadman" in pendant.error.details()
+    # The stream ends as the braking starts; its jerk-limited ramp may outlast it.
+    wait_until(lambda: np.abs(arm.server.device.feedback().velocity).max() <= 1e-6, timeout=5)
     rows = _rows(arm, last - 50)
     moving = np.abs(rows[:, QD]).max(axis=1) > 1e-6
     stopped_at = rows[np.nonzero(moving)[0][-1] + 1, SEQ]
