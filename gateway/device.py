@@ -187,11 +187,6 @@ class Control:
             if (await self.robot.get_end_effector_state()).current_ee == tool:
                 await self.robot.set_tool_offset(Pose(*self.units.pose(offset)))
 
-    @property
-    def changed(self) -> bool:
-        """Whether the session has settings of its own on the device."""
-        return bool(self.pushed) or self._offset_before is not None
-
     async def state(self) -> int:
         return (await self.robot.get_device_state()).state
 

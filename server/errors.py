@@ -73,10 +73,14 @@ class ControllerFailure(CommandError):
     status, reason = grpc.StatusCode.ABORTED, "CONTROLLER"
 
 
+def info_metadata(error: CommandError) -> dict[str, str]:
+    """The ErrorInfo metadata of a refusal: its seed ret_code and what it names."""
+    return {"ret_code": str(error.ret_code), **error.metadata}
+
+
 def to_status(error: CommandError) -> grpc.Status:
-    info = error_details_pb2.ErrorInfo(
-        reason=error.reason, domain=DOMAIN,
-        metadata={"ret_code": str(error.ret_code), **error.metadata})
+    info = error_details_pb2.ErrorInfo(reason=error.reason, domain=DOMAIN,
+                                       metadata=info_metadata(error))
     detail = any_pb2.Any()
     detail.Pack(info)
     return rpc_status.to_status(status_pb2.Status(

@@ -9,7 +9,7 @@ import grpc
 
 from landscape.server.api import convert
 from landscape.server.api.guard import blocking
-from landscape.server.errors import CommandError
+from landscape.server.errors import CommandError, info_metadata
 from landscape.v1 import pose_solving_pb2 as pb
 
 
@@ -44,4 +44,4 @@ class PoseSolving:
 def refusal(error: CommandError) -> pb.MoveRefusal:
     """What the refused call's status and ErrorInfo would say (errors.to_status)."""
     return pb.MoveRefusal(status=error.status.name, reason=error.reason, message=error.message,
-                          metadata={"ret_code": str(error.ret_code), **error.metadata})
+                          metadata=info_metadata(error))
