@@ -83,9 +83,10 @@ def _check(args) -> int:
 def _certs(args) -> int:
     from landscape.cell.certs import make_certificates
     files = make_certificates(args.out, args.host, args.client or ["client"], args.days,
-                              args.new_ca)
+                              args.new_ca, opcua=True)
     print(f"CA {files.ca}; server {files.server_cert} (key {files.server_key}); clients: "
-          + ", ".join(f"{name} {cert}" for name, (cert, _key) in files.clients.items()))
+          + ", ".join(f"{name} {cert}" for name, (cert, _key) in files.clients.items())
+          + f"; OPC UA server {files.opcua_server[0]}, client {files.opcua_client[0]}")
     return 0
 
 

@@ -24,6 +24,6 @@ def start(args, gateway) -> MetricsEndpoint | None:
     registry = new_registry()
     registry.register(_Connections(lambda: len(gateway.connections)))
     endpoint = serve_metrics(registry, args.metrics_host, args.metrics_port,
-                             insecure=args.insecure)
+                             insecure=args.insecure or args.metrics_insecure)
     print(f"CRCL gateway metrics on {endpoint.url}", flush=True)
     return endpoint

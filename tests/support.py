@@ -79,8 +79,8 @@ class Keys:
         return ClientTLS(ca=str(self.certs.ca))
 
 
-def make_keys(folder: Path, hosts=()) -> Keys:
-    certs = make_certificates(folder / "certs", hosts=hosts)
+def make_keys(folder: Path, hosts=(), opcua: bool = False) -> Keys:
+    certs = make_certificates(folder / "certs", hosts=hosts, opcua=opcua)
     make_tokens(folder / "tokens")
     return Keys(certs, folder / "tokens")
 

@@ -77,12 +77,16 @@ def serve_metrics(registry: CollectorRegistry, address: str = "127.0.0.1", port:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """--metrics-port and --metrics-host, for a front end (the gateway, the supervisor)."""
+    """--metrics-port, --metrics-host and --metrics-insecure, for a front end (the gateway,
+    the supervisor)."""
     parser.add_argument("--metrics-port", type=int, default=None, metavar="PORT",
                         help="serve /metrics for Prometheus on this port (0: any free one; "
                              "default: off; the cell's launcher turns it on)")
     parser.add_argument("--metrics-host", default="127.0.0.1",
                         help="where /metrics listens (default %(default)s)")
+    parser.add_argument("--metrics-insecure", action="store_true",
+                        help="serve /metrics off loopback in plaintext, on a network of your "
+                             "own (a container's, published on the host's loopback)")
 
 
 def options(argv=None) -> tuple[argparse.Namespace, list[str]]:

@@ -21,6 +21,8 @@ import signal
 from pathlib import Path
 
 from asyncua import Server, ua
+from cryptography import x509
+from cryptography.hazmat.primitives.asymmetric import rsa
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.user_managers import CertificateUserManager
 
@@ -123,6 +125,24 @@ def _ignore(*_) -> None:
     pass
 
 
+def application_uri(certificate: str) -> str | None:
+    """The application URI an OPC UA certificate (PEM or DER) names (OPC UA Part 6, 6.2.2),
+    None if it names none; ValueError for a key Basic256Sha256 cannot use (it needs RSA)."""
+    data = Path(certificate).read_bytes()
+    cert = (x509.load_pem_x509_certificate(data) if data.lstrip().startswith(b"-----")
+            else x509.load_der_x509_certificate(data))
+    if not isinstance(cert.public_key(), rsa.RSAPublicKey):
+        raise ValueError(f"{certificate}: OPC UA's Basic256Sha256 needs an RSA key, this "
+                         f"certificate's is not (`landscape-cell certs` writes an RSA pair, "
+                         f"opcua-server.pem and opcua-server-key.pem)")
+    try:
+        names = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except x509.ExtensionNotFound:
+        return None
+    uris = names.get_values_for_type(x509.UniformResourceIdentifier)
+    return uris[0] if uris else None
+
+
 class OpcUaBridge:
     """The server and one ArmFeed per device ({name: target}). Off loopback it needs
     `certificate` and `key` (PEM), and users or trusted client certificates."""
@@ -140,6 +160,7 @@ class OpcUaBridge:
             raise ValueError(f"off loopback ({host}) the OPC UA server needs its certificate "
                              f"and key, and users or trusted client certificates: anonymous "
                              f"access is for loopback only")
+        self.application_uri = certificate and application_uri(certificate)
         self.server: Server | None = None
         self.feeds: list[DeviceFeed] = []
         self._stopped = asyncio.Event()
@@ -152,6 +173,8 @@ class OpcUaBridge:
                 await certificates.add_user(Path(path), name=Path(path).stem)
         server = Server(user_manager=CellUsers(self.users, certificates, self.loopback))
         await server.init()
+        if self.application_uri:   # a client checks it against the certificate's
+            await server.set_application_uri(self.application_uri)
         host = f"[{self.host}]" if ":" in self.host else self.host
         server.set_endpoint(f"opc.tcp://{host}:{self.port}")
         server.set_server_name(f"LandScape cell {self.cell}")

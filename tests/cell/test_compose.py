@@ -3,18 +3,25 @@ engine here), and its services run without Docker, from the file's own commands,
 checks and environment (compose_run.py): every health check passes, an operator moves each
 arm over TLS with a token, a CRCL client drives the first arm through the gateway, and the
 web supervisor serves its page, reaches both arms over TLS with its own token, and a person
-signed in to it with an operator's token takes a lock."""
+signed in to it with an operator's token takes a lock; with the bridges profile, every
+service's /metrics answers a scrape (the devices' over HTTPS), Foxglove advertises both arms,
+and an OPC UA client with the cell's client certificate browses both arms' axes."""
 from __future__ import annotations
 
+import asyncio
 import os
 import shutil
+import ssl
 import subprocess
+import urllib.request
 
 import pytest
+import yaml
 
 from cell_support import make_keys, move_as_operator, through_the_supervisor
 from compose_run import COMPOSE_FILE, DOCKERFILE, ComposeRun
 from crcl_support import RawClient, command, field
+from foxglove_client import FoxgloveClient
 
 ARMS = {"arm1": [0.3, -0.2, 1.8, 0.1, 1.2, -0.4], "arm2": [0.3, -0.1, 1.6, 0.0, 1.4, 0.2]}
 
@@ -36,7 +43,11 @@ def test_docker_compose_config_validates_the_file(tmp_path):
     assert check.returncode == 0, check.stderr
     services = subprocess.run([exe, "-f", str(COMPOSE_FILE), "config", "--services"], env=env,
                               capture_output=True, text=True, timeout=120).stdout.split()
-    assert sorted(services) == ["arm1", "arm2", "gateway", "supervisor"]
+    assert sorted(services) == ["arm1", "arm2", "foxglove", "gateway", "opcua", "supervisor"]
+    plain = yaml.safe_load(subprocess.run([exe, "-f", str(COMPOSE_FILE), "config"], env=env,
+                                          capture_output=True, text=True, timeout=120).stdout)
+    for bridge in ("foxglove", "opcua"):   # `up` leaves them out unless --profile bridges
+        assert plain["services"][bridge]["profiles"] == ["bridges"]
     volumes = subprocess.run([exe, "-f", str(COMPOSE_FILE), "config", "--volumes"], env=env,
                              capture_output=True, text=True, timeout=120).stdout.split()
     assert sorted(volumes) == sorted(f"{arm}-{kind}" for arm in ARMS
@@ -44,10 +55,10 @@ def test_docker_compose_config_validates_the_file(tmp_path):
 
 
 def test_the_compose_services_run_without_docker_and_each_arm_moves(tmp_path):
-    keys = make_keys(tmp_path / "keys")
+    keys = make_keys(tmp_path / "keys", opcua=True)
     run = ComposeRun(tmp_path, {"LANDSCAPE_CERTS": str(keys.certs.ca.parent),
                                 "LANDSCAPE_TOKENS": str(keys.tokens)})
-    wanted = ["arm1", "arm2", "gateway", "supervisor"]
+    wanted = ["arm1", "arm2", "gateway", "supervisor", "foxglove", "opcua"]
     try:
         took = run.up(wanted)
         print("healthy after " + ", ".join(f"{name} {s:.1f} s" for name, s in took.items()))
@@ -69,6 +80,8 @@ def test_the_compose_services_run_without_docker_and_each_arm_moves(tmp_path):
             assert field(crcl.wait_done(2), "CommandState") == "CRCL_Done"
         finally:
             crcl.close()
+        check_metrics(run, keys)
+        check_bridges(run, keys)
     finally:
         codes = run.down()
     assert codes == {name: 0 for name in wanted}, codes
@@ -77,6 +90,42 @@ def test_the_compose_services_run_without_docker_and_each_arm_moves(tmp_path):
         assert (volumes / f"{arm}-store" / "paths.sqlite3").is_file()
         audit = (volumes / f"{arm}-audit" / "audit.log").read_text()
         assert '"DeviceService/MoveAbsolute"' in audit and '"who": "operator"' in audit
+
+
+def check_metrics(run: ComposeRun, keys) -> None:
+    """Each service's /metrics, as the file publishes it: the devices' over HTTPS (their
+    certificate, verified with the cell's CA), the front ends' in plain HTTP."""
+    tls = ssl.create_default_context(cafile=str(keys.certs.ca))
+    for name, scheme, figure in (("arm1", "https", "landscape_device_state"),
+                                 ("arm2", "https", "landscape_device_state"),
+                                 ("gateway", "http", "landscape_crcl_connections"),
+                                 ("supervisor", "http", "process_resident_memory_bytes")):
+        url = f"{scheme}://{run.target(name, 9464)}/metrics"
+        text = urllib.request.urlopen(url, timeout=10,
+                                      context=tls if scheme == "https" else None).read().decode()
+        assert figure in text, f"{name}: {figure} not in its scrape"
+
+
+def check_bridges(run: ComposeRun, keys) -> None:
+    """Foxglove advertises both arms; OPC UA lets the cell's client certificate in, signed
+    and encrypted, and shows both arms."""
+    fox = FoxgloveClient(int(run.target("foxglove", 8765).rsplit(":", 1)[1]))
+    try:
+        fox.channel("/arm1/joint_states"), fox.channel("/arm2/joint_states")
+    finally:
+        fox.close()
+    from asyncua import Client
+
+    cert, key = keys.certs.opcua_client
+
+    async def browse() -> list[str]:
+        client = Client(f"opc.tcp://{run.target('opcua', 4840)}")
+        await client.set_security_string(f"Basic256Sha256,SignAndEncrypt,{cert},{key}")
+        async with client:
+            children = await client.nodes.objects.get_children()
+            return [(await node.read_browse_name()).Name for node in children]
+    names = asyncio.run(browse())
+    assert "DeviceSet" in names, names   # OPC 40010's motion devices, there to be browsed
 
 
 def test_the_image_builds_the_supervisors_page():

@@ -217,7 +217,8 @@ def test_certs_and_tokens_commands_make_what_the_server_reads(tmp_path):
         assert done.returncode == 0, done.stderr
     names = sorted(p.name for p in (tmp_path / "c").iterdir())
     assert names == ["ca-key.pem", "ca.pem", "gateway-key.pem", "gateway.pem",
-                     "server-key.pem", "server.pem"]
+                     "opcua-client-key.pem", "opcua-client.pem", "opcua-server-key.pem",
+                     "opcua-server.pem", "server-key.pem", "server.pem"]
     assert oct((tmp_path / "c" / "server-key.pem").stat().st_mode & 0o777) == "0o600"
     assert sorted(p.name for p in (tmp_path / "t").iterdir()) == [
         "admin.tokens", "operator.tokens", "viewer.tokens"]
@@ -225,6 +226,12 @@ def test_certs_and_tokens_commands_make_what_the_server_reads(tmp_path):
     cert = x509.load_pem_x509_certificate((tmp_path / "c" / "server.pem").read_bytes())
     names = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     assert "cell1.lan" in names.get_values_for_type(x509.DNSName)
+    # OPC UA's pair: RSA (Basic256Sha256), naming the application the bridge says it is
+    from landscape.bridges.opcua.server import application_uri
+    from landscape.cell.certs import OPCUA_SERVER_URI
+    assert application_uri(str(tmp_path / "c" / "opcua-server.pem")) == OPCUA_SERVER_URI
+    with pytest.raises(ValueError, match="RSA"):   # the TLS pair is ECDSA: refused, saying so
+        application_uri(str(tmp_path / "c" / "server.pem"))
     ca_before = (tmp_path / "c" / "ca.pem").read_bytes()
     subprocess.run([sys.executable, "-m", "landscape.cell", "certs", "--out", "c"],
                    cwd=tmp_path, check=True, capture_output=True, timeout=60)
