@@ -72,8 +72,9 @@ def _loopback(host: str) -> bool:
 
 async def serve(config: DashboardConfig, metrics_on=None) -> None:
     running = await app.start(config)
-    endpoint = metrics.start(metrics_on) if metrics_on else None
     print(f"web supervisor on {running.url}", flush=True)
+    endpoint = metrics.start(metrics_on, running.sign_ins.by_role, running.sign_ins.pages,
+                             running.devices_answering) if metrics_on else None
     print(f"sign in with a token from {config.sign_in_tokens} (operator.tokens to command, "
           f"viewer.tokens to watch)", flush=True)
     if not _loopback(config.host):
@@ -96,7 +97,7 @@ async def serve(config: DashboardConfig, metrics_on=None) -> None:
 
 def main(argv=None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    metrics_on, argv = metrics_options(argv)   # --metrics-port, --metrics-host
+    metrics_on, argv = metrics_options(argv)   # --metrics-port, -host, -insecure
     asyncio.run(serve(parse_args(argv), metrics_on))
 
 

@@ -170,6 +170,13 @@ class RunningDashboard:
     server: asyncio.base_events.Server
     url: str
 
+    @property
+    def sign_ins(self) -> SignIns:
+        return self.runner.app[SIGN_INS]
+
+    def devices_answering(self) -> dict[str, bool]:
+        return {name: hub.answering for name, hub in self.runner.app[HUBS].items()}
+
     async def stop(self) -> None:
         self.server.close()
         await self.runner.cleanup()

@@ -127,6 +127,11 @@ class DeviceHub:
             else:
                 outbox.put_latest((self.name, feed), text)
 
+    @property
+    def answering(self) -> bool:
+        """No feed of the device's failing now (its state, events and reads)."""
+        return not self._failed
+
     def feed_status(self, rpc: str, code: grpc.StatusCode, details: str) -> None:
         """A feed works (OK) or failed: its failure is told once per change of code."""
         if code is grpc.StatusCode.OK:

@@ -101,6 +101,17 @@ class SignIns:
         """The person did something (a request, a frame from their page)."""
         record.last_seen = self._clock()
 
+    def by_role(self) -> dict[str, int]:
+        """People signed in now, by role label (read by /metrics from another thread)."""
+        counts: dict[str, int] = {}
+        for record in list(self._open.values()):
+            counts[record.role_label] = counts.get(record.role_label, 0) + 1
+        return counts
+
+    def pages(self) -> int:
+        """Pages open now, over every sign-in."""
+        return sum(record.pages for record in list(self._open.values()))
+
     def sign_out(self, record: SignIn) -> None:
         self._end(record, "signed out")
 

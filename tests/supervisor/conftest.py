@@ -20,7 +20,7 @@ NEED_THE_PAGE = {"test_backend.py", "test_page.py", "test_page_panels.py", "test
                  "test_page_status.py", "test_page_words.py", "test_page_layout.py",
                  "test_page_operations.py", "test_page_a11y.py", "test_page_cell.py",
                  "test_handover.py", "test_page_alarms.py",
-                 "test_supervisor_calls.py"}
+                 "test_supervisor_calls.py", "test_metrics.py"}
 ROOT = Path(__file__).resolve().parents[2]
 
 
