@@ -17,11 +17,12 @@ import asyncio
 import logging
 from dataclasses import dataclass
 
-from landscape.client import AsyncRobot, DeviceLink, Endpoint, Identity, LandscapeError, Pose
+from landscape.client import (AsyncRobot, DeviceLink, Endpoint, Frame, Identity, LandscapeError,
+                              Pose)
+from landscape.client.aio_streams import SI_UNITS, state_request
 from landscape.client.state_feed import StateFeed
 from landscape.gateway.device_units import DeviceUnits
 from landscape.gateway.errors import CrclError
-from landscape.gateway.live import base_si
 from landscape.v1 import settings_pb2, types_pb2
 
 log = logging.getLogger(__name__)
@@ -33,7 +34,9 @@ ENDING_WAIT = 10.0            # s a new session waits for this gateway's session
 class CrclDevice:
     def __init__(self, endpoint: Endpoint, state_rate_hz: float = 100.0):
         self.target = endpoint.target
-        self.link = DeviceLink(endpoint, Identity(PROGRAM), state=base_si(state_rate_hz))
+        # CRCL reads the base frame in m and rad (live.py)
+        self.link = DeviceLink(endpoint, Identity(PROGRAM),
+                               state=state_request(state_rate_hz, Frame.BASE, SI_UNITS, ()))
         self.slots: dict = {}      # rack tool -> its plate in the base frame (tooling.py)
         self._ending: set[asyncio.Future] = set()    # sessions' ends under way
 
@@ -72,7 +75,7 @@ class CrclDevice:
                            identity=self.link.identity.acting_for(f"crcl {peer}"))
         await robot.open()
         try:
-            await robot.lock()
+            await _lock(robot)
         except LandscapeError as refused:
             await robot.close()
             state = await robot.get_device_state()
@@ -80,6 +83,22 @@ class CrclDevice:
                 raise CrclError(f"{refused} (locked by {state.lock_holder})") from None
             raise
         return Control(robot)
+
+
+async def _lock(robot: AsyncRobot) -> None:
+    """Lock, waiting (up to ENDING_WAIT) for a device still bringing its last holder's session
+    to an end: unlocked already, but braking and turning the drives off, so Lock is not valid
+    yet (a CRCL client's InitCanon right after a lost lock)."""
+    deadline = asyncio.get_running_loop().time() + ENDING_WAIT
+    while True:
+        try:
+            return await robot.lock()
+        except LandscapeError:
+            state = await robot.get_device_state()
+            if (state.locked or state.state == types_pb2.DEVICE_STATE_UNLOCKED
+                    or asyncio.get_running_loop().time() > deadline):
+                raise
+            await asyncio.sleep(0.05)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,6 @@ import numpy as np
 
 from landscape.client.state_feed import Sample
 from landscape.gateway.device_units import DeviceUnits
-from landscape.v1 import state_service_pb2, types_pb2
 
 @dataclass(frozen=True, eq=False)
 class LiveState:
@@ -55,11 +54,3 @@ def live_state(arrived: Sample) -> LiveState:
         end_effector_state=sample.end_effector_state,
         sensors={s.name: tuple(s.values) for s in sample.sensors}, received=arrived.received,
         time=arrived.time)
-
-
-def base_si(rate_hz: float) -> state_service_pb2.StreamStateRequest:
-    """The stream CRCL reads: `rate_hz` samples a second, the base frame, m and rad."""
-    return state_service_pb2.StreamStateRequest(
-        rate_hz=rate_hz, frame=types_pb2.REFERENCE_FRAME_BASE_CARTESIAN_FRAME,
-        units=types_pb2.Units(linear=types_pb2.LINEAR_UNIT_METERS,
-                              angular=types_pb2.ANGULAR_UNIT_RADIANS))

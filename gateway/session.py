@@ -273,17 +273,25 @@ class CrclSession:
 
     async def init_canon(self) -> str:
         if self.control is None:
-            control = self.control = await self.device.take_control(self.name, self.peer)
-            control.robot.session.add_end_listener(lambda lost: self._ended(control, lost))
+            taken = self.control = await self.device.take_control(self.name, self.peer)
+            taken.robot.session.add_end_listener(lambda lost: self._ended(taken, lost))
+        control = self.control
         workstation = self.options.workstation
         try:
-            await self.control.prepare()
+            await control.prepare()
             self.settings = CrclSettings(units=workstation.units, frame=workstation.frame)
             self.guard_report = None
             await self.device.feed.watch(self, ())
             tool = await hold_end_effector(self, workstation.end_effector)
-        except BaseException:
+            if self.control is not control:
+                raise CrclError(self.lost)
+        except BaseException as error:
+            # The device may end the session during any await above (a keep-alive starved on
+            # a busy machine): `lose` has cleared self.control, and the loss is the reason.
+            lost = self.control is not control and self.lost
             await self.drop_control()
+            if lost and isinstance(error, Exception) and not isinstance(error, CrclError):
+                raise CrclError(lost) from error
             raise
         self.ended, self.lost = False, ""
         units = self.settings.units

@@ -83,6 +83,35 @@ def test_a_lost_lock_is_an_error_until_init_canon_takes_it_again(paced):
         gateway.stop()
 
 
+def test_a_lock_lost_during_init_canon_is_its_error_and_the_next_takes_it(paced):
+    """InitCanon fetching the cell's gripper (a tool change: motions of seconds) loses the
+    lock on the way: it ends in CRCL_Error naming the loss, never as a gateway error (it
+    was "AttributeError: 'NoneType' object has no attribute 'prepare'" when the loss came
+    between its steps), and the next InitCanon, sent at once, takes the lock again once the
+    device has stopped the arm (it was refused: "Lock is not valid in state moving")."""
+    port = _free_port()
+    gateway = GatewayProcess(paced.target, port, "--end-effector", "gripper")
+    client = RawClient(port, timeout=60)
+    try:
+        client.send(command("InitCanon", 1))
+        wait_until(lambda: paced.device.state is State.MOVING, timeout=30)
+        os.kill(gateway.process.pid, signal.SIGSTOP)        # no keep-alive goes out
+        try:
+            wait_until(lambda: not paced.device.status().locked, timeout=20)
+        finally:
+            os.kill(gateway.process.pid, signal.SIGCONT)
+        ended = client.wait_done(1)
+        assert field(ended, "CommandState") == "CRCL_Error", ended
+        why = field(ended, "StateDescription")
+        assert "gateway error" not in why and "no keep-alive for 2 s" in why, why
+        again = client.run("InitCanon", 2, timeout=120)
+        assert field(again, "CommandState") == "CRCL_Done", again
+        assert paced.device.status().locked
+    finally:
+        client.close()
+        gateway.stop()
+
+
 def test_get_status_is_answered_while_a_move_screw_is_computed(server, gateway, client):
     """The helix waits for a worker thread the test holds: meanwhile another connection's
     GetStatus is answered, and the screw does not start; released, it completes."""

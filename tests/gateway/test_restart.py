@@ -26,9 +26,10 @@ def _free_port() -> int:
 
 
 class GatewayProcess:
-    def __init__(self, device: str, port: int):
+    def __init__(self, device: str, port: int, *args: str):
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "landscape.gateway", "--device", device, "--port", str(port)],
+            [sys.executable, "-m", "landscape.gateway", "--device", device, "--port", str(port),
+             *args],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = self.process.stdout.readline()
         assert "CRCL gateway listening on" in line, (line, self.process.stderr.read()[-2000:])
