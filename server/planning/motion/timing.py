@@ -58,8 +58,11 @@ GRID_MIN_POINTS = 100     # per section between stops, at least
 
 LIMIT_SLACK = 1e-9        # relative: sampled values may exceed a limit by this much (rounding)
 _MAX_RETIMES = 8          # uniform slow-downs tried before giving up with LIMITS
-_LOCAL_ROUNDS = 2         # local slow-downs of a jerk-limited section before a uniform one
-_FLAT_TURNS_EXCESS = 0.01 # a short window (flat turns) is kept if its samples exceed by less
+_LOCAL_ROUNDS = 1         # local slow-downs of a jerk-limited section before a uniform one
+_FLAT_TURNS_COST = 0.25   # of T: flat turns are tried where they cost less (a joint move,
+                          # a line, an arc: under 0.03); blended paths lose T and more
+_FLAT_TURNS_EXCESS = 0.01 # and kept if their samples exceed by less (a path with many turns:
+                          # 4 to 20 %)
 _MERGE = 1e-9             # rad: consecutive waypoints closer than this are the same point
 
 
@@ -179,13 +182,13 @@ def _jerk_limited(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.
 
 def _filter_window(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.ndarray, rows):
     """(window s, the profile filtered, the caps it was planned with, it taken): over the time
-    T the limits ramp the acceleration in, its turns made flat for T, where that costs less
-    than T and its samples exceed by under _FLAT_TURNS_EXCESS (a joint move, a line); else
+    T the limits ramp the acceleration in, its turns made flat for T, where that costs little
+    and its samples exceed by little (a joint move, a line); else
     over 2 T as it is (many turns: a window of 2 T spreads the largest jump of the path
     acceleration, from one limit to the other, within the jerk limit, and costs T once)."""
     ramp = _ramp(section.limits)
     flat_caps = np.minimum(caps, flat_turns(grid, xs, caps, ramp))
-    if _time_lost(grid, xs, flat_caps) < ramp:
+    if _time_lost(grid, xs, flat_caps) < _FLAT_TURNS_COST * ramp:
         flat = ConstAccelProfile(grid, topp_ra(section.path, grid, section.limits.acceleration,
                                                flat_caps, rows))
         taken = section.take(FilteredProfile(flat, ramp))
