@@ -173,8 +173,9 @@ def _jerk_limited(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.
         if excess.stretch() <= 1.0 + LIMIT_SLACK:
             break
         caps, accelerations = slowed_where_exceeded(
-            raw, window, taken.times, excess.speed,
-            np.maximum(excess.acceleration, excess.jerk), caps, accelerations)
+            raw, window, taken.times, excess.per_sample("speed"),
+            np.maximum(excess.per_sample("acceleration"), excess.per_sample("jerk")),
+            caps, accelerations)
         raw = ConstAccelProfile(grid, topp_ra(path, grid, accelerations, caps, rows))
         taken = section.take(FilteredProfile(raw, window))
     return section.sampled(FilteredProfile(raw, window), taken=taken)[:3]
