@@ -157,6 +157,41 @@ def test_a_blended_path_costs_at_most_5_percent_over_its_jerk_free_time(points, 
     assert off_path(JointPath(s, W[keep]), tr.positions).max() < 1e-9
 
 
+def test_a_local_excess_lowers_the_limits_behind_it_only():
+    """slowed_where_exceeded: a sample over its jerk limit lowers the acceleration limits of
+    the raw profile's stages that the filter averaged into it (the window before it, and the
+    three samples its third difference takes), by its ratio and the margin; a speed excess
+    caps the squared speed there below the raw profile's; nothing changes elsewhere."""
+    from landscape.server.planning.motion.jerk_timing import (SLOW_DOWN_MARGIN,
+                                                              slowed_where_exceeded)
+    W = walk(6, seed=3, step=0.3)
+    limits = Limits.scaled(ARM, 100, 100)
+    s, keep = chord_parameters(W)
+    path = JointPath(s, W[keep])
+    grid, _ = gridpoints(path)
+    raw = ConstAccelProfile(grid, topp_ra(path, grid, limits.acceleration,
+                                          np.full(len(grid), 1e300)))
+    window, times = 0.04, np.arange(0.0, raw.duration, DT)
+    k = len(times) // 2
+    ratio = np.zeros(len(times))
+    ratio[k] = 1.2
+    rows = np.tile(limits.acceleration, (len(grid) - 1, 1))
+    caps = np.full(len(grid), 1e300)
+    same_caps, lowered = slowed_where_exceeded(raw, window, times, np.zeros(len(times)), ratio,
+                                               caps, rows)
+    assert np.array_equal(same_caps, caps)
+    behind = (raw.times[1:] > times[k] - 3 * DT - window) & (raw.times[:-1] <= times[k])
+    assert behind.sum() >= 2
+    assert np.allclose(lowered[behind], rows[behind] / (1.2 * (1 + SLOW_DOWN_MARGIN)))
+    assert np.array_equal(lowered[~behind], rows[~behind])
+    capped, same_rows = slowed_where_exceeded(raw, window, times, ratio, np.zeros(len(times)),
+                                              caps, rows)
+    assert np.array_equal(same_rows, rows)
+    lower = capped < 1e300
+    assert np.all(capped[lower] < raw.sd[lower] ** 2)
+    assert lower.sum() == behind.sum() + 1                # the stages' gridpoints
+
+
 @pytest.mark.parametrize("length", [1.5e-9, 1e-6, 1e-4, 1e-3])
 def test_a_tiny_move_is_timed_within_the_jerk_limit(length):
     """A PathMove from where the arm stands (measured, a few nrad from its setpoint) to its
