@@ -127,7 +127,7 @@ def slowed_where_exceeded(raw: ConstAccelProfile, window: float, times: np.ndarr
                           limits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The speed caps (G,) and the per-stage acceleration limits (G-1, 6) TOPP-RA plans with,
     lowered where samples of the filtered profile exceeded a limit: its samples at profile
-    times `times` (K,), with their ratios to the limits (sample_check.Excess): `speed` (K,)
+    times `times` (K,), with their ratios to the limits (Excess.per_sample): `speed` (K,)
     (velocity-like, 1/k) and `acceleration` (K,) (the larger of the acceleration and jerk
     ratios: both shrink in proportion as the path acceleration does, to first order).
 

@@ -164,7 +164,7 @@ def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, t
 def _jerk_limited(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.ndarray, rows):
     """The section re-timed jerk-limited (jerk_timing.py): TOPP-RA's profile xs (G,) filtered
     (`_filter_window`); where its samples exceed a limit, TOPP-RA planned again with lower
-    limits there only, a few rounds; what still exceeds then, slowed down uniformly."""
+    limits there only (_LOCAL_ROUNDS times); what still exceeds then, slowed uniformly."""
     path, limits = section.path, section.limits
     window, raw, caps, taken = _filter_window(section, grid, xs, caps, rows)
     accelerations = np.tile(limits.acceleration, (len(grid) - 1, 1))
@@ -184,9 +184,9 @@ def _jerk_limited(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.
 def _filter_window(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.ndarray, rows):
     """(window s, the profile filtered, the caps it was planned with, it taken): over the time
     T the limits ramp the acceleration in, its turns made flat for T, where that costs little
-    and its samples exceed by little (a joint move, a line); else
-    over 2 T as it is (many turns: a window of 2 T spreads the largest jump of the path
-    acceleration, from one limit to the other, within the jerk limit, and costs T once)."""
+    and its samples exceed by little (a joint move, a line); else over 2 T as it is (many
+    turns: a window of 2 T spreads the largest jump of the path acceleration, from one limit
+    to the other, within the jerk limit, and costs T once, not T / 2 per turn)."""
     ramp = _ramp(section.limits)
     flat_caps = np.minimum(caps, flat_turns(grid, xs, caps, ramp))
     if _time_lost(grid, xs, flat_caps) < _FLAT_TURNS_COST * ramp:
@@ -255,7 +255,8 @@ class _Section:
         sampled (`taken` already, once) and slowed down uniformly until no sample exceeds a
         limit; a waypoint's sample is at its knot's time (knot_times, s) or, without them, the
         sample nearest to it along the path."""
-        taken = taken or self.take(profile)
+        if taken is None:
+            taken = self.take(profile)
         for _ in range(_MAX_RETIMES):
             excess = taken.excess.stretch()
             if excess <= 1.0 + LIMIT_SLACK:
