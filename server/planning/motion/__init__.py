@@ -2,7 +2,8 @@
 
 - trajectory: the records -- Trajectory (what the 4 ms cycle plays), Limits, PlanningError,
   JointPath (the C2 joint spline through waypoints, toppra's path(s, order) protocol).
-- timing: time_path, time-optimal timing of a joint path with TOPP-RA, checked per sample.
+- timing: time_path, time-optimal timing of a joint path with TOPP-RA, checked per sample
+  (sample_check), jerk-limited with jerk_timing's filter and local slow-downs.
 - constraints: the bounds TOPP-RA works with (joint and tool speeds, tool accelerations,
   pass speeds); topp_ra: the stage solver, the constant-acceleration profile, toppra as
   reference.

@@ -17,10 +17,11 @@
    Trajectory.accelerations() gives), second differences of the positions (what the drives
    follow, the arm held at rest before and after), and with a tool path the tool tip's
    linear and angular speeds and accelerations, must not exceed the limits (relative slack
-   1e-9, rounding only). Where they do (constraints hold at gridpoints, the samples fall
-   between them), the section is slowed uniformly in time, which scales velocities by 1/k and
-   accelerations by 1/k^2, and checked again. The duration is also rounded up to a whole
-   number of cycles the same way.
+   1e-9, rounding only; sample_check.py). Where they do (constraints hold at gridpoints, the
+   samples fall between them), the section is slowed uniformly in time, which scales
+   velocities by 1/k and accelerations by 1/k^2, and checked again. The duration is also
+   rounded up to a whole number of cycles the same way. With a jerk limit, the profile is
+   re-timed jerk-limited first (jerk_timing.py) and slowed down locally before uniformly.
 
 The stage solver (topp_ra.py) is ours rather than toppra's: each stage's two-variable LP has a
 closed form, computed for all stages at once in numpy, and each pass is a plain loop over the
@@ -33,12 +34,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
-from .constraints import (pass_plateaus, rotation_angle, rotation_vectors, speed_caps,
-                          tool_constraints)
-from .jerk_timing import FilteredProfile, flat_turns, jerk_caps
+from .constraints import pass_plateaus, rotation_angle, speed_caps, tool_constraints
+from .jerk_timing import FilteredProfile, flat_turns, jerk_caps, slowed_where_exceeded
+from .sample_check import Excess, excess_per_sample
 from .topp_ra import ConstAccelProfile, topp_ra, toppra_reference
 from .trajectory import JointPath, Limits, PlanningError, Trajectory
 
@@ -56,6 +58,11 @@ GRID_MIN_POINTS = 100     # per section between stops, at least
 
 LIMIT_SLACK = 1e-9        # relative: sampled values may exceed a limit by this much (rounding)
 _MAX_RETIMES = 8          # uniform slow-downs tried before giving up with LIMITS
+_LOCAL_ROUNDS = 1         # local slow-downs of a jerk-limited section before a uniform one
+_FLAT_TURNS_COST = 0.25   # of T: flat turns are tried where they cost less (a joint move,
+                          # a line, an arc: under 0.03); blended paths lose T and more
+_FLAT_TURNS_EXCESS = 0.01 # and kept if their samples exceed by less (a path with many turns:
+                          # 4 to 20 %)
 _MERGE = 1e-9             # rad: consecutive waypoints closer than this are the same point
 
 
@@ -151,19 +158,66 @@ def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, t
     section = _Section(W, index, keep, of_waypoint, path, limits, dt, tool_path, max_duration)
     if limits.jerk is None:
         return section.sampled(profile, profile.times[knot_at])[:3]
-    # Jerk-limited (jerk_timing.py): the window the limits ramp the acceleration in, or twice
-    # that where the path bends so much that the samples needed slowing down with the first.
-    ramp = _ramp(limits)
-    best = None
-    for window in (ramp, 2.0 * ramp):
-        flat = topp_ra(path, grid, limits.acceleration,
-                       np.minimum(caps, flat_turns(grid, xs, caps, window)), rows)
-        timed = section.sampled(FilteredProfile(ConstAccelProfile(grid, flat), window))
-        if best is None or len(timed[0]) < len(best[0]):
-            best = timed
-        if timed[3] <= 1.0 + 1e-3:
+    return _jerk_limited(section, grid, xs, caps, rows)
+
+
+def _jerk_limited(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.ndarray, rows):
+    """The section re-timed jerk-limited (jerk_timing.py): TOPP-RA's profile xs (G,) filtered
+    (`_filter_window`); where its samples exceed a limit, TOPP-RA planned again with lower
+    limits there only (_LOCAL_ROUNDS times); what still exceeds then, slowed uniformly."""
+    path, limits = section.path, section.limits
+    window, raw, caps, taken = _filter_window(section, grid, xs, caps, rows)
+    accelerations = np.tile(limits.acceleration, (len(grid) - 1, 1))
+    for _ in range(_LOCAL_ROUNDS):
+        excess = taken.excess
+        if excess.stretch() <= 1.0 + LIMIT_SLACK:
             break
-    return best[:3]
+        caps, accelerations = slowed_where_exceeded(
+            raw, window, taken.times, excess.per_sample("speed"),
+            np.maximum(excess.per_sample("acceleration"), excess.per_sample("jerk")),
+            caps, accelerations)
+        raw = ConstAccelProfile(grid, topp_ra(path, grid, accelerations, caps, rows))
+        taken = section.take(FilteredProfile(raw, window))
+    return section.sampled(FilteredProfile(raw, window), taken=taken)[:3]
+
+
+def _filter_window(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.ndarray, rows):
+    """(window s, the profile filtered, the caps it was planned with, it taken): over the time
+    T the limits ramp the acceleration in, its turns made flat for T, where that costs little
+    and its samples exceed by little (a joint move, a line); else over 2 T as it is (many
+    turns: a window of 2 T spreads the largest jump of the path acceleration, from one limit
+    to the other, within the jerk limit, and costs T once, not T / 2 per turn)."""
+    ramp = _ramp(section.limits)
+    flat_caps = np.minimum(caps, flat_turns(grid, xs, caps, ramp))
+    if _time_lost(grid, xs, flat_caps) < _FLAT_TURNS_COST * ramp:
+        flat = ConstAccelProfile(grid, topp_ra(section.path, grid, section.limits.acceleration,
+                                               flat_caps, rows))
+        taken = section.take(FilteredProfile(flat, ramp))
+        if taken.excess.stretch() <= 1.0 + _FLAT_TURNS_EXCESS:
+            return ramp, flat, flat_caps, taken
+    raw = ConstAccelProfile(grid, xs)
+    return 2.0 * ramp, raw, caps, section.take(FilteredProfile(raw, 2.0 * ramp))
+
+
+def _time_lost(grid: np.ndarray, xs: np.ndarray, caps: np.ndarray) -> float:
+    """s: at least what capping the squared speeds xs (G,) at caps (G,) costs (the time at
+    the lower speeds, without the braking and speeding up around them)."""
+    def duration(x):
+        sd = np.sqrt(x)
+        with np.errstate(divide="ignore"):
+            return np.sum(2.0 * np.diff(grid) / (sd[:-1] + sd[1:]))
+    return float(duration(np.minimum(xs, caps)) - duration(xs))
+
+
+class _Taken(NamedTuple):
+    """A profile sampled every dt at a uniform time stretch: positions and velocities (K, 6),
+    path positions (K,), the profile's time at each sample (K,), their Excess."""
+    q: np.ndarray
+    v: np.ndarray
+    s: np.ndarray
+    times: np.ndarray
+    stretch: float
+    excess: Excess
 
 
 class _Section:
@@ -176,35 +230,45 @@ class _Section:
         self.path, self.limits, self.dt = path, limits, dt
         self.tool_path, self.max_duration = tool_path, max_duration
 
-    def sampled(self, profile, knot_times: np.ndarray | None = None):
+    def take(self, profile, stretch: float = 1.0) -> _Taken:
+        """The profile (duration, sample(t) -> (s, ds/dt)) sampled every dt, slowed uniformly
+        by `stretch` and then to a whole number of cycles; the samples' excess."""
+        path, limits, dt, W = self.path, self.limits, self.dt, self.W
+        if profile.duration * stretch > self.max_duration + dt:
+            raise PlanningError("TOO_LONG", "the motion, slowed to keep the limits, would "
+                                f"last longer than the {self.max_duration:.4g} s allowed",
+                                index=int(self.index[0]))
+        n = max(1, math.ceil(profile.duration * stretch / dt - 1e-9))
+        stretch = n * dt / profile.duration                 # a whole number of cycles
+        times = np.arange(n + 1) * (dt / stretch)
+        s_k, sd_k = profile.sample(times)
+        q, dq = path.evaluate(s_k, (0, 1))
+        v = dq * (sd_k / stretch)[:, None]
+        q[0], q[-1] = W[0], W[-1]                           # exact ends, at rest
+        v[0] = v[-1] = 0.0
+        _check_range(q, limits, self.index[self.keep][path_piece(path, s_k)])
+        return _Taken(q, v, s_k, times, stretch,
+                      excess_per_sample(q, v, dt, limits, self.tool_path))
+
+    def sampled(self, profile, knot_times: np.ndarray | None = None, taken: _Taken | None = None):
         """(positions (n, 6), velocities (n, 6), sample of each waypoint, stretch): the profile
-        (duration, sample(t) -> (s, ds/dt)) sampled; a waypoint's sample is at its knot's time
-        (knot_times, s) or, without them, the sample nearest to it along the path."""
-        path, limits, dt, W, index = self.path, self.limits, self.dt, self.W, self.index
-        stretch = 1.0
+        sampled (`taken` already, once) and slowed down uniformly until no sample exceeds a
+        limit; a waypoint's sample is at its knot's time (knot_times, s) or, without them, the
+        sample nearest to it along the path."""
+        if taken is None:
+            taken = self.take(profile)
         for _ in range(_MAX_RETIMES):
-            if profile.duration * stretch > self.max_duration + dt:
-                raise PlanningError("TOO_LONG", "the motion, slowed to keep the limits, would "
-                                    f"last longer than the {self.max_duration:.4g} s allowed",
-                                    index=int(index[0]))
-            n = max(1, math.ceil(profile.duration * stretch / dt - 1e-9))
-            stretch = n * dt / profile.duration                 # a whole number of cycles
-            s_k, sd_k = profile.sample(np.arange(n + 1) * (dt / stretch))
-            q, dq = path.evaluate(s_k, (0, 1))
-            v = dq * (sd_k / stretch)[:, None]
-            q[0], q[-1] = W[0], W[-1]                           # exact ends, at rest
-            v[0] = v[-1] = 0.0
-            _check_range(q, limits, index[self.keep][path_piece(path, s_k)])
-            excess = _excess(q, v, dt, limits, self.tool_path)
+            excess = taken.excess.stretch()
             if excess <= 1.0 + LIMIT_SLACK:
                 if knot_times is not None:
-                    samples = np.rint(knot_times * (stretch / dt)).astype(int)
+                    samples = np.rint(knot_times * (taken.stretch / self.dt)).astype(int)
                 else:
-                    samples = _nearest(s_k, path.s)
-                return q, v, samples[self.of_waypoint].tolist(), stretch
-            stretch *= excess * (1.0 + 1e-4)   # the margin saves a round most times
+                    samples = _nearest(taken.s, self.path.s)
+                return taken.q, taken.v, samples[self.of_waypoint].tolist(), taken.stretch
+            # The margin saves a round most times.
+            taken = self.take(profile, taken.stretch * excess * (1.0 + 1e-4))
         raise PlanningError("LIMITS", "the sampled motion stays above the limits after "
-                            "re-timing", index=int(index[0]))
+                            "re-timing", index=int(self.index[0]))
 
 
 def _ramp(limits: Limits) -> float:
@@ -264,45 +328,6 @@ def _check_range(q: np.ndarray, limits: Limits, where: np.ndarray) -> None:
         joints = np.flatnonzero((q[k] < lo) | (q[k] > hi)) + 1
         raise PlanningError("OUT_OF_JNT_RANGE", f"joint(s) {joints.tolist()} out of range",
                             index=int(where[k]))
-
-
-def _excess(q, v, dt, limits: Limits, tool_path) -> float:
-    """Largest ratio of a sampled value to its limit, as the time stretch that would fix it:
-    velocities scale with 1/k, accelerations with 1/k^2 (hence the square root)."""
-    ratio = float(np.max(np.abs(v) / limits.velocity))
-    if len(v) > 1:
-        acc = np.abs(np.diff(v, axis=0)) / dt
-        ratio = max(ratio, math.sqrt(float(np.max(acc / limits.acceleration))))
-        # What the drives follow: the second difference of the positions, held at rest before
-        # the first sample and after the last.
-        held = np.concatenate([q[:1], q, q[-1:]])
-        acc = np.abs(held[2:] - 2.0 * held[1:-1] + held[:-2]) / (dt * dt)
-        ratio = max(ratio, math.sqrt(float(np.max(acc / limits.acceleration))))
-        if limits.jerk is not None:   # third differences, at rest before and after (1 / k^3)
-            held = np.concatenate([q[:1], q[:1], q, q[-1:], q[-1:]])
-            jerk = np.abs(np.diff(held, 3, axis=0)) / dt**3
-            ratio = max(ratio, float(np.max(jerk / limits.jerk)) ** (1.0 / 3.0))
-    if tool_path is not None and len(q) > 1 and (limits.linear_velocity or limits.angular_velocity):
-        poses = tool_path(q)
-        if limits.linear_velocity:
-            step = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
-            ratio = max(ratio, float(step.max()) / (dt * limits.linear_velocity))
-        if limits.angular_velocity:
-            angle = rotation_angle(poses[:-1, :3, :3], poses[1:, :3, :3])
-            ratio = max(ratio, float(angle.max()) / (dt * limits.angular_velocity))
-    if tool_path is not None and len(q) > 1 and (limits.linear_acceleration
-                                                 or limits.angular_acceleration):
-        poses = tool_path(q)
-        # Per-cycle steps of the tip, at rest before the first sample and after the last; the
-        # change of step over dt^2 is the tip's acceleration as the drives make it.
-        for limit, steps in ((limits.linear_acceleration, np.diff(poses[:, :3, 3], axis=0)),
-                             (limits.angular_acceleration,
-                              rotation_vectors(poses[:-1, :3, :3], poses[1:, :3, :3]))):
-            if limit:
-                held = np.concatenate([np.zeros((1, 3)), steps, np.zeros((1, 3))])
-                acc = np.linalg.norm(np.diff(held, axis=0), axis=1) / (dt * dt)
-                ratio = max(ratio, math.sqrt(float(acc.max()) / limit))
-    return ratio
 
 
 def chord_parameters(W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,8 @@ def topp_ra(path: JointPath, grid: np.ndarray, acceleration: np.ndarray,
             ) -> np.ndarray:
     """Squared path speeds x (G,) of the time-optimal rest-to-rest motion along `path`.
 
-    grid (G,): gridpoints from path_interval[0] to [1]; acceleration (6,) rad/s^2 (symmetric);
+    grid (G,): gridpoints from path_interval[0] to [1]; acceleration (6,) rad/s^2 (symmetric),
+    or (G-1, 6), a row per stage (the jerk-limited timing lowers it where its samples exceed);
     xcap (G,): the velocity bounds on x (speed_caps); rows: more second-order constraints, one
     sided, per gridpoint: (ku (G, R), kx (G, R), h (R,)) with ku u + kx x <= h (the tool's
     acceleration, tool_constraints). Raises PlanningError("LIMITS") when the path cannot be
@@ -42,7 +43,7 @@ def topp_ra(path: JointPath, grid: np.ndarray, acceleration: np.ndarray,
     q1, q2 = path.evaluate(grid, (1, 2))
     a = np.concatenate([q1[:-1], q1[1:] + 2.0 * D * q2[1:]], axis=1)   # (G-1, 12)
     b = np.concatenate([q2[:-1], q2[1:]], axis=1)
-    h = np.concatenate([acceleration, acceleration])
+    h = np.concatenate([acceleration, acceleration], axis=-1)
     # A row with a ~ 0 hardly involves u; flooring |a| keeps the algebra finite and tends to
     # the right limit: the pairs then cap x by |b x| <= h, and its lines never bind.
     a = np.where(np.abs(a) < _A_FLOOR, np.copysign(_A_FLOOR, a), a)

@@ -181,6 +181,31 @@ def test_the_stage_solver_returns_what_toppra_returns_on_the_same_grid():
         ConstAccelProfile(grid, theirs).duration, rel=1e-6)
 
 
+def test_the_stage_solver_takes_an_acceleration_limit_per_stage():
+    """What the jerk-limited timing lowers where its samples exceed a limit (issue 30): one
+    row of accelerations per stage. The same row everywhere is the (6,) limit; a stretch
+    with half the limit keeps half, there only."""
+    W = walk(8, seed=4)
+    limits = Limits.scaled(ARM, 100, 100)
+    s, keep = chord_parameters(W)
+    path = JointPath(s, W[keep])
+    grid, _ = gridpoints(path)
+    caps = speed_caps(path, grid, limits)
+    whole = topp_ra(path, grid, limits.acceleration, caps)
+    rows = np.tile(limits.acceleration, (len(grid) - 1, 1))
+    assert np.array_equal(topp_ra(path, grid, rows, caps), whole)
+    stretch = (grid[:-1] > 0.3 * s[-1]) & (grid[:-1] < 0.6 * s[-1])
+    rows[stretch] *= 0.5
+    xs = topp_ra(path, grid, rows, caps)
+    u = np.diff(xs) / (2.0 * np.diff(grid))
+    q1, q2 = path.evaluate(grid, (1, 2))
+    at_start = np.abs(q1[:-1] * u[:, None] + q2[:-1] * xs[:-1, None])
+    assert (at_start / rows).max() <= 1 + 1e-9
+    assert (at_start[stretch] / limits.acceleration).max() <= 0.5 + 1e-9
+    assert (at_start[~stretch] / limits.acceleration).max() > 0.99     # full elsewhere
+    assert ConstAccelProfile(grid, xs).duration > ConstAccelProfile(grid, whole).duration
+
+
 def test_finer_grids_converge_from_above():
     """TOPP-RA's interpolation scheme is conservative: the duration falls towards the optimum
     as the grid refines; the default grid is within 1% of a 10x finer one."""
