@@ -79,35 +79,36 @@ def local(stop) -> threading.Event:
 
 
 async def holder(target: str, stop, ready):
-    """Lock, activate, load a blended path, run it until `stop` is set; returns runs done."""
-    async with grpc.aio.insecure_channel(target) as channel, \
-            AsyncSession(channel, "soak-holder") as session:
-        await session.lock()
-        md = session.metadata()
-        device = device_service_pb2_grpc.DeviceServiceStub(channel)
-        events = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
-            event_service_pb2.SubscribeRequest())
-        await device.Activate(control_pb2.ActivateRequest(), metadata=md)
-        await device.SetSpeed(settings_pb2.SetSpeedRequest(
-            speed=60, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), metadata=md)
-        points = [types_pb2.TagStruct(
-            tag_name=f"t{i}", transition_speed=40,
-            joint_values=[0.8 * math.sin(i / 3), 0.2 * math.sin(i / 2), 1.5708,
-                          0.4 * math.cos(i / 3), 1.5708, math.sin(i / 4)]) for i in range(20)]
-        header = motion_pb2.PathHeader(path_name="soak", frame=JOINT,
-                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
-                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
-        await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=points)]),
-                              metadata=md)
-        # Fill the event history (bounded: the last DEFAULT_HISTORY events are kept for
-        # resuming subscribers), so that what it takes is not counted as growth.
-        poster = event_service_pb2_grpc.EventServiceStub(channel)
-        while (await poster.PostMessage(event_service_pb2.PostMessageRequest(
-                text="soak: filling the event history " + "x" * 40),
-                metadata=md)).sequence <= DEFAULT_HISTORY:
-            pass
+    """Lock, activate, load a blended path, run it until `stop` is set; returns runs done.
+    A session the device ends (a shared machine starved its keep-alives) is opened again and
+    the lock taken again, as a user would: the soak goes on measuring memory."""
+    stop, runs, first = local(stop), 0, True
+    async with grpc.aio.insecure_channel(target) as channel:
+        while not stop.is_set():
+            async with AsyncSession(channel, "soak-holder") as session:
+                try:
+                    runs += await run_paths(channel, session, stop, ready, first)
+                except grpc.aio.AioRpcError as error:
+                    if error.code() is not grpc.StatusCode.PERMISSION_DENIED:
+                        raise
+                    print(f"soak: {error.details()}: a new session", flush=True)
+                first = False
+    return runs
+
+
+async def run_paths(channel, session, stop, ready, first: bool) -> int:
+    """The holder's work in one session (`first`: load the path and fill the history)."""
+    await session.lock()
+    md = session.metadata()
+    device = device_service_pb2_grpc.DeviceServiceStub(channel)
+    events = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
+        event_service_pb2.SubscribeRequest())
+    await device.Activate(control_pb2.ActivateRequest(), metadata=md)
+    if first:
+        await load_path(channel, device, md)
         ready.set()
-        stop, runs = local(stop), 0
+    runs = 0
+    try:
         while not stop.is_set():
             try:
                 command = (await device.PathMove(motion_pb2.PathMoveRequest(
@@ -126,9 +127,32 @@ async def holder(target: str, stop, ready):
                         "command_done", "command_failed", "command_aborted"):
                     break
             runs += 1
-        events.cancel()
         await device.Deactivate(control_pb2.DeactivateRequest(), metadata=md)
-        return runs
+    finally:
+        events.cancel()
+    return runs
+
+
+async def load_path(channel, device, md) -> None:
+    """The soak's 20-point blended path, and the event history filled (bounded: the last
+    DEFAULT_HISTORY events are kept for resuming subscribers, so that what it takes is not
+    counted as growth)."""
+    await device.SetSpeed(settings_pb2.SetSpeedRequest(
+        speed=60, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), metadata=md)
+    points = [types_pb2.TagStruct(
+        tag_name=f"t{i}", transition_speed=40,
+        joint_values=[0.8 * math.sin(i / 3), 0.2 * math.sin(i / 2), 1.5708,
+                      0.4 * math.cos(i / 3), 1.5708, math.sin(i / 4)]) for i in range(20)]
+    header = motion_pb2.PathHeader(path_name="soak", frame=JOINT,
+                                   motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+    await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=points)]),
+                          metadata=md)
+    poster = event_service_pb2_grpc.EventServiceStub(channel)
+    while (await poster.PostMessage(event_service_pb2.PostMessageRequest(
+            text="soak: filling the event history " + "x" * 40),
+            metadata=md)).sequence <= DEFAULT_HISTORY:
+        pass
 
 
 async def readers(target: str, n: int, stop):
