@@ -211,9 +211,11 @@ def start_server(folder: str) -> tuple[subprocess.Popen, str]:
 def sample(pids: list, seconds: float, rows: list) -> None:
     """(t, MB of each of `pids`: the server, its cycle and planning processes) once a second
     for `seconds`, and a line a minute. A child gone (a cycle process restarted by a Reset)
-    is NaN that second, and found again."""
+    or not yet started is NaN that second, and found again."""
     began, said = time.monotonic(), 0.0
     while (now := time.monotonic() - began) < seconds:
+        if None in pids:   # not started yet (the planning process starts with the first plan)
+            pids[1:] = children(pids[0])
         row = [now]
         for p in pids:
             try:
