@@ -30,6 +30,7 @@ import sys
 import tempfile
 import threading
 import time
+from queue import Empty
 
 import grpc
 import numpy as np
@@ -78,6 +79,10 @@ def local(stop) -> threading.Event:
     return flag
 
 
+class SessionLost(Exception):
+    """The device ended the holder's session (it found the device unlocked)."""
+
+
 async def holder(target: str, stop, ready):
     """Lock, activate, load a blended path, run it until `stop` is set; returns runs done.
     A session the device ends (a shared machine starved its keep-alives) is opened again and
@@ -88,10 +93,11 @@ async def holder(target: str, stop, ready):
             async with AsyncSession(channel, "soak-holder") as session:
                 try:
                     runs += await run_paths(channel, session, stop, ready, first)
-                except grpc.aio.AioRpcError as error:
-                    if error.code() is not grpc.StatusCode.PERMISSION_DENIED:
+                except (grpc.aio.AioRpcError, SessionLost) as error:
+                    if isinstance(error, grpc.aio.AioRpcError) and \
+                            error.code() is not grpc.StatusCode.PERMISSION_DENIED:
                         raise
-                    print(f"soak: {error.details()}: a new session", flush=True)
+                    print(f"soak: {error}: a new session", flush=True)
                 first = False
     return runs
 
@@ -115,6 +121,11 @@ async def run_paths(channel, session, stop, ready, first: bool) -> int:
                     path_name="soak", number_of_cycles=1), metadata=md)).ret_val.command_id
             except grpc.aio.AioRpcError as error:
                 if error.code() is not grpc.StatusCode.FAILED_PRECONDITION:
+                    raise
+                state = (await device.GetDeviceState(control_pb2.GetDeviceStateRequest())).state
+                if state == types_pb2.DEVICE_STATE_UNLOCKED:   # the device ended the session
+                    raise SessionLost(error.details()) from None
+                if state != types_pb2.DEVICE_STATE_ERROR:
                     raise
                 # In error (a shared machine starved the cycle process: the watchdog took it
                 # for hung): what a user would do, so that the soak goes on measuring memory.
@@ -231,6 +242,15 @@ def sample(pids: list, seconds: float, rows: list) -> None:
         time.sleep(1.0)
 
 
+def outcome(proc, queue) -> str:
+    """What a load child did (its count), or that it failed (its error is printed above): the
+    memory figures stand either way."""
+    try:
+        return f"{queue.get(timeout=120 if proc.is_alive() else 5):,}"
+    except Empty:
+        return f"(failed: exit code {proc.exitcode})"
+
+
 def growth(rows: list) -> tuple[float, ...]:
     """MB per minute of each process sampled (least squares, over the seconds it was read)."""
     t = np.array([r[0] for r in rows])
@@ -267,7 +287,7 @@ def main() -> None:
             loaded: list = []
             sample(pids, seconds - warm_up, loaded)
             stop.set()
-            runs, calls, messages = (queue.get(timeout=120) for _, queue in loads)
+            runs, calls, messages = (outcome(proc, queue) for proc, queue in loads)
         finally:
             proc.terminate()
             proc.wait(timeout=30)
@@ -275,7 +295,7 @@ def main() -> None:
         [float(np.nanmedian([r[k] for r in rows])) for k in (1, 2, 3)] for rows in (idle, loaded))
     server_growth, cycle_growth, planning_growth = growth(loaded)
     print(f"resident memory (MB), {seconds:g} s of load after {warm_up:g} s of warm-up: "
-          f"{runs} path runs, {calls:,} read calls, {messages:,} streamed messages")
+          f"{runs} path runs, {calls} read calls, {messages} streamed messages")
     for name, at_idle, at_load, grew in (
             ("device server", server_idle, server_load, server_growth),
             ("cycle process", cycle_idle, cycle_load, cycle_growth),
