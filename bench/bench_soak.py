@@ -97,7 +97,8 @@ async def holder(target: str, stop, ready):
                     if isinstance(error, grpc.aio.AioRpcError) and \
                             error.code() is not grpc.StatusCode.PERMISSION_DENIED:
                         raise
-                    print(f"soak: {error}: a new session", flush=True)
+                    why = error.details() if isinstance(error, grpc.aio.AioRpcError) else error
+                    print(f"soak: {why}: a new session", flush=True)
                 first = False
     return runs
 
