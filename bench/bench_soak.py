@@ -99,8 +99,19 @@ async def holder(target: str, stop, ready):
                         raise
                     why = error.details() if isinstance(error, grpc.aio.AioRpcError) else error
                     print(f"soak: {why}: a new session", flush=True)
+                    await unlocked(channel)
                 first = False
     return runs
+
+
+async def unlocked(channel, timeout: float = 60.0) -> None:
+    """Until the device has ended the lost session (its disconnect handler stops the arm and
+    frees the lock): a Lock before that is refused."""
+    device = device_service_pb2_grpc.DeviceServiceStub(channel)
+    end = time.monotonic() + timeout
+    while (await device.GetDeviceState(control_pb2.GetDeviceStateRequest())).locked \
+            and time.monotonic() < end:
+        await asyncio.sleep(0.1)
 
 
 async def run_paths(channel, session, stop, ready, first: bool) -> int:
