@@ -30,6 +30,7 @@ import sys
 import tempfile
 import threading
 import time
+from queue import Empty
 
 import grpc
 import numpy as np
@@ -78,42 +79,65 @@ def local(stop) -> threading.Event:
     return flag
 
 
+class SessionLost(Exception):
+    """The device ended the holder's session (it found the device unlocked)."""
+
+
 async def holder(target: str, stop, ready):
-    """Lock, activate, load a blended path, run it until `stop` is set; returns runs done."""
-    async with grpc.aio.insecure_channel(target) as channel, \
-            AsyncSession(channel, "soak-holder") as session:
-        await session.lock()
-        md = session.metadata()
-        device = device_service_pb2_grpc.DeviceServiceStub(channel)
-        events = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
-            event_service_pb2.SubscribeRequest())
-        await device.Activate(control_pb2.ActivateRequest(), metadata=md)
-        await device.SetSpeed(settings_pb2.SetSpeedRequest(
-            speed=60, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), metadata=md)
-        points = [types_pb2.TagStruct(
-            tag_name=f"t{i}", transition_speed=40,
-            joint_values=[0.8 * math.sin(i / 3), 0.2 * math.sin(i / 2), 1.5708,
-                          0.4 * math.cos(i / 3), 1.5708, math.sin(i / 4)]) for i in range(20)]
-        header = motion_pb2.PathHeader(path_name="soak", frame=JOINT,
-                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
-                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
-        await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=points)]),
-                              metadata=md)
-        # Fill the event history (bounded: the last DEFAULT_HISTORY events are kept for
-        # resuming subscribers), so that what it takes is not counted as growth.
-        poster = event_service_pb2_grpc.EventServiceStub(channel)
-        while (await poster.PostMessage(event_service_pb2.PostMessageRequest(
-                text="soak: filling the event history " + "x" * 40),
-                metadata=md)).sequence <= DEFAULT_HISTORY:
-            pass
+    """Lock, activate, load a blended path, run it until `stop` is set; returns runs done.
+    A session the device ends (a shared machine starved its keep-alives) is opened again and
+    the lock taken again, as a user would: the soak goes on measuring memory."""
+    stop, runs, first = local(stop), 0, True
+    async with grpc.aio.insecure_channel(target) as channel:
+        while not stop.is_set():
+            async with AsyncSession(channel, "soak-holder") as session:
+                try:
+                    runs += await run_paths(channel, session, stop, ready, first)
+                except (grpc.aio.AioRpcError, SessionLost) as error:
+                    if isinstance(error, grpc.aio.AioRpcError) and \
+                            error.code() is not grpc.StatusCode.PERMISSION_DENIED:
+                        raise
+                    why = error.details() if isinstance(error, grpc.aio.AioRpcError) else error
+                    print(f"soak: {why}: a new session", flush=True)
+                    await unlocked(channel)
+                first = False
+    return runs
+
+
+async def unlocked(channel, timeout: float = 60.0) -> None:
+    """Until the device has ended the lost session (its disconnect handler stops the arm and
+    frees the lock): a Lock before that is refused."""
+    device = device_service_pb2_grpc.DeviceServiceStub(channel)
+    end = time.monotonic() + timeout
+    while (await device.GetDeviceState(control_pb2.GetDeviceStateRequest())).locked \
+            and time.monotonic() < end:
+        await asyncio.sleep(0.1)
+
+
+async def run_paths(channel, session, stop, ready, first: bool) -> int:
+    """The holder's work in one session (`first`: load the path and fill the history)."""
+    await session.lock()
+    md = session.metadata()
+    device = device_service_pb2_grpc.DeviceServiceStub(channel)
+    events = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
+        event_service_pb2.SubscribeRequest())
+    await device.Activate(control_pb2.ActivateRequest(), metadata=md)
+    if first:
+        await load_path(channel, device, md)
         ready.set()
-        stop, runs = local(stop), 0
+    runs = 0
+    try:
         while not stop.is_set():
             try:
                 command = (await device.PathMove(motion_pb2.PathMoveRequest(
                     path_name="soak", number_of_cycles=1), metadata=md)).ret_val.command_id
             except grpc.aio.AioRpcError as error:
                 if error.code() is not grpc.StatusCode.FAILED_PRECONDITION:
+                    raise
+                state = (await device.GetDeviceState(control_pb2.GetDeviceStateRequest())).state
+                if state == types_pb2.DEVICE_STATE_UNLOCKED:   # the device ended the session
+                    raise SessionLost(error.details()) from None
+                if state != types_pb2.DEVICE_STATE_ERROR:
                     raise
                 # In error (a shared machine starved the cycle process: the watchdog took it
                 # for hung): what a user would do, so that the soak goes on measuring memory.
@@ -126,9 +150,32 @@ async def holder(target: str, stop, ready):
                         "command_done", "command_failed", "command_aborted"):
                     break
             runs += 1
-        events.cancel()
         await device.Deactivate(control_pb2.DeactivateRequest(), metadata=md)
-        return runs
+    finally:
+        events.cancel()
+    return runs
+
+
+async def load_path(channel, device, md) -> None:
+    """The soak's 20-point blended path, and the event history filled (bounded: the last
+    DEFAULT_HISTORY events are kept for resuming subscribers, so that what it takes is not
+    counted as growth)."""
+    await device.SetSpeed(settings_pb2.SetSpeedRequest(
+        speed=60, attribute=types_pb2.SPEED_TYPE_PERCENT_SPEED), metadata=md)
+    points = [types_pb2.TagStruct(
+        tag_name=f"t{i}", transition_speed=40,
+        joint_values=[0.8 * math.sin(i / 3), 0.2 * math.sin(i / 2), 1.5708,
+                      0.4 * math.cos(i / 3), 1.5708, math.sin(i / 4)]) for i in range(20)]
+    header = motion_pb2.PathHeader(path_name="soak", frame=JOINT,
+                                   motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+    await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=points)]),
+                          metadata=md)
+    poster = event_service_pb2_grpc.EventServiceStub(channel)
+    while (await poster.PostMessage(event_service_pb2.PostMessageRequest(
+            text="soak: filling the event history " + "x" * 40),
+            metadata=md)).sequence <= DEFAULT_HISTORY:
+        pass
 
 
 async def readers(target: str, n: int, stop):
@@ -187,9 +234,11 @@ def start_server(folder: str) -> tuple[subprocess.Popen, str]:
 def sample(pids: list, seconds: float, rows: list) -> None:
     """(t, MB of each of `pids`: the server, its cycle and planning processes) once a second
     for `seconds`, and a line a minute. A child gone (a cycle process restarted by a Reset)
-    is NaN that second, and found again."""
+    or not yet started is NaN that second, and found again."""
     began, said = time.monotonic(), 0.0
     while (now := time.monotonic() - began) < seconds:
+        if None in pids:   # not started yet (the planning process starts with the first plan)
+            pids[1:] = children(pids[0])
         row = [now]
         for p in pids:
             try:
@@ -203,6 +252,15 @@ def sample(pids: list, seconds: float, rows: list) -> None:
             print(f"  {now:5.0f} s: " + ", ".join(f"{m:.1f}" for m in row[1:]) + " MB",
                   flush=True)
         time.sleep(1.0)
+
+
+def outcome(proc, queue) -> str:
+    """What a load child did (its count), or that it failed (its error is printed above): the
+    memory figures stand either way."""
+    try:
+        return f"{queue.get(timeout=120 if proc.is_alive() else 5):,}"
+    except Empty:
+        return f"(failed: exit code {proc.exitcode})"
 
 
 def growth(rows: list) -> tuple[float, ...]:
@@ -241,7 +299,7 @@ def main() -> None:
             loaded: list = []
             sample(pids, seconds - warm_up, loaded)
             stop.set()
-            runs, calls, messages = (queue.get(timeout=120) for _, queue in loads)
+            runs, calls, messages = (outcome(proc, queue) for proc, queue in loads)
         finally:
             proc.terminate()
             proc.wait(timeout=30)
@@ -249,7 +307,7 @@ def main() -> None:
         [float(np.nanmedian([r[k] for r in rows])) for k in (1, 2, 3)] for rows in (idle, loaded))
     server_growth, cycle_growth, planning_growth = growth(loaded)
     print(f"resident memory (MB), {seconds:g} s of load after {warm_up:g} s of warm-up: "
-          f"{runs} path runs, {calls:,} read calls, {messages:,} streamed messages")
+          f"{runs} path runs, {calls} read calls, {messages} streamed messages")
     for name, at_idle, at_load, grew in (
             ("device server", server_idle, server_load, server_growth),
             ("cycle process", cycle_idle, cycle_load, cycle_growth),

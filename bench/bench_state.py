@@ -15,6 +15,7 @@ run. Prints figures, no pass/fail.
 
 The device server runs here on the real-time clock (its cycle process apart); every client runs
 in a child process, as supervisors would. Run: .venv/bin/python bench/bench_state.py [--quick]
+[--only events ...]
 """
 from __future__ import annotations
 
@@ -421,9 +422,14 @@ def event_latency(server, bare: BareServer, holder: Holder):
         motions.on_report = original
 
 
+SECTIONS = ["fan-out", "events", "idle", "starts"]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="shorter runs, for CI")
+    parser.add_argument("--only", nargs="+", choices=SECTIONS, default=SECTIONS,
+                        help="run these sections only (default: all)")
     args = parser.parse_args()
     # Every watcher here comes from this machine's address: one client to the stream caps,
     # whose per-client share (limits.DEFAULT_CAPS) is for a cell's supervisors, not 1,000.
@@ -434,12 +440,16 @@ def main() -> None:
     try:
         print(f"state sample message: {_sample_size_message().ByteSize()} bytes; real-time "
               f"priority: {'no: ' + '; '.join(server.link.tuning_problems) if server.link.tuning_problems else 'yes'}")
-        fan_out(server, bare, holder, 3.0 if args.quick else 6.0)
-        event_latency(server, bare, holder)
+        if "fan-out" in args.only:
+            fan_out(server, bare, holder, 3.0 if args.quick else 6.0)
+        if "events" in args.only:
+            event_latency(server, bare, holder)
         holder.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
         holder.close()
-        idle(server, bare, 200 if args.quick else 1000)
-        starts(server, bare, 10 if args.quick else 25)
+        if "idle" in args.only:
+            idle(server, bare, 200 if args.quick else 1000)
+        if "starts" in args.only:
+            starts(server, bare, 10 if args.quick else 25)
     finally:
         bare.stop()
         server.stop(grace=None)

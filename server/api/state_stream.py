@@ -32,6 +32,11 @@ from landscape.robot.units import Units
 from landscape.robot.pinocchio_model import PinocchioModel
 from landscape.v1 import state_service_pb2 as pb
 
+# rad: joints within this of where the arm stood are where it stands. An arm at rest still
+# reads a new position every cycle (the simulation's round-off: 1e-23 rad), which would
+# rebuild a position read's reply every 4 ms for nothing.
+STILL = 1e-9
+
 
 @dataclass(frozen=True)
 class View:
@@ -60,11 +65,27 @@ class StateHub:
         self._conversions = conversions
         self._poses: dict[int, np.ndarray] = {}   # sequence -> flange pose (4, 4), newest few
         self._model = PinocchioModel(device.arm)  # one pose in ~5 us (the numpy FK: ~60 us)
+        self._looked = -1                  # the newest cycle position_since looked at
+        self._since, self._stands = -1, None   # where the arm stands, since which cycle
 
     @property
     def cycle(self) -> int:
         """The newest cycle's sequence number (-1 before the first)."""
         return self.ring.head
+
+    def position_since(self) -> int:
+        """The cycle since which the arm has stood where it stands now (every joint within
+        STILL), the newest while it moves: a reply built from the joints alone stays right
+        while this does (GetRobotPosition). One ring read per new cycle, on the loop."""
+        head = self.ring.head
+        if head != self._looked:
+            row = self.ring.row(head)
+            if row is not None:
+                joints = row[Q]
+                if self._stands is None or np.abs(joints - self._stands).max() > STILL:
+                    self._since, self._stands = head, joints
+                self._looked = head
+        return self._since
 
     def attach(self, loop: asyncio.AbstractEventLoop) -> None:
         """Serve streams on `loop` (the server's), listening to the ring's wake-ups while

@@ -32,7 +32,7 @@ from typing import Any, Callable
 from landscape.robot.controller import Capability
 from landscape.server.config import CLOCKS, PROCESS_CLOCKS
 from landscape.server.cycle.factory import build_controller
-from landscape.server.cycle.feedback import FeedbackRing, Sample
+from landscape.server.cycle.feedback import WALL, FeedbackRing, Sample
 from landscape.server.cycle.shared_array import SharedArrays
 from landscape.server.errors import ControllerFailure
 from landscape.server.link.clock import RealTimeClock, ThreadedLockStepClock
@@ -186,26 +186,38 @@ class ControllerLink:
 
     def _watch(self) -> None:
         """The ring must advance; `silence_cycles` cycles without a row is a hang (on the fast
-        clock, FAST_SILENCE; before a new process's first row, START_SILENCE)."""
-        period = self._clock.cycle_time
-        limit = self.silence_cycles * period
+        clock, FAST_SILENCE; before a new process's first row, START_SILENCE). Silence counts
+        from when the newest row was written (its time stamp), and the watchdog looks when
+        that row would be too old: about once per limit while rows come, where a look every
+        cycle took the interpreter from the server 250 times a second (issue 31 item 1)."""
+        cycle = self._clock.cycle_time
+        limit = self.silence_cycles * cycle
         if self.clock_kind == "fast":
-            # Looked at every eighth of its limit: a wake-up per wall cycle would be 250 a
-            # second taking the interpreter from the server for nothing (issue 31 item 5).
             limit = max(limit, FAST_SILENCE)
-            period = limit / 8
-        generation, seen, since = None, self.feedback.head, time.monotonic()
+        generation, first_row, seen = None, True, self.feedback.head
+        since = looked = time.monotonic()
         while not self._closing:
-            time.sleep(period)
+            due = since + (START_SILENCE if first_row else limit)
+            time.sleep(min(limit, max(cycle, due - time.monotonic())))
             head, now = self.feedback.head, time.monotonic()
             if self._generation != generation:    # a new process: judged from its first row
                 generation, first_row, seen, since = self._generation, True, head, now
             if head != seen or self.lost is not None:
                 first_row = first_row and head == seen
-                seen, since = head, now
+                seen, since = head, self._written(head, looked, now)
             elif now - since > (START_SILENCE if first_row else limit):
                 alive = self._clock.alive
                 self._lose(f"the cycle process sent no feedback for {now - since:.3f} s"
                            + (" (killed)" if alive else " and exited"), kill=True,
                            generation=generation)
+            looked = now
+
+    def _written(self, sequence: int, looked: float, now: float) -> float:
+        """When (monotonic s) row `sequence`, new since the look at `looked`, was written: by
+        its time stamp, kept within (looked, now] (a wall clock that stepped is trusted no
+        further)."""
+        row = self.feedback.row(sequence)
+        if row is None:
+            return now
+        return min(now, max(looked, now - (time.time() - float(row[WALL]))))
 

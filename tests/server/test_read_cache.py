@@ -98,3 +98,46 @@ def test_the_position_follows_the_moving_arm_cycle_by_cycle(arm):
     finally:
         clock.release()
     assert len(set(seen)) == 3      # the arm moved between the reads
+
+
+def test_an_arm_at_rest_is_read_from_one_reply_across_cycles(server):
+    """A position read's reply is built once while the arm stands still (issue 31 item 1): the
+    cycles go on, the reads answer the very same bytes. (The simulated arm at rest reads a
+    new position every cycle, by 1e-23 rad of round-off: its reply was built again every
+    4 ms, a third of a bare echo's time for a read that changed nothing.)"""
+    clock = server.link.clock
+    with grpc.insecure_channel(server.target) as channel:
+        reader, _, _ = stubs(channel)
+        request = settings_pb2.GetRobotPositionRequest()
+        clock.hold()
+        try:
+            replies, cycles = set(), []
+            for _ in range(20):
+                replies.add(reader.GetRobotPosition(request, timeout=5).SerializeToString())
+                cycles.append(server.link.feedback.head)
+                server.link.between_cycles(lambda controller: controller.step())
+        finally:
+            clock.release()
+    assert len(set(cycles)) == 20    # a new cycle for every read
+    assert len(replies) == 1
+
+
+def test_the_position_since_moves_with_the_arm(arm):
+    """The hub's position_since, which versions the position reads: it stays while the arm
+    rests and is each new cycle while a joint moves by more than STILL."""
+    hub, clock = arm.server.hub, arm.link.clock
+    resting = hub.position_since()
+    arm.link.between_cycles(lambda controller: controller.step())
+    assert hub.position_since() == resting
+    reply = arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        frame=types_pb2.REFERENCE_FRAME_JOINT_FRAME, values=[0.5, 0, 0, 0, 0, 0]), timeout=30)
+    arm.wait_command(reply.ret_val.command_id, phases=("command_started",))
+    wait_until(lambda: abs(arm.server.link.feedback.latest().velocity[0]) > 0.01, 30)
+    clock.hold()
+    try:
+        for _ in range(3):
+            assert hub.position_since() == arm.server.link.feedback.head
+            arm.link.between_cycles(lambda controller: controller.step())
+    finally:
+        clock.release()
+    assert hub.position_since() > resting

@@ -32,7 +32,7 @@ STOP_DECELERATIONS = {motion_pb2.STOP_DECELERATION_FULL: False,
 # What the cached reads' replies depend on (read_cache.py).
 _SETTINGS = by_version(lambda s: (s.device.settings,))
 _CYCLE = by_version(lambda s: (s.hub.cycle,))
-_CYCLE_AND_SETTINGS = by_version(lambda s: (s.hub.cycle, s.device.settings))
+_POSITION_AND_SETTINGS = by_version(lambda s: (s.hub.position_since(), s.device.settings))
 _SCENE = by_version(lambda s: (s.device.collisions.version,))
 _FIXED = by_version(lambda s: ())
 
@@ -160,7 +160,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
             ret_val=convert.ok(), frame=convert.matrix_to_pose(s.world_frame, s.units),
             units=convert.units_to_pb(s.units))
 
-    @_CYCLE_AND_SETTINGS
+    @_POSITION_AND_SETTINGS
     def GetRobotPosition(self, request, context):
         joints, world, units = self._position()
         return settings_pb2.GetRobotPositionResponse(
