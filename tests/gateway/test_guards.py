@@ -11,9 +11,10 @@ import pytest
 
 from landscape.client import Robot
 from landscape.gateway.workstation import Workstation
+from landscape.server.device.states import State
 
 from crcl_support import XSD_2021, RawClient, RunningGateway, field, pose
-from support import start_server
+from support import start_server, wait_until
 from test_gateway import MOVE, point
 
 CRCL_SCHEMAS = XSD_2021                     # Guard is the 2021 revision's
@@ -63,7 +64,11 @@ def server(shared_cell):
 
 @pytest.fixture
 def gateway(shared_cell):
-    return shared_cell[1]
+    server, gateway = shared_cell
+    yield gateway
+    # The test's CRCL session ends as its client closes; the next one's InitCanon would find
+    # the device still locked by it if it came first.
+    wait_until(lambda: server.device.state is State.UNLOCKED, timeout=10)
 
 
 def over_the_table(client: RawClient) -> RawClient:
