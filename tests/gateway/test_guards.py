@@ -4,13 +4,17 @@ laser sees the table 5 cm away; guards the device cannot watch are refused befor
 (issue 27 item 3)."""
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 
 from landscape.client import Robot
 from landscape.gateway.workstation import Workstation
+from landscape.server.device.states import State
 
-from crcl_support import XSD_2021, field, pose
+from crcl_support import XSD_2021, RawClient, RunningGateway, field, pose
+from support import start_server, wait_until
 from test_gateway import MOVE, point
 
 CRCL_SCHEMAS = XSD_2021                     # Guard is the 2021 revision's
@@ -32,17 +36,68 @@ def guarded(*guards: str, to=INTO) -> str:
     return "".join(guards) + MOVE.format("true") + pose(*to)
 
 
+@contextlib.contextmanager
+def cell():
+    """A device server (pybullet: the guards read its physics) and the gateway before it."""
+    server = start_server(backend="pybullet")
+    gateway = RunningGateway(server.target, schemas=CRCL_SCHEMAS, workstation=CRCL_WORKSTATION)
+    try:
+        yield server, gateway
+    finally:
+        gateway.close()
+        server.stop(grace=None)
+
+
+@pytest.fixture(scope="module")
+def shared_cell():
+    """One cell for the module's tests (starting one took most of each test's time): each
+    test's client opens its own CRCL session (InitCanon) and `above` moves the cup back over
+    the table from wherever the last test left it."""
+    with cell() as running:
+        yield running
+
+
 @pytest.fixture
-def above(client):
-    """The cup over the table, slow (20 mm/s), guards reported in status."""
+def server(shared_cell):
+    return shared_cell[0]
+
+
+@pytest.fixture
+def gateway(shared_cell):
+    server, gateway = shared_cell
+    yield gateway
+    # The test's CRCL session ends as its client closes; the next one's InitCanon would find
+    # the device still locked by it if it came first.
+    wait_until(lambda: server.device.state is State.UNLOCKED, timeout=10)
+
+
+def over_the_table(client: RawClient) -> RawClient:
+    """The cup over the table, then slow (20 mm/s) for what follows, guards reported in status
+    (the move there runs at the default speed: it is not what a test watches)."""
     for command_id, kind, body in (
-            (2, "SetTransSpeed", SLOW),
-            (3, "ConfigureStatusReport", "".join(f"<Report{t}>true</Report{t}>" for t in (
+            (2, "MoveTo", MOVE.format("false") + pose(*ABOVE)),
+            (3, "SetTransSpeed", SLOW),
+            (4, "ConfigureStatusReport", "".join(f"<Report{t}>true</Report{t}>" for t in (
                 "JointStatuses", "PoseStatus", "GripperStatus", "SettingsStatus", "SensorsStatus",
-                "GuardsStatus"))),
-            (4, "MoveTo", MOVE.format("false") + pose(*ABOVE))):
+                "GuardsStatus")))):
         assert field(client.run(kind, command_id, body), "CommandState") == "CRCL_Done"
     return client
+
+
+@pytest.fixture
+def above(client):
+    return over_the_table(client)
+
+
+@pytest.fixture
+def untared_above():
+    """`above` on a cell of the test's own: every guarded move tares the force sensor (MoveReact
+    does) and nothing undoes a tare, so the shared cell's sensor reads from its last one."""
+    with cell() as (_, gateway):
+        client = RawClient(gateway.port, schemas=gateway.schemas)
+        assert field(client.run("InitCanon", 1), "CommandState") == "CRCL_Done"
+        yield over_the_table(client)
+        client.close()
 
 
 def _done(status: str) -> str:
@@ -130,7 +185,9 @@ def test_guards_the_device_cannot_watch_are_refused_before_anything_moves(above,
         "Guard on Dwell: guards are carried out on MoveTo only")
 
 
-def test_a_sensor_enabled_with_the_tare_option_reads_from_zero(above):
+def test_a_sensor_enabled_with_the_tare_option_reads_from_zero(untared_above):
+    above = untared_above
+
     def fz() -> float:
         return float(field(field(above.status(), "ForceTorqueSensorStatus"), "Fz"))
     assert field(above.run("EnableSensor", 5, "<SensorID>force_sensor</SensorID>"),

@@ -23,6 +23,7 @@ from __future__ import annotations
 import copy
 import re
 import socket
+import time
 
 import pytest
 from lxml import etree
@@ -38,6 +39,9 @@ XSI = "http://www.w3.org/2001/XMLSchema-instance"
 FRAMINGS = ("one write per document", "byte by byte", "command and GetStatus coalesced",
             "whitespace between documents")
 SPACE = b"\r\n \t\n"
+# s between GetStatus polls while a command runs: polled flat out, this process's parsing and
+# schema checks of the statuses took the interpreter from the lock-step device's cycles
+POLL_PERIOD = 0.01
 
 # program -> (CommandID it ends at, the start of the CRCL_Error's description); every command
 # before it is Done
@@ -140,6 +144,7 @@ class FramedClient(RawClient):
             if kind == "GetStatus" or (field(status, "CommandID") == str(command_id) and
                                        field(status, "CommandState") in ("CRCL_Done", "CRCL_Error")):
                 return field(status, "CommandState"), field(status, "StateDescription") or ""
+            time.sleep(POLL_PERIOD)
             self.write(poll)
 
 
