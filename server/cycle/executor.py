@@ -198,6 +198,7 @@ class Executor:
         if motion.stopped_by is not None:
             self._peak(motion, sensors)
         if motion.settling is None:
+            motion.keep_to_checked()
             motion.advance()
             marks = motion.marks
             while motion.next_mark < len(marks) and marks[motion.next_mark][0] <= motion.s:
@@ -210,7 +211,8 @@ class Executor:
             if motion.s >= motion.last and not motion.next_segment():
                 if not (motion.compliance is not None and motion.compliance.holding):
                     motion.settling = motion.end_as or "done"
-            elif motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused:
+            elif (motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused
+                  and not motion.awaiting):
                 motion.settling = motion.end_as or ("aborted" if motion.abort_when_paused
                                                     else "paused")
             if motion.settling == "done" and self._settling_force(motion):
@@ -380,6 +382,14 @@ class Executor:
                 self._end("failed", message="this controller has no arm model for comply")
             else:
                 self._attach(self._motion, msg)
+        elif op == "checked" and motion is not None and motion.id == msg["id"]:
+            motion.checked_to(msg["rows"])
+        elif op == "refused" and motion is not None and motion.id == msg["id"]:
+            motion.outcome["message"] = msg["message"]   # at rest on the path, it fails
+            if motion.paused:
+                self._end("failed", message=msg["message"])
+            elif motion.settling is None:
+                brake(motion, "failed")
         elif op == "comply" and motion is not None and motion.id == msg["id"]:
             if motion.compliance is None and self._tip is not None:
                 self._attach(motion, {"comply": msg["spec"]})

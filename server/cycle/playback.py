@@ -66,9 +66,16 @@ class Motion:
         self._step = 0
         self._planner = RampPlanner(dt)
         self._recent = np.tile(self.positions[0], (3, 1))   # the last 3 played, newest first
+        # A run checked against the cell as it plays (run_check.py): its rows checked so far
+        # (None: all) and how many rows a stop may take; `awaiting` while braking or held for
+        # the next stretch.
+        self.checked: int | None = msg.get("checked")
+        self.brake_rows = int(msg.get("brake", 0))
+        self.awaiting = False
 
     def _load(self, index: int) -> None:
         self.segment = index
+        self.first_row = self.segments.first_row(index)
         segment = self.segments[index]
         # Nothing here walks the whole segment: a long one costs the cycle nothing to load.
         self.positions = np.asarray(segment["positions"], dtype=float)
@@ -113,6 +120,7 @@ class Motion:
     def stop(self, acceleration: np.ndarray | None = None, jerk: np.ndarray | None = None
              ) -> None:
         """Slow down to rest along the path (at the stop limits, or those given), then wait."""
+        self.awaiting = False   # a stop asked for: paused (or ended) at rest, not resumed
         self.target_rate = 0.0
         self._braking = (self.stop_limit if acceleration is None else acceleration,
                          self.stop_jerk if jerk is None else jerk)
@@ -121,6 +129,25 @@ class Motion:
         """Speed up again along the path (at the run limits) to the planned pace."""
         self.paused = False
         self.target_rate = 1.0
+
+    # ---- a run checked as it plays ----------------------------------------------------------
+
+    def keep_to_checked(self) -> None:
+        """Brake along the path in time to rest before the rows not checked yet (the cycle
+        never waits for them: it slows down, and goes on once they are checked)."""
+        if (self.checked is not None and not self.awaiting and self.target_rate == 1.0
+                and self.first_row + self.s + self.brake_rows >= self.checked):
+            self.awaiting = True
+            self.target_rate = 0.0
+            self._braking = (self.stop_limit, self.stop_jerk)
+
+    def checked_to(self, rows: int) -> None:
+        """The rows up to `rows` are checked: a play held for them goes on."""
+        self.checked = None if rows >= self.segments.rows else rows
+        if self.awaiting and (self.checked is None
+                              or self.first_row + self.s + self.brake_rows < self.checked):
+            self.awaiting = False
+            self.target_rate = 1.0
 
     @property
     def ramping(self) -> bool:
