@@ -35,15 +35,6 @@ class Segments:
     def __len__(self) -> int:
         return len(self._a["segments"])
 
-    @property
-    def rows(self) -> int:
-        """The run's samples, all segments together."""
-        return len(self._a["positions"])
-
-    def first_row(self, index: int) -> int:
-        """Segment `index`'s first sample among the run's."""
-        return int(self._a["segments"][index][0])
-
     def __getitem__(self, index: int) -> dict:
         start, end, m0, m1 = (int(v) for v in self._a["segments"][index])
         return {"positions": self._a["positions"][start:end],

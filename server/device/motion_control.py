@@ -180,10 +180,9 @@ class MotionControl:
             self.planning.run("drop_run", key)
             raise
         if checked < rows:   # the rest is checked while the path plays (run_check.py)
-            threading.Thread(target=run_check.follow, name=f"check {motion.command_id}",
-                             args=(self.planning, key, motion.command_id, checked, rows,
-                                   self.send, lambda: self._motion is motion,
-                                   lambda: self.check_ahead_delay), daemon=True).start()
+            run_check.following(self.planning, key, motion.command_id, checked, rows,
+                                self.send, lambda: self._motion is motion,
+                                lambda: self.check_ahead_delay)
         return motion.command_id
 
     # ---- starting ----------------------------------------------------------------------------

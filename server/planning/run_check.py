@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from typing import Callable
 
@@ -75,12 +76,19 @@ class RunCheck:
             raise Collision(f"{self.what} would collide: {contact}", **contact.metadata())
 
 
+def following(*args) -> threading.Thread:
+    """`follow(*args)` on a thread of its own, started."""
+    thread = threading.Thread(target=follow, args=args, name=f"check {args[2]}", daemon=True)
+    thread.start()
+    return thread
+
+
 def follow(planning, key: str, command_id: str, checked: int, rows: int,
            send: Callable[[dict], None], running: Callable[[], bool],
            delay: Callable[[], float] = lambda: 0.0) -> None:
-    """The server's side, on a thread of its own: rows `checked` to `rows` of the run under
+    """The server's side: rows `checked` to `rows` of the run under
     `key` checked by `planning` (process.py) STRETCH rows at a time, each stretch's end sent to
-    the cycle as {"op": "checked", "id", "rows"}, a refusal as {"op": "refused", "id",
+    the cycle as {"op": "checked", "id", "rows", "all"}, a refusal as {"op": "refused", "id",
     "message"}; stops once the motion no longer `running()`. `delay()`: seconds to wait before
     each stretch (0 in service; tests make a stretch late with it: MotionControl's
     check_ahead_delay)."""
@@ -93,7 +101,8 @@ def follow(planning, key: str, command_id: str, checked: int, rows: int,
             stop = min(rows, checked + STRETCH)
             planning.run("check_path_ahead", key, checked, stop)
             checked = stop
-            send({"op": "checked", "id": command_id, "rows": checked})
+            send({"op": "checked", "id": command_id, "rows": checked,
+                  "all": checked >= rows})
     except CommandError as refusal:   # a collision, or the planning process lost
         try:
             send({"op": "refused", "id": command_id, "message": refusal.message})

@@ -2,6 +2,8 @@
 ring (one row per cycle): the cycle that takes a run from the server already moves the arm."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -159,7 +161,7 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
 
 def _on_chords(near: np.ndarray, q: np.ndarray, tolerance: float) -> bool:
     """Whether q lies within `tolerance` (rad) of the chords between consecutive rows."""
-    for a, b in zip(near[:-1], near[1:]):
+    for a, b in itertools.pairwise(near):
         d = b - a
         t = np.clip(np.dot(q - a, d) / max(np.dot(d, d), 1e-30), 0.0, 1.0)
         if np.linalg.norm(a + t * d - q) < tolerance:
