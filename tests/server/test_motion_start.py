@@ -54,17 +54,30 @@ def run(arm, call) -> None:
     assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
 
 
-def test_a_joint_move_and_a_path_from_its_first_point_move_on_the_cycle_that_takes_them(fast):
-    points = [[0.3 * np.sin(i / 5), 0.3 + 0.1 * np.sin(i / 7), 1.4, 0.0, 0.9, 0.0]
-              for i in range(12)]
-    header = motion_pb2.PathHeader(path_name="ring", frame=JOINT,
+def at_first_point(arm, name: str, points: list, transition: float) -> list:
+    """A blended joint path through `points` loaded as `name`, the arm moved to its first
+    point; the points."""
+    header = motion_pb2.PathHeader(path_name=name, frame=JOINT,
                                    motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
                                    offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
-    fast.device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=[
-        types_pb2.TagStruct(joint_values=q, transition_speed=40) for q in points])]),
-        timeout=30)
-    run(fast, lambda: fast.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+    arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=[
+        types_pb2.TagStruct(joint_values=q, transition_speed=transition) for q in points])]),
+        timeout=60)
+    run(arm, lambda: arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
         frame=JOINT, values=points[0]), timeout=30))
+    return points
+
+
+def long_path(arm, name: str, count: int) -> list:
+    """A blended path of `count` joint points around HOME, loaded, the arm at its start."""
+    return at_first_point(arm, name, [
+        [0.4 * np.sin(i / 9), 0.3 + 0.15 * np.sin(i / 13), 1.4 + 0.1 * np.cos(i / 11),
+         0.2 * np.sin(i / 7), 0.9, 0.0] for i in range(count)], 60)
+
+
+def test_a_joint_move_and_a_path_from_its_first_point_move_on_the_cycle_that_takes_them(fast):
+    at_first_point(fast, "ring", [[0.3 * np.sin(i / 5), 0.3 + 0.1 * np.sin(i / 7), 1.4, 0.0,
+                                   0.9, 0.0] for i in range(12)], 40)
     stamps = started_cycles(fast)
     run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="ring"),
                                            timeout=30))
@@ -74,21 +87,6 @@ def test_a_joint_move_and_a_path_from_its_first_point_move_on_the_cycle_that_tak
     path_step, move_step = (setpoint_step(fast, stamp) for stamp in stamps)
     assert path_step > 0.0, "the path's first cycle held the arm where it was"
     assert move_step > 0.0, "the move's first cycle held the arm where it was"
-
-
-def long_path(arm, name: str, count: int) -> list:
-    """A blended path of `count` joint points around HOME, loaded; its points."""
-    points = [[0.4 * np.sin(i / 9), 0.3 + 0.15 * np.sin(i / 13), 1.4 + 0.1 * np.cos(i / 11),
-               0.2 * np.sin(i / 7), 0.9, 0.0] for i in range(count)]
-    header = motion_pb2.PathHeader(path_name=name, frame=JOINT,
-                                   motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
-                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
-    arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=[
-        types_pb2.TagStruct(joint_values=q, transition_speed=60) for q in points])]),
-        timeout=60)
-    run(arm, lambda: arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
-        frame=JOINT, values=points[0]), timeout=30))
-    return points
 
 
 def sent_to_cycle(arm) -> list[tuple[dict, np.ndarray]]:
