@@ -210,13 +210,16 @@ class _Planning:
 
 
 class InProcessPlanning(_Planning):
-    """The jobs on the calling thread, with the server's planner and scene."""
+    """The jobs on the calling thread, with the server's planner and scene, one at a time (a
+    path's later stretches are checked on a thread of their own: run_check.follow)."""
 
     def __init__(self, planner: Planner, scene: CollisionScene):
         self.context = PlanningContext(planner, scene)
+        self._lock = threading.Lock()
 
     def run(self, job: str, *args):
-        return JOBS[job](self.context, *args)
+        with self._lock:
+            return JOBS[job](self.context, *args)
 
     def drop_stream(self, key: str) -> None:
         self.context.streams.pop(key, None)
