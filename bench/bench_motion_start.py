@@ -150,8 +150,9 @@ class Stamps:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer runs, for CI")
+    parser.add_argument("--runs", type=int, help="runs of each kind (default 60, quick 10)")
     args = parser.parse_args()
-    runs = 10 if args.quick else 60
+    runs = args.runs or (10 if args.quick else 60)
     server = serve(ServerConfig(port=0, clock="realtime"))
     bare = BareServer("bench.Bare", {"Echo": grpc.unary_unary_rpc_method_handler(
         _echo, request_deserializer=wrappers_pb2.UInt64Value.FromString,
