@@ -36,6 +36,7 @@ BENCHES = {
     "bench_rpc": ([], ["--quick"]),
     "bench_stop": ([], ["--quick"]),
     "bench_state": ([], ["--quick"]),
+    "bench_motion_start": ([], ["--quick"]),
     "bench_lockstep": ([], ["--quick"]),
     "bench_cycle": (["--seconds", "8", "--lock-step-seconds", "8"],
                     ["--seconds", "3", "--lock-step-seconds", "3"]),

@@ -50,8 +50,8 @@ import time
 import numpy as np
 
 from landscape.server.cycle.inputs import CycleSensors, IoMonitor
-from landscape.server.cycle.feedback import (CMD, ENABLE, ESTOP, IO, MODEL_TAU, QD, SENSORS, SEQ, TAU,
-                                       TIME, WALL, WIDTH, Q, FeedbackRing)
+from landscape.server.cycle.cycle_record import CycleRecord
+from landscape.server.cycle.feedback import FeedbackRing
 from landscape.server.cycle.force_loops import (RANGE_KIND, Admittance, ForceSettle, ThresholdMonitor,
                                             vector)
 from landscape.server.cycle.jerk_tracker import PositionTracker
@@ -84,9 +84,6 @@ class Executor:
                  model_torques: bool = True):
         self.mailbox = mailbox
         self.cycle_time = cycle_time
-        self.ring = ring
-        self._sequence = ring.head + 1 if ring is not None else 0   # goes on after a restart
-        self._row = np.full(WIDTH, np.nan)
         self._hold: np.ndarray | None = None   # commanded position when not moving, rad
         self._motion: Motion | None = None
         self._jog: JogIntegrator | None = None
@@ -103,19 +100,19 @@ class Executor:
         self._sensors = sensors or CycleSensors()
         self._io = io or IoMonitor()
         self._wall = 0.0   # this cycle's time stamp (unix s)
-        self._tip = self._dynamics = None
-        self._setpoints: np.ndarray | None = None   # (3, 6): the last three cycles', newest first
+        self._tip = dynamics = None
         if arm is not None:
             # pinocchio: only where it runs
             from landscape.server.cycle.arm_dynamics import ArmDynamics
             from landscape.server.cycle.tip_model import TipModel
             self._tip = TipModel(arm)
-            self._dynamics = ArmDynamics(arm, gravity) if model_torques else None
+            dynamics = ArmDynamics(arm, gravity) if model_torques else None
+        self._record = CycleRecord(ring, cycle_time, dynamics)
 
     @property
     def sequence(self) -> int:
         """The sequence number the next cycle's row gets."""
-        return self._sequence
+        return self._record.sequence
 
     def __call__(self, ctrl: Controller) -> bool:
         # The cycle's time stamp: its tick, when the controller says (a simulated one computes
@@ -126,8 +123,8 @@ class Executor:
         enabled = state.enable is EnableState.ENABLED
         while (msg := self.mailbox.poll()) is not None:
             self._handle(msg, fbk)
-        sensors = self._sensors.read(ctrl, self._sequence)
-        self._io.poll(ctrl, self._sequence, self._reports)
+        sensors = self._sensors.read(ctrl, self._record.sequence)
+        self._io.poll(ctrl, self._record.sequence, self._reports)
         if not enabled or self._hold is None:
             self._hold = fbk.pos.copy()
             if self._motion is not None and not enabled:
@@ -145,59 +142,29 @@ class Executor:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
         self._velocity = np.asarray(vel, dtype=float)
-        model = self.model_torques(fbk, pos)
+        model = self._record.model_torques(fbk, pos)
 
         key = (state.enable, state.estop)
         if key != self._last_state:   # first, so the server knows the power before the rest
             self._last_state = key
             self._reports.insert(0, {"op": "controller", "enable": int(state.enable),
                                      "estop": state.estop is EstopState.ESTOP})
-        if self.ring is not None:
-            self._write_row(ctrl, fbk, pos, state, model)
+        self._record.write(ctrl, fbk, pos, state, self._wall, self._sensors.values,
+                           self._io.image, model)
         for report in self._reports:
             self.mailbox.post(report)
         self._reports.clear()
         return True
 
-    def model_torques(self, fbk, pos: np.ndarray) -> np.ndarray | float:
-        """The arm model's torques for the cycle the drives just played: they went from the
-        setpoint of two cycles ago to last cycle's (linearly, LLI 5.3.12), so the commanded
-        acceleration is the second difference of the last three setpoints. Then `pos` (this
-        cycle's) becomes the newest."""
-        past = self._setpoints
-        if past is None:
-            past = self._setpoints = np.tile(fbk.pos, (3, 1))
-        model = np.nan
-        if self._dynamics is not None:
-            acceleration = (past[0] - 2.0 * past[1] + past[2]) / (self.cycle_time ** 2)
-            model = self._dynamics.torques(fbk.pos, fbk.vel, acceleration)
-        past[1:] = past[:2].copy()
-        past[0] = pos
-        return model
-
     def set_payload(self, parameters) -> None:
         """What the flange carries now (10 dynamic parameters, arm_dynamics.py)."""
-        if self._dynamics is not None:
-            self._dynamics.set_payload(parameters)
-
-    def _write_row(self, ctrl, fbk, pos, state, model) -> None:
-        row = self._row
-        row[SEQ] = self._sequence
-        row[TIME] = getattr(ctrl, "time", 0.0)
-        row[WALL] = self._wall
-        row[Q], row[QD], row[CMD], row[TAU] = fbk.pos, fbk.vel, pos, fbk.torque
-        row[ENABLE] = int(state.enable)
-        row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
-        row[SENSORS] = self._sensors.values
-        row[IO] = self._io.image
-        row[MODEL_TAU] = model
-        self.ring.write(self._sequence, row)
-        self._sequence += 1
+        self._record.set_payload(parameters)
 
     def _play(self, motion: Motion, fbk, sensors) -> tuple[np.ndarray, np.ndarray]:
         if motion.stopped_by is not None:
-            self._peak(motion, sensors)
+            motion.note_peak(sensors)
         if motion.settling is None:
+            motion.keep_to_checked()
             motion.advance()
             marks = motion.marks
             while motion.next_mark < len(marks) and marks[motion.next_mark][0] <= motion.s:
@@ -210,7 +177,8 @@ class Executor:
             if motion.s >= motion.last and not motion.next_segment():
                 if not (motion.compliance is not None and motion.compliance.holding):
                     motion.settling = motion.end_as or "done"
-            elif motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused:
+            elif (motion.target_rate == 0.0 and motion.rate == 0.0 and not motion.paused
+                  and not motion.awaiting):
                 motion.settling = motion.end_as or ("aborted" if motion.abort_when_paused
                                                     else "paused")
             if motion.settling == "done" and self._settling_force(motion):
@@ -282,18 +250,6 @@ class Executor:
             motion.outcome["message"] = compliance.problem
             brake(motion, "failed")
 
-    @staticmethod
-    def _peak(motion: Motion, sensors) -> None:
-        """A guard that fired: the reading furthest past its threshold since (each watched
-        component, signed as read), for the final report ("peak")."""
-        guard = motion.stopped_by
-        value = guard.reading(sensors)
-        report = motion.outcome["guard"]
-        peak = np.array(report.get("peak", value), dtype=float)
-        further = guard.watched & (np.sign(guard.thresholds) * (value - peak) > 0)
-        peak[further] = value[further]
-        report["peak"] = peak.tolist()
-
     def _settling_force(self, motion: Motion) -> bool:
         """Whether a motion braked on a force threshold settles its force now (starting
         that once it is at a stop: ForceSettle)."""
@@ -318,7 +274,7 @@ class Executor:
         `resting`: the loop has ended, the setpoints come to rest on the target."""
         tracker, dt = self._tracker, self.cycle_time
         if tracker is None:
-            past = self._setpoints
+            past = self._record.setpoints
             acceleration = (np.zeros(6) if past is None
                             else (past[0] - 2.0 * past[1] + past[2]) / (dt * dt))
             tracker = self._tracker = PositionTracker(self._hold, dt, self._velocity,
@@ -380,6 +336,11 @@ class Executor:
                 self._end("failed", message="this controller has no arm model for comply")
             else:
                 self._attach(self._motion, msg)
+        elif op == "checked" and motion is not None and motion.id == msg["id"]:
+            motion.checked_to(msg["rows"], msg["all"])
+        elif op == "refused" and motion is not None and motion.id == msg["id"]:
+            if motion.refuse(msg["message"]):
+                self._end("failed", message=msg["message"])
         elif op == "comply" and motion is not None and motion.id == msg["id"]:
             if motion.compliance is None and self._tip is not None:
                 self._attach(motion, {"comply": msg["spec"]})

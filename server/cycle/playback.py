@@ -41,6 +41,7 @@ class Motion:
         self.id = msg["id"]
         self.dt = dt
         self.segments = msg["segments"]   # a sequence; read one segment at a time
+        self.first_row = 0                # the segment's first sample among the run's
         self._load(0)
         # rad/s^2 and rad/s^3 per joint: the ramps' limits, `run_*` to resume, `stop_*` to stop.
         self.run_limit = self.stop_limit = np.asarray(msg["acceleration"], dtype=float)
@@ -66,6 +67,12 @@ class Motion:
         self._step = 0
         self._planner = RampPlanner(dt)
         self._recent = np.tile(self.positions[0], (3, 1))   # the last 3 played, newest first
+        # A run checked against the cell as it plays (run_check.py): its rows checked so far
+        # (None: all) and how many rows a stop may take; `awaiting` while braking or held for
+        # the next stretch.
+        self.checked: int | None = msg.get("checked")
+        self.brake_rows = int(msg.get("brake", 0))
+        self.awaiting = False
 
     def _load(self, index: int) -> None:
         self.segment = index
@@ -82,6 +89,7 @@ class Motion:
         at the next one's start (the same place, at rest) rather than ending."""
         if self.segment + 1 >= len(self.segments):
             return False
+        self.first_row += len(self.positions)
         self._load(self.segment + 1)
         # The last one ended at rest: this one starts as planned, or waits there.
         self.rate, self.rate_change, self._ramp = self.target_rate, 0.0, None
@@ -113,6 +121,7 @@ class Motion:
     def stop(self, acceleration: np.ndarray | None = None, jerk: np.ndarray | None = None
              ) -> None:
         """Slow down to rest along the path (at the stop limits, or those given), then wait."""
+        self.awaiting = False   # a stop asked for: paused (or ended) at rest, not resumed
         self.target_rate = 0.0
         self._braking = (self.stop_limit if acceleration is None else acceleration,
                          self.stop_jerk if jerk is None else jerk)
@@ -121,6 +130,34 @@ class Motion:
         """Speed up again along the path (at the run limits) to the planned pace."""
         self.paused = False
         self.target_rate = 1.0
+
+    # ---- a run checked as it plays ----------------------------------------------------------
+
+    def keep_to_checked(self) -> None:
+        """Brake along the path in time to rest before the rows not checked yet (the cycle
+        never waits for them: it slows down, and goes on once they are checked)."""
+        if (self.checked is not None and not self.awaiting and self.target_rate == 1.0
+                and self.first_row + self.s + self.brake_rows >= self.checked):
+            self.awaiting = True
+            self.target_rate = 0.0
+            self._braking = (self.stop_limit, self.stop_jerk)
+
+    def checked_to(self, rows: int, everything: bool) -> None:
+        """The rows up to `rows` are checked (`everything`: all of them): a play held for them
+        goes on."""
+        self.checked = None if everything else rows
+        if self.awaiting and (self.checked is None
+                              or self.first_row + self.s + self.brake_rows < self.checked):
+            self.awaiting = False
+            self.target_rate = 1.0
+
+    def refuse(self, message: str) -> bool:
+        """A later stretch was refused: brake along the path, to fail with `message` at rest;
+        True if the play is paused (at rest already: it fails now)."""
+        self.outcome["message"] = message
+        if not self.paused and self.settling is None:
+            brake(self, "failed")
+        return self.paused
 
     @property
     def ramping(self) -> bool:
@@ -154,6 +191,18 @@ class Motion:
                                   self.rate_change, self.target_rate, acceleration, jerk)
         if ramp is not None:
             self._ramp, self._step = ramp, 0
+
+
+    def note_peak(self, sensors) -> None:
+        """A guard that fired: the reading furthest past its threshold since (each watched
+        component, signed as read), for the final report ("peak")."""
+        guard = self.stopped_by
+        value = guard.reading(sensors)
+        report = self.outcome["guard"]
+        peak = np.array(report.get("peak", value), dtype=float)
+        further = guard.watched & (np.sign(guard.thresholds) * (value - peak) > 0)
+        peak[further] = value[further]
+        report["peak"] = peak.tolist()
 
 
 def brake(motion: Motion, end_as: str) -> None:

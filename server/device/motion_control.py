@@ -38,7 +38,7 @@ from landscape.server.events import alarms
 from landscape.server.events.bus import EventBus, Phase, Severity
 from landscape.server.link.clock import CycleProcessError
 from landscape.server.link.controller_link import ControllerLink
-from landscape.server.planning import aux_commands
+from landscape.server.planning import aux_commands, run_check
 from landscape.server.planning.collision import CheckResult, CollisionScene
 from landscape.server.planning.moves import Planner
 from landscape.server.planning.paths import PathLibrary, PathStore
@@ -82,6 +82,9 @@ class MotionControl:
         self._changed = threading.Condition()
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
+        # s: each later stretch of a path waits this long before it is checked (tests make a
+        # stretch late with it: the arm then slows along the path, run_check.py).
+        self.check_ahead_delay = 0.0
         # Long paths are planned beside a cycle process in a process of their own as well.
         self.planning = (PlanningProcess(collisions, link.cycle_time, self._planning_lost)
                          if link.clock_kind in PROCESS_CLOCKS
@@ -162,13 +165,25 @@ class MotionControl:
         path = self.paths.get(name)
         if path is None:
             raise NotFound(f"no path named {name!r}")
-        trajectories = self.planning.run("plan_path_run", path, self.planning_start(),
-                                         settings or self.settings.current, cycles,
-                                         f"PathMove {name}")
+        key = f"run-{next(self._ids)}"
+        trajectories, checked, brake = self.planning.run(
+            "plan_path_start", key, path, self.planning_start(),
+            settings or self.settings.current, cycles, f"PathMove {name}")
         tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
         aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
                                       if p.aux_commands}
-        return self.start("PathMove", name, trajectories, tags, aux, checked=True)
+        rows = sum(len(t) for t in trajectories)
+        try:
+            motion = self._start("PathMove", name, trajectories, tags, aux, checked=True,
+                                 ahead=(checked, brake) if checked < rows else None)
+        except BaseException:
+            self.planning.run("drop_run", key)
+            raise
+        if checked < rows:   # the rest is checked while the path plays (run_check.py)
+            run_check.following(self.planning, key, motion.command_id, checked, rows,
+                                self.send, lambda: self._motion is motion,
+                                lambda: self.check_ahead_delay)
+        return motion.command_id
 
     # ---- starting ----------------------------------------------------------------------------
 
@@ -192,15 +207,17 @@ class MotionControl:
                            loops=loops, finish=finish, checked=checked).command_id
 
     def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
-               loops=None, finish=None, checked=False) -> RunningMotion:
+               loops=None, finish=None, checked=False, ahead=None) -> RunningMotion:
+        """start(); `ahead`: (rows checked, brake rows) of a run checked as it plays."""
         if not checked:
             self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
         arrays = self.link.share(pack_run(trajectories, self.planner.dt))
         motion = RunningMotion(f"{command}-{next(self._ids)}", command, point_name, tags or {},
                                aux or {}, arrays, finish=finish)
+        unchecked = {} if ahead is None else {"checked": ahead[0], "brake": ahead[1]}
         try:
             self._begin(motion, {"op": "run", "id": motion.command_id, "arrays": arrays,
-                                 **self._ramps(), **(loops or {})})
+                                 **self._ramps(), **(loops or {}), **unchecked})
         except BaseException:
             arrays.discard()
             raise

@@ -6,6 +6,7 @@ import math
 import numpy as np
 
 from landscape.server.errors import OutOfRange, ParamError, Unreachable
+from landscape.server.planning.joint_line import time_joint_line
 from landscape.server.planning.motion.cartesian import MAX_SAMPLES, arc, circle, straight_line, tool_pose
 from landscape.server.planning.motion.timing import duration_lower_bound, time_path
 from landscape.server.planning.motion.trajectory import Limits, PlanningError, Reason, Trajectory
@@ -93,8 +94,18 @@ class Planner:
                               f"is at most {longest:.4g} m long", reason_code="OUT_OF_WORKSPACE",
                               field="arc_value", maximum=f"{longest:.4g} m")
 
-    def joint_move(self, q_now, q_goal, limits: Limits) -> Trajectory:
-        return self.timed(np.array([q_now, check_joints(self.arm, q_goal)]), limits)
+    def joint_move(self, q_now, q_goal, limits: Limits,
+                   max_duration: float = MAX_MOTION_SECONDS) -> Trajectory:
+        """The straight joint-space line to q_goal within max_duration (s): ruckig's
+        jerk-limited optimum (joint_line.py), or time_path where that does not apply."""
+        waypoints = np.array([q_now, check_joints(self.arm, q_goal)])
+        check_duration(waypoints, limits, max_duration)
+        try:
+            line = time_joint_line(waypoints[0], waypoints[1], limits, self.dt, max_duration)
+        except PlanningError as error:
+            raise _unreachable(error) from None
+        return line if line is not None else self.timed(waypoints, limits,
+                                                        max_duration=max_duration)
 
     def pose_goal_joints(self, q_now, flange_goal: np.ndarray, field: str = "values"
                          ) -> np.ndarray:

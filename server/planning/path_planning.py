@@ -22,7 +22,7 @@ as they allow.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -169,8 +169,7 @@ def _approach(planner: Planner, q_from: np.ndarray, q_to: np.ndarray, settings,
               max_duration: float) -> list[Trajectory]:
     if np.max(np.abs(q_from - q_to)) < 1e-9:
         return []
-    move = planner.timed(np.array([q_from, q_to]), planner.limits(settings, None),
-                         max_duration=max_duration)
+    move = planner.joint_move(q_from, q_to, planner.limits(settings, None), max_duration)
     return [Trajectory(move.dt, move.positions, move.velocities)]   # no marks: no points here
 
 
@@ -216,11 +215,16 @@ def _plan_points(planner: Planner, path: StoredPath, stretches, max_duration: fl
     """From point 0 through the last point, dwells included; marks labelled by point index;
     the whole within max_duration (s)."""
     points = path.points
-    # Point 0 is reached by the approach: its mark sits on a hold there (with its dwell, if any).
-    pieces = [_hold(planner.dt, points[0].joints, points[0].time_delay, mark=0)]
+    # Point 0 is reached by the approach: its mark sits on a hold there if it has a dwell (or
+    # is the only point), else on the first stretch's first sample: a hold of its own would
+    # cost the run's first cycle (it moves on the cycle that takes it).
+    held = points[0].time_delay > 0 or not stretches
+    pieces = [_hold(planner.dt, points[0].joints, points[0].time_delay, mark=0)] if held else []
     left = max_duration - sum(p.time_delay for p in points)
     for start, end, limits in stretches:
         piece = _time_stretch(planner, path, points[start:end + 1], limits, start, left)
+        if not pieces:
+            piece = replace(piece, marks=((0, 0), *piece.marks))
         pieces.append(piece)
         left -= piece.duration
         if points[end].time_delay > 0:

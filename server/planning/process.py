@@ -32,7 +32,7 @@ from typing import Callable
 import numpy as np
 from google.protobuf.message import DecodeError
 
-from landscape.server.planning import path_planning
+from landscape.server.planning import path_planning, run_check
 from landscape.server.planning.collision import CheckResult, CollisionScene, check_motion
 from landscape.server.api.convert import PathLoadStream
 from landscape.server.errors import Collision, Internal, ParamError
@@ -78,12 +78,13 @@ def check_run(scene: CollisionScene, trajectories: list, what: str = "the motion
 
 @dataclass
 class PlanningContext:
-    """What the jobs work with: the arm, the cell's collision scene, and the open PathLoad
-    streams by key."""
+    """What the jobs work with: the arm, the cell's collision scene, the open PathLoad
+    streams and the runs being checked ahead, by key."""
 
     planner: Planner
     scene: CollisionScene
     streams: dict[str, PathLoadStream] = field(default_factory=dict)
+    runs: dict[str, run_check.RunCheck] = field(default_factory=dict)   # checked ahead
 
     def stream(self, key: str) -> PathLoadStream:
         stream = self.streams.get(key)
@@ -148,8 +149,44 @@ def plan_path_run(ctx: PlanningContext, path: StoredPath, q_start: np.ndarray,
     return trajectories
 
 
+def plan_path_start(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
+                    settings: MotionSettings, cycles: int, what: str
+                    ) -> tuple[list, int, int]:
+    """plan_path_run with only its first stretch checked against the cell (run_check.py):
+    (trajectories, rows checked, brake rows); the rest waits under `key` for
+    check_path_ahead."""
+    trajectories = path_planning.plan_run(ctx.planner, path, q_start, settings, cycles)
+    arm = ctx.planner.arm
+    brake = run_check.brake_rows(trajectories, ctx.planner.dt,
+                                 np.asarray(arm.max_acceleration), np.asarray(arm.max_jerk))
+    run = ctx.runs[key] = run_check.RunCheck(trajectories, what)
+    checked = min(run.rows, brake + run_check.LEAD)
+    check_path_ahead(ctx, key, 0, checked)
+    return trajectories, checked, brake
+
+
+def check_path_ahead(ctx: PlanningContext, key: str, start: int, stop: int) -> None:
+    """Rows start to stop of a run plan_path_start planned, checked against the cell as it is
+    now; the run is forgotten after its last rows or a refusal."""
+    run = ctx.runs.get(key)
+    if run is None:   # the planning process holding it ended, and another started
+        raise Internal("the rest of this run was lost with the planning process that held it")
+    try:
+        run.check(ctx.scene, start, stop)
+    except Exception:
+        ctx.runs.pop(key, None)
+        raise
+    if stop >= run.rows:
+        ctx.runs.pop(key, None)
+
+
+def drop_run(ctx: PlanningContext, key: str) -> None:
+    ctx.runs.pop(key, None)
+
+
 JOBS = {job.__name__: job for job in (open_stream, feed_stream, finish_stream, load_path,
-                                      plan_path_run)}
+                                      plan_path_run, plan_path_start, check_path_ahead,
+                                      drop_run)}
 _keys = itertools.count(1)
 
 
@@ -173,13 +210,16 @@ class _Planning:
 
 
 class InProcessPlanning(_Planning):
-    """The jobs on the calling thread, with the server's planner and scene."""
+    """The jobs on the calling thread, with the server's planner and scene, one at a time (a
+    path's later stretches are checked on a thread of their own: run_check.follow)."""
 
     def __init__(self, planner: Planner, scene: CollisionScene):
         self.context = PlanningContext(planner, scene)
+        self._lock = threading.Lock()
 
     def run(self, job: str, *args):
-        return JOBS[job](self.context, *args)
+        with self._lock:
+            return JOBS[job](self.context, *args)
 
     def drop_stream(self, key: str) -> None:
         self.context.streams.pop(key, None)

@@ -117,24 +117,31 @@ def test_a_path_run_checks_each_of_its_pieces_once_whatever_its_cycles(arm):
     assert many.configurations == two.configurations
 
 
-def test_a_refusal_in_a_later_piece_says_where_in_the_whole_motion(arm):
+def test_a_refusal_in_a_later_piece_stops_the_arm_on_the_path_and_fails_the_motion(arm):
     """The way back from the last point to the first (joints straight from b to a) sweeps
-    through the table: the second piece of a two-cycle run. Time, sample, fraction and the
-    message count from the start of the whole run."""
+    through the table: the second piece of a two-cycle run. A run is checked against the cell
+    as it plays (issue 31 item 4): it starts, the later piece is refused while the arm moves,
+    and the arm comes to rest on the path before it; the motion fails with the refusal, which
+    says where in the whole run (time and fraction counted from its start), and an alarm
+    names it."""
     a, _ = _around(arm)
     run, first_pass = _plan_run(arm, "around", 2), _plan_run(arm, "around", 1)
     dt = run[0].dt
-    with pytest.raises(grpc.RpcError) as refused:
-        arm.device.PathMove(motion_pb2.PathMoveRequest(path_name="around", number_of_cycles=2))
-    assert refused.value.code() is grpc.StatusCode.FAILED_PRECONDITION
-    where = error_info(refused.value).metadata
-    assert where["body_b"] == "table"
-    time, sample, fraction = float(where["time"]), int(where["sample"]), float(where["fraction"])
+    reply = arm.device.PathMove(motion_pb2.PathMoveRequest(path_name="around",
+                                                           number_of_cycles=2))
+    events = arm.wait_command(reply.ret_val.command_id)
+    failed = events[-1]
+    assert failed.event_id == "command_failed", failed
+    assert "table" in failed.command.message and "% of the motion" in failed.command.message
+    time = float(failed.command.message.split("at t = ")[1].split(" s")[0])
     assert time > (sum(len(t) for t in first_pass) - 1) * dt      # after the first pass
-    assert sample == pytest.approx(time / dt, abs=1)
-    assert fraction == pytest.approx(time / ((sum(len(t) for t in run) - 1) * dt), abs=1e-3)
-    assert f"{100 * fraction:.1f} % of the motion" in refused.value.details()
-    assert np.allclose(arm.joints(), a, atol=1e-4)           # nothing moved
+    assert arm.server.device.state is State.RESTING
+    played = np.concatenate([t.positions for t in run])
+    nearest = np.argmin(np.abs(played - arm.joints()).max(axis=1))
+    assert np.abs(played[nearest] - arm.joints()).max() < 1e-3       # at rest on the path
+    assert nearest < round(time / dt)                                # before the contact
+    alarms = [e for e in arm.history() if e.event_id == "alarm" and "table" in e.detail.message]
+    assert alarms, "no alarm named the refusal"
 
 
 SLOT = np.array([-0.1, -0.6, 0.461])    # the gripper's plate in its rack slot (world), down

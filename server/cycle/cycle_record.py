@@ -1,0 +1,59 @@
+"""Each cycle's record: its row of the feedback ring (feedback.py), with the arm model's
+torques for the motion the drives just played (arm_dynamics.py). The Executor (executor.py)
+computes the cycle; this writes down what it commanded and what it read."""
+from __future__ import annotations
+
+import numpy as np
+
+from landscape.robot.controller import EstopState
+from landscape.server.cycle.feedback import (CMD, ENABLE, ESTOP, IO, MODEL_TAU, QD, SENSORS, SEQ,
+                                             TAU, TIME, WALL, WIDTH, Q, FeedbackRing)
+
+
+class CycleRecord:
+    """`ring` receives a row per cycle (None: nothing is written); `dynamics` (ArmDynamics,
+    or None) computes the model torques in it."""
+
+    def __init__(self, ring: FeedbackRing | None, cycle_time: float, dynamics=None):
+        self.ring, self.cycle_time, self.dynamics = ring, cycle_time, dynamics
+        self.sequence = ring.head + 1 if ring is not None else 0   # goes on after a restart
+        self.setpoints: np.ndarray | None = None   # (3, 6): the last three cycles', newest first
+        self._row = np.full(WIDTH, np.nan)
+
+    def model_torques(self, fbk, pos: np.ndarray) -> np.ndarray | float:
+        """The arm model's torques for the cycle the drives just played: they went from the
+        setpoint of two cycles ago to last cycle's (linearly, LLI 5.3.12), so the commanded
+        acceleration is the second difference of the last three setpoints. Then `pos` (this
+        cycle's) becomes the newest."""
+        past = self.setpoints
+        if past is None:
+            past = self.setpoints = np.tile(fbk.pos, (3, 1))
+        model = np.nan
+        if self.dynamics is not None:
+            acceleration = (past[0] - 2.0 * past[1] + past[2]) / (self.cycle_time ** 2)
+            model = self.dynamics.torques(fbk.pos, fbk.vel, acceleration)
+        past[1:] = past[:2].copy()
+        past[0] = pos
+        return model
+
+    def set_payload(self, parameters) -> None:
+        """What the flange carries now (10 dynamic parameters, arm_dynamics.py)."""
+        if self.dynamics is not None:
+            self.dynamics.set_payload(parameters)
+
+    def write(self, ctrl, fbk, pos, state, wall: float, sensors, io_image, model) -> None:
+        """This cycle's row, stamped `wall` (unix s); then the sequence goes on."""
+        if self.ring is None:
+            return
+        row = self._row
+        row[SEQ] = self.sequence
+        row[TIME] = getattr(ctrl, "time", 0.0)
+        row[WALL] = wall
+        row[Q], row[QD], row[CMD], row[TAU] = fbk.pos, fbk.vel, pos, fbk.torque
+        row[ENABLE] = int(state.enable)
+        row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
+        row[SENSORS] = sensors
+        row[IO] = io_image
+        row[MODEL_TAU] = model
+        self.ring.write(self.sequence, row)
+        self.sequence += 1

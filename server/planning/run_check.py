@@ -1,0 +1,110 @@
+"""A path run checked against the cell in stretches, ahead of where the arm plays it (issue 31
+item 4): the run starts once its first rows are checked, and the rest is checked while it
+plays (motion_control.py sends each stretch's end to the cycle, which brakes along the path
+before rows not yet checked: playback.py).
+
+How far ahead is enough: `brake_rows`, an upper bound on the rows the arm travels while it
+brakes along the path from anywhere in the run at the stop limits, so the first stretch is
+that many rows plus LEAD (what the cycle plays while the next stretch is checked).
+
+`RunCheck` is the planning process's side (process.py's jobs), `follow` the server's: it has
+the later stretches checked one after the other and tells the cycle where each ends, or that
+one was refused (the cycle then brakes along the path and the motion fails with the refusal).
+"""
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from typing import Callable
+
+import numpy as np
+
+from landscape.server.errors import Collision, CommandError
+from landscape.server.planning.collision import CollisionScene, check_motion
+
+LEAD = 50       # rows (200 ms at 4 ms) played while the next stretch is checked
+STRETCH = 500   # rows checked by each later job
+# A stop ramp may be planned at reduced bounds (ramps.py: down to 0.36 of them) and late by a
+# few cycles: the bound below is three times the braking time at full bounds, plus SPARE rows.
+BRAKE_FACTOR = 3.0
+SPARE = 8
+
+log = logging.getLogger(__name__)
+
+
+def brake_rows(trajectories: list, dt: float, acceleration: np.ndarray,
+               jerk: np.ndarray) -> int:
+    """Rows (samples at rate 1) the play may advance while it brakes from any sample of the
+    run: a joint at v rad/s stops within v / a + a / j s at acceleration a and jerk j, and
+    the play moves at most one row per cycle meanwhile."""
+    fastest = max(float(np.max(np.abs(t.velocities) / acceleration)) for t in trajectories)
+    seconds = fastest + float(np.max(acceleration / jerk))
+    return int(math.ceil(BRAKE_FACTOR * seconds / dt)) + SPARE
+
+
+class RunCheck:
+    """The rows of a run (back-to-back trajectories, as played) checked stretch by stretch:
+    `check(scene, start, stop)` raises Collision naming where in the whole run. A piece that
+    comes again (the cycles of a path run) is checked once."""
+
+    def __init__(self, trajectories: list, what: str):
+        self.trajectories, self.what = trajectories, what
+        self.rows = sum(len(t) for t in trajectories)
+        self._done: dict[int, int] = {}   # id(piece) -> its rows checked so far
+
+    def check(self, scene: CollisionScene, start: int, stop: int, model=None) -> None:
+        model = model or scene.model()
+        first = 0
+        for piece in self.trajectories:
+            lo, hi = max(start - first, 0), min(stop - first, len(piece))
+            done = self._done.get(id(piece), 0)
+            if lo < hi and done < hi:
+                self._check_piece(model, piece, max(lo, done - 1, 0), hi, first)
+                self._done[id(piece)] = hi
+            first += len(piece)
+
+    def _check_piece(self, model, piece, lo: int, hi: int, first: int) -> None:
+        marks = tuple((s - lo, label) for s, label in piece.marks if lo <= s < hi)
+        # A stretch that continues a piece starts on its last checked row: a pair within the
+        # margin there was refused already, so none may count as "leaving" (check_motion).
+        result = check_motion(model, piece.positions[lo:hi], piece.dt, marks,
+                              allow_leaving=lo == 0)
+        if result.contact is not None:
+            contact = result.contact.within(first + lo, self.rows, piece.dt)
+            raise Collision(f"{self.what} would collide: {contact}", **contact.metadata())
+
+
+def following(*args) -> threading.Thread:
+    """`follow(*args)` on a thread of its own, started."""
+    thread = threading.Thread(target=follow, args=args, name=f"check {args[2]}", daemon=True)
+    thread.start()
+    return thread
+
+
+def follow(planning, key: str, command_id: str, checked: int, rows: int,
+           send: Callable[[dict], None], running: Callable[[], bool],
+           delay: Callable[[], float] = lambda: 0.0) -> None:
+    """The server's side: rows `checked` to `rows` of the run under
+    `key` checked by `planning` (process.py) STRETCH rows at a time, each stretch's end sent to
+    the cycle as {"op": "checked", "id", "rows", "all"}, a refusal as {"op": "refused", "id",
+    "message"}; stops once the motion no longer `running()`. `delay()`: seconds to wait before
+    each stretch (0 in service; tests make a stretch late with it: MotionControl's
+    check_ahead_delay)."""
+    try:
+        while checked < rows:
+            time.sleep(delay())
+            if not running():
+                planning.run("drop_run", key)
+                return
+            stop = min(rows, checked + STRETCH)
+            planning.run("check_path_ahead", key, checked, stop)
+            checked = stop
+            send({"op": "checked", "id": command_id, "rows": checked,
+                  "all": checked >= rows})
+    except CommandError as refusal:   # a collision, or the planning process lost
+        try:
+            send({"op": "refused", "id": command_id, "message": refusal.message})
+        except CommandError as gone:   # the controller is gone: the motion failed already
+            log.warning("refusal of %s not sent: %s", command_id, gone)

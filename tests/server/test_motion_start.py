@@ -1,0 +1,167 @@
+"""Issue 31 item 4: motion that starts in a cycle. On the lock-step clock, read on the feedback
+ring (one row per cycle): the cycle that takes a run from the server already moves the arm."""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from landscape.server.cycle.feedback import CMD, WALL
+from landscape.v1 import motion_pb2, types_pb2
+
+from support import Arm, wait_until
+
+JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
+HOME = [0.0, 0.3, 1.4, 0.0, 0.9, 0.0]
+
+
+@pytest.fixture
+def fast(tmp_path):
+    """The kinematic backend: the arm follows its setpoints exactly, fast."""
+    a = Arm(tmp_path, backend="kinematic")
+    yield a
+    a.close()
+
+
+def started_cycles(arm) -> list[float]:
+    """The tick stamps of the cycles that took a run (the executor's "started" reports)."""
+    stamps: list[float] = []
+    device = arm.server.device
+    original = device.on_cycle_message
+
+    def spy(msg):
+        if isinstance(msg, dict) and msg.get("op") == "started":
+            stamps.append(msg["wall_time"])
+        original(msg)
+    device.on_cycle_message = spy
+    return stamps
+
+
+def setpoint_step(arm, wall_time: float) -> float:
+    """How far the setpoint moved on the cycle stamped `wall_time` (rad, the largest joint)."""
+    ring = arm.server.link.feedback
+    wait_until(lambda: ring.row(ring.head)[WALL] > wall_time)
+    seq = ring.head
+    while ring.row(seq)[WALL] > wall_time:
+        seq -= 1
+    assert ring.row(seq)[WALL] == wall_time
+    return float(np.max(np.abs(ring.row(seq)[CMD] - ring.row(seq - 1)[CMD])))
+
+
+def run(arm, call) -> None:
+    reply = call()
+    assert arm.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+
+
+def at_first_point(arm, name: str, points: list, transition: float) -> list:
+    """A blended joint path through `points` loaded as `name`, the arm moved to its first
+    point; the points."""
+    header = motion_pb2.PathHeader(path_name=name, frame=JOINT,
+                                   motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                   offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+    arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=[
+        types_pb2.TagStruct(joint_values=q, transition_speed=transition) for q in points])]),
+        timeout=60)
+    run(arm, lambda: arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        frame=JOINT, values=points[0]), timeout=30))
+    return points
+
+
+def long_path(arm, name: str, count: int) -> list:
+    """A blended path of `count` joint points around HOME, loaded, the arm at its start."""
+    return at_first_point(arm, name, [
+        [0.4 * np.sin(i / 9), 0.3 + 0.15 * np.sin(i / 13), 1.4 + 0.1 * np.cos(i / 11),
+         0.2 * np.sin(i / 7), 0.9, 0.0] for i in range(count)], 60)
+
+
+def test_a_joint_move_and_a_path_from_its_first_point_move_on_the_cycle_that_takes_them(fast):
+    at_first_point(fast, "ring", [[0.3 * np.sin(i / 5), 0.3 + 0.1 * np.sin(i / 7), 1.4, 0.0,
+                                   0.9, 0.0] for i in range(12)], 40)
+    stamps = started_cycles(fast)
+    run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="ring"),
+                                           timeout=30))
+    run(fast, lambda: fast.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
+        frame=JOINT, values=HOME), timeout=30))
+    assert len(stamps) == 2
+    path_step, move_step = (setpoint_step(fast, stamp) for stamp in stamps)
+    assert path_step > 0.0, "the path's first cycle held the arm where it was"
+    assert move_step > 0.0, "the move's first cycle held the arm where it was"
+
+
+def sent_to_cycle(arm) -> list[tuple[dict, np.ndarray]]:
+    """The run and stretch messages the server sends the cycle, each with the newest cycle's
+    setpoint when it was sent (where the arm was then)."""
+    sent: list[tuple[dict, np.ndarray]] = []
+    link = arm.server.device.motions.link
+    original = link.send
+
+    def spy(message):
+        if isinstance(message, dict) and message.get("op") in ("run", "checked", "refused"):
+            sent.append(({k: v for k, v in message.items() if k != "arrays"},
+                         link.feedback.latest().command.copy()))
+        original(message)
+    link.send = spy
+    return sent
+
+
+def test_a_long_path_moves_before_its_last_stretch_is_checked(fast):
+    """240 blended points: the run is handed to the cycle with its first stretch checked, and
+    the arm has left its start when the last stretch's check is sent (read on the ring at that
+    moment: the planner's own progress against the arm's)."""
+    points = long_path(fast, "long", 240)
+    fast.server.device.motions.check_ahead_delay = 0.05
+    sent = sent_to_cycle(fast)
+    run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="long"),
+                                           timeout=30))
+    (start, _), *stretches = sent
+    assert start["op"] == "run" and start["checked"] > 0
+    assert [m["op"] for m, _ in stretches] == ["checked"] * len(stretches) and stretches
+    assert [m["rows"] for m, _ in stretches] == sorted(m["rows"] for m, _ in stretches)
+    _, where = stretches[-1]
+    assert np.abs(where - np.array(points[0])).max() > 1e-3, "the arm had not left its start"
+    assert np.allclose(fast.joints(), points[-1], atol=1e-4)
+
+
+def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
+    """Each later stretch's check waits 0.3 s (check_ahead_delay): the lock-step cycle runs
+    far ahead meanwhile, so the arm brakes to rest before the rows not checked, and goes on
+    when they are. Every cycle keeps the velocity, acceleration and jerk limits, and every
+    setpoint lies on the planned path; the motion ends done at the last point."""
+    from landscape.server.planning import path_planning
+    points = long_path(fast, "late", 240)
+    motions = fast.server.device.motions
+    planned = np.concatenate([t.positions for t in path_planning.plan_run(
+        motions.planner, motions.paths.get("late"), motions.planning_start(),
+        fast.server.device.settings, 1)])
+    motions.check_ahead_delay = 0.3
+    fast.record_start()
+    run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="late"),
+                                           timeout=60))
+    cmd = fast.recorded_tips()[1]["cmd_pos"]
+    model = fast.server.device.arm
+    dt = 0.004
+    for order, limit in ((1, model.max_velocity), (2, model.max_acceleration),
+                         (3, model.max_jerk)):
+        peak = (np.abs(np.diff(cmd, order, axis=0)).max(axis=0) / dt**order / np.array(limit))
+        assert peak.max() <= 1 + 1e-6, (order, peak)
+    # On the path: each setpoint within a hair of the planned samples' polyline.
+    steps = np.linalg.norm(np.diff(cmd, axis=0), axis=1)
+    for q in cmd:
+        k = int(np.argmin(np.linalg.norm(planned - q, axis=1)))
+        assert _on_chords(planned[max(k - 2, 0):k + 3], q, 1e-4), q
+    # It slowed down to rest mid-path (held for the late stretch) and went on.
+    moving = np.flatnonzero(steps > 1e-9)
+    middle = steps[moving[0]:moving[-1]]
+    assert (middle < 1e-9).sum() >= 10, "the arm never waited for a late stretch"
+    assert np.allclose(fast.joints(), points[-1], atol=1e-4)
+
+
+def _on_chords(near: np.ndarray, q: np.ndarray, tolerance: float) -> bool:
+    """Whether q lies within `tolerance` (rad) of the chords between consecutive rows."""
+    for a, b in itertools.pairwise(near):
+        d = b - a
+        t = np.clip(np.dot(q - a, d) / max(np.dot(d, d), 1e-30), 0.0, 1.0)
+        if np.linalg.norm(a + t * d - q) < tolerance:
+            return True
+    return False
