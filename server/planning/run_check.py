@@ -104,7 +104,14 @@ def follow(planning, key: str, command_id: str, checked: int, rows: int,
             send({"op": "checked", "id": command_id, "rows": checked,
                   "all": checked >= rows})
     except CommandError as refusal:   # a collision, or the planning process lost
-        try:
-            send({"op": "refused", "id": command_id, "message": refusal.message})
-        except CommandError as gone:   # the controller is gone: the motion failed already
-            log.warning("refusal of %s not sent: %s", command_id, gone)
+        _refuse(send, command_id, refusal.message)
+    except Exception as error:   # never a silent end: the arm would wait at rest for rows
+        log.exception("checking %s ahead of the arm failed", command_id)
+        _refuse(send, command_id, f"internal error checking the path ahead: {error!r}")
+
+
+def _refuse(send: Callable[[dict], None], command_id: str, message: str) -> None:
+    try:
+        send({"op": "refused", "id": command_id, "message": message})
+    except CommandError as gone:   # the controller is gone: the motion failed already
+        log.warning("refusal of %s not sent: %s", command_id, gone)
