@@ -1,5 +1,5 @@
-"""Live state, watchers and motion start (issue 12), each beside a baseline measured in the same
-run. Prints figures, no pass/fail.
+"""Live state and watchers (issue 12), each beside a baseline measured in the same run. Prints
+figures, no pass/fail. Command to motion (send -> first moving cycle) is bench_motion_start's.
 
 - State fan-out: 50 StateService.StreamState subscribers at 250 Hz while a path runs: samples
   per second per subscriber, gaps, p99 sample age (receive - the cycle's time), cycle overruns
@@ -7,9 +7,6 @@ run. Prints figures, no pass/fail.
   every 4 ms to 50 subscribers.
 - 1,000 idle event subscribers: the server's resident memory, and the unary call latency
   (GetDeviceState) beside them, against the latency with none.
-- Command to motion: from the call to the first moving cycle (the cycle's own time stamp, as
-  the cycle process took it) and to the client seeing it on the state stream, p50/p99, for a
-  joint MoveAbsolute and a 100-point PathMove; baseline: a bare unary echo's round trip.
 - Event latency: tag events of a path from the cycle that passed the tag to 1 and 50
   subscribers, p50/p99; baseline: a bare stream stamped and sent on a 4 ms tick.
 
@@ -28,11 +25,9 @@ import statistics
 import time
 
 import grpc
-import numpy as np
 from common import BareServer, in_child, pct, record
 from google.protobuf import wrappers_pb2
 
-from landscape.client import AsyncSession
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
 from landscape.server.api.stream_caps import DEFAULT_CAPS, Cap
@@ -159,71 +154,6 @@ async def unary_latency(target: str, n: int, bare: bool):
             began = time.perf_counter()
             await call(request)
             out.append((time.perf_counter() - began) * 1000)
-        return out
-
-
-async def motion_starts(target: str, runs: int):
-    """A lock holder that starts motions and times them on the state stream: per run and kind,
-    (call -> first moving cycle, call -> the client sees it), ms."""
-    async with grpc.aio.insecure_channel(target) as channel, \
-            AsyncSession(channel, "bench") as session:
-        await session.lock()
-        device = device_service_pb2_grpc.DeviceServiceStub(channel)
-        md = session.metadata()
-        await device.Activate(control_pb2.ActivateRequest(), metadata=md)
-        stream = state_service_pb2_grpc.StateServiceStub(channel).StreamState(
-            state_service_pb2.StreamStateRequest(units=types_pb2.Units(
-                linear=types_pb2.LINEAR_UNIT_METERS, angular=types_pb2.ANGULAR_UNIT_RADIANS)))
-        samples = stream.__aiter__()
-
-        async def first_moving(rest, began):
-            while True:
-                sample = (await samples.__anext__()).sample
-                if not sample.ListFields():
-                    continue
-                if np.max(np.abs(np.array(sample.commanded_positions) - rest)) > 1e-7:
-                    return ((sample.time.ToNanoseconds() / 1e9 - began) * 1000,
-                            (time.time() - began) * 1000)
-
-        async def at_rest(since: float = 0.0):
-            """The commanded joints once a cycle after `since` (wall time, s) shows the device
-            resting: samples queued before a motion started would show it resting too."""
-            while True:
-                sample = (await samples.__anext__()).sample
-                if (sample.ListFields() and sample.device_state == types_pb2.DEVICE_STATE_RESTING
-                        and sample.time.ToNanoseconds() / 1e9 > since):
-                    return np.array(sample.commanded_positions)
-
-        ring = [[0.3 * math.sin(i / 15), 0.2 * math.sin(i / 25), 1.5708 + 0.1 * math.cos(i / 20),
-                 0.0, 1.5708, 0.0] for i in range(100)]
-        header = motion_pb2.PathHeader(path_name="bench100", frame=JOINT,
-                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
-                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
-        try:
-            await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=[
-                types_pb2.TagStruct(joint_values=q, transition_speed=40) for q in ring])]),
-                metadata=md)
-        except grpc.aio.AioRpcError:
-            pass   # loaded by an earlier run (paths are kept)
-        out = {"joint move": [], "100-point path": []}
-        for i in range(runs):
-            rest = await at_rest()
-            goal = list(HOME)
-            goal[0] = 0.2 if i % 2 == 0 else -0.2
-            began = time.time()
-            await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=goal),
-                                      metadata=md)
-            out["joint move"].append(await first_moving(rest, began))
-            await at_rest(time.time())
-            await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT,
-                                                                     values=ring[0]), metadata=md)
-            rest = await at_rest(time.time())
-            began = time.time()
-            await device.PathMove(motion_pb2.PathMoveRequest(path_name="bench100"), metadata=md)
-            out["100-point path"].append(await first_moving(rest, began))
-            await at_rest(time.time())
-        stream.cancel()
-        await device.Deactivate(control_pb2.DeactivateRequest(), metadata=md)
         return out
 
 
@@ -370,21 +300,6 @@ def unary_latency_in_child(target: str, is_bare: bool, n: int = 2000):
     return queue.get(timeout=300)
 
 
-def starts(server, bare: BareServer, runs: int):
-    print(f"\ncommand to motion, {runs} runs each, ms p50 / p99:")
-    _, queue = in_child(motion_starts, server.target, runs)
-    out = queue.get(timeout=600)
-    for kind, pairs in out.items():
-        cycle = [c for c, _ in pairs]
-        seen = [s for _, s in pairs]
-        print(f"  {kind:15s}: first moving cycle {pct(cycle, 50):6.2f} / {pct(cycle, 99):6.2f}"
-              f"   client sees it {pct(seen, 50):6.2f} / {pct(seen, 99):6.2f}")
-        record(f"command to first moving cycle p99, {kind}", pct(cycle, 99), "ms",
-               goal=10.0 if kind == "joint move" else 20.0)
-    echo = unary_latency_in_child(bare.target, True, 500)
-    print(f"  baseline, a bare unary echo round trip: {pct(echo, 50):.3f} / {pct(echo, 99):.3f}")
-
-
 def event_latency(server, bare: BareServer, holder: Holder):
     print("\nevent latency, the cycle that passed a tag -> a subscriber receives it, ms:")
     motions = server.device.motions
@@ -422,7 +337,7 @@ def event_latency(server, bare: BareServer, holder: Holder):
         motions.on_report = original
 
 
-SECTIONS = ["fan-out", "events", "idle", "starts"]
+SECTIONS = ["fan-out", "events", "idle"]
 
 
 def main() -> None:
@@ -448,8 +363,6 @@ def main() -> None:
         holder.close()
         if "idle" in args.only:
             idle(server, bare, 200 if args.quick else 1000)
-        if "starts" in args.only:
-            starts(server, bare, 10 if args.quick else 25)
     finally:
         bare.stop()
         server.stop(grace=None)
