@@ -82,8 +82,12 @@ class MotionControl:
         self._changed = threading.Condition()
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
-        # s: each later stretch of a path waits this long before it is checked (tests make a
-        # stretch late with it: the arm then slows along the path, run_check.py).
+        # A path run is checked against the cell as it plays on the real-time clock only: on the
+        # lock-step and fast clocks simulated time outruns a check made in wall time, so the
+        # arm would slow for it (a simulation not as commanded); there the whole run is
+        # checked before it starts. Tests turn it on there, and make a later stretch late by
+        # `check_ahead_delay` s (the arm then slows along the path, run_check.py).
+        self.check_ahead = link.clock_kind == "realtime"
         self.check_ahead_delay = 0.0
         # Long paths are planned beside a cycle process in a process of their own as well.
         self.planning = (PlanningProcess(collisions, link.cycle_time, self._planning_lost)
@@ -168,7 +172,7 @@ class MotionControl:
         key = f"run-{next(self._ids)}"
         trajectories, checked, brake = self.planning.run(
             "plan_path_start", key, path, self.planning_start(),
-            settings or self.settings.current, cycles, f"PathMove {name}")
+            settings or self.settings.current, cycles, f"PathMove {name}", self.check_ahead)
         tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
         aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
                                       if p.aux_commands}

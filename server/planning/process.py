@@ -150,17 +150,17 @@ def plan_path_run(ctx: PlanningContext, path: StoredPath, q_start: np.ndarray,
 
 
 def plan_path_start(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
-                    settings: MotionSettings, cycles: int, what: str
+                    settings: MotionSettings, cycles: int, what: str, ahead: bool = True
                     ) -> tuple[list, int, int]:
-    """plan_path_run with only its first stretch checked against the cell (run_check.py):
-    (trajectories, rows checked, brake rows); the rest waits under `key` for
-    check_path_ahead."""
+    """plan_path_run with only its first stretch checked against the cell (run_check.py),
+    or all of it unless `ahead`: (trajectories, rows checked, brake rows); the rest waits
+    under `key` for check_path_ahead."""
     trajectories = path_planning.plan_run(ctx.planner, path, q_start, settings, cycles)
     arm = ctx.planner.arm
     brake = run_check.brake_rows(trajectories, ctx.planner.dt,
                                  np.asarray(arm.max_acceleration), np.asarray(arm.max_jerk))
     run = ctx.runs[key] = run_check.RunCheck(trajectories, what)
-    checked = min(run.rows, brake + run_check.LEAD)
+    checked = min(run.rows, brake + run_check.LEAD) if ahead else run.rows
     check_path_ahead(ctx, key, 0, checked)
     return trajectories, checked, brake
 

@@ -28,6 +28,16 @@ from test_restart import GatewayProcess, _free_port
 SLOW = '<TransSpeed xsi:type="TransSpeedRelativeType"><Fraction>0.02</Fraction></TransSpeed>'
 
 
+def starve_until_unlocked(gateway, server) -> None:
+    """The gateway's process stopped (no keep-alive goes out) until the device has ended its
+    session and freed the lock."""
+    os.kill(gateway.process.pid, signal.SIGSTOP)
+    try:
+        wait_until(lambda: not server.device.status().locked, timeout=20)
+    finally:
+        os.kill(gateway.process.pid, signal.SIGCONT)
+
+
 @pytest.fixture
 def paced():
     """Motions last as long as on the arm (lock-step at real-time pace)."""
@@ -56,11 +66,7 @@ def test_a_lost_lock_is_an_error_until_init_canon_takes_it_again(paced):
         client.run("SetTransSpeed", 2, SLOW)
         client.send(command("MoveTo", 3, MOVE.format("true") + pose(0.5, 0.3, 0.5)))
         wait_until(lambda: paced.device.state is State.MOVING, timeout=20)
-        os.kill(gateway.process.pid, signal.SIGSTOP)        # no keep-alive goes out
-        try:
-            wait_until(lambda: not paced.device.status().locked, timeout=20)
-        finally:
-            os.kill(gateway.process.pid, signal.SIGCONT)
+        starve_until_unlocked(gateway, paced)
         ended = client.wait_done(3)
         assert field(ended, "CommandState") == "CRCL_Error"
         lost = field(ended, "StateDescription")
@@ -95,11 +101,7 @@ def test_a_lock_lost_during_init_canon_is_its_error_and_the_next_takes_it(paced)
     try:
         client.send(command("InitCanon", 1))
         wait_until(lambda: paced.device.state is State.MOVING, timeout=30)
-        os.kill(gateway.process.pid, signal.SIGSTOP)        # no keep-alive goes out
-        try:
-            wait_until(lambda: not paced.device.status().locked, timeout=20)
-        finally:
-            os.kill(gateway.process.pid, signal.SIGCONT)
+        starve_until_unlocked(gateway, paced)
         ended = client.wait_done(1)
         assert field(ended, "CommandState") == "CRCL_Error", ended
         why = field(ended, "StateDescription")

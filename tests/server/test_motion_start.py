@@ -110,6 +110,7 @@ def test_a_long_path_moves_before_its_last_stretch_is_checked(fast):
     the arm has left its start when the last stretch's check is sent (read on the ring at that
     moment: the planner's own progress against the arm's)."""
     points = long_path(fast, "long", 240)
+    fast.server.device.motions.check_ahead = True   # as on the real-time clock
     fast.server.device.motions.check_ahead_delay = 0.05
     sent = sent_to_cycle(fast)
     run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="long"),
@@ -134,6 +135,7 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
     planned = np.concatenate([t.positions for t in path_planning.plan_run(
         motions.planner, motions.paths.get("late"), motions.planning_start(),
         fast.server.device.settings, 1)])
+    motions.check_ahead = True   # as on the real-time clock
     motions.check_ahead_delay = 0.3
     fast.record_start()
     run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="late"),
