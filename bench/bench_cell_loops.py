@@ -30,7 +30,8 @@ import time
 import numpy as np
 from common import record
 
-from landscape.server.cycle.arm_dynamics import tool_payload
+from landscape.server.cycle.arm_dynamics import ArmDynamics, tool_payload
+from landscape.server.cycle.cycle_record import CycleRecord
 from landscape.server.cycle.inputs import CycleSensors, IoMonitor
 from landscape.server.cycle.executor import Executor
 from landscape.server.cycle.run_arrays import pack_run
@@ -123,14 +124,14 @@ def _figures(label: str, executor_us: np.ndarray, step_us: np.ndarray) -> None:
 
 def _model_torques(cycles: int) -> np.ndarray:
     cell = load_cell()
-    executor = Executor(Mailbox(), cell.controller.cycle_time, None, cell.arm)
-    executor.set_payload(tool_payload(cell.world.tools[0]))
+    cycle = CycleRecord(None, cell.controller.cycle_time, ArmDynamics(cell.arm))
+    cycle.set_payload(tool_payload(cell.world.tools[0]))
     q = np.array(cell.controller.initial_position)
     fbk = JointFbk(q, np.full(6, 0.5), np.zeros(6), np.zeros(6))
     out = []
     for k in range(cycles):
         start = time.perf_counter()
-        executor.model_torques(fbk, q + 1e-3 * (k % 7))
+        cycle.model_torques(fbk, q + 1e-3 * (k % 7))
         out.append(time.perf_counter() - start)
     return np.array(out) * 1e6
 
