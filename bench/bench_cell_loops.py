@@ -32,7 +32,6 @@ from common import record
 
 from landscape.server.cycle.arm_dynamics import ArmDynamics, tool_payload
 from landscape.server.cycle.cycle_record import CycleRecord
-from landscape.server.cycle.inputs import CycleSensors, IoMonitor
 from landscape.server.cycle.executor import Executor
 from landscape.server.cycle.run_arrays import pack_run
 from landscape.server.cycle.feedback import FeedbackRing
