@@ -42,6 +42,7 @@ class Motion:
         self.dt = dt
         self.segments = msg["segments"]   # a sequence; read one segment at a time
         self.first_row = 0                # the segment's first sample among the run's
+        self._curve_at: tuple | None = None   # (segment, s) of _curve_here
         self._load(0)
         # rad/s^2 and rad/s^3 per joint: the ramps' limits, `run_*` to resume, `stop_*` to stop.
         self.run_limit = self.stop_limit = np.asarray(msg["acceleration"], dtype=float)
@@ -107,14 +108,22 @@ class Motion:
             return table[i]
         return table[i] + frac * (table[i + 1] - table[i])
 
+    def _curve(self) -> tuple[np.ndarray, np.ndarray]:
+        """The Hermite curve and its slope at the play position, worked out once per position:
+        a cycle asks for it three times (advance, the setpoint, its velocity). Read-only."""
+        if self._curve_at != (self.segment, self.s):
+            self._curve_at = (self.segment, self.s)
+            self._curve_here = hermite_at(self.positions, self.s)
+        return self._curve_here
+
     def position(self) -> np.ndarray:
         """The planned position at the play position (the Hermite curve between samples)."""
-        return hermite_at(self.positions, self.s)[0]
+        return self._curve()[0]
 
     def velocity(self) -> np.ndarray:
         """The commanded velocity (rad/s): the Hermite curve's at the play position and rate
         (central differences at whole samples, so its change keeps the acceleration limit)."""
-        return hermite_at(self.positions, self.s)[1] * (self.rate / self.dt)
+        return self._curve()[1] * (self.rate / self.dt)
 
     # ---- stops and resumes -------------------------------------------------------------------
 
@@ -191,7 +200,6 @@ class Motion:
                                   self.rate_change, self.target_rate, acceleration, jerk)
         if ramp is not None:
             self._ramp, self._step = ramp, 0
-
 
     def note_peak(self, sensors) -> None:
         """A guard that fired: the reading furthest past its threshold since (each watched
