@@ -10,11 +10,13 @@ within the acceleration limits (playback.py).
 A motion may carry a sensor loop (force_control.py): a guard (moveReact) that stops it when a
 sensor crosses a threshold (on a force, the stop then settles the force near the threshold), a
 compliance (comply) that shifts its setpoints to hold a force.
-Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. Sensors,
-the I/O image and the I/O watches are read every cycle (cycle_inputs.py), so the loops see
-this cycle's readings. The arm model's joint torques for the motion the drives just followed
-(arm_dynamics.py: pinocchio's RNEA at the measured position and velocity and the commanded
-acceleration, with the payload the server declared) go into every row beside the measured ones.
+Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. The I/O
+image and the I/O watches are read every cycle (cycle_inputs.py); the sensors in every cycle a
+sensor loop runs, so the loops see this cycle's readings, and in every cycle whose row a reader
+watches (feedback.FeedbackRing.watch). The arm model's joint torques for the motion the drives
+just followed (arm_dynamics.py: pinocchio's RNEA at the measured position and velocity and the
+commanded acceleration, with the payload the server declared) go into every watched row beside
+the measured ones.
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
@@ -123,7 +125,11 @@ class Executor:
         enabled = state.enable is EnableState.ENABLED
         while (msg := self.mailbox.poll()) is not None:
             self._handle(msg, fbk)
-        sensors = self._sensors.read(ctrl, self._record.sequence)
+        # Sensors and model torques only where they are used: a reader watching the rows, or
+        # this motion's sensor loops (they were a quarter of a back-to-back cycle's cost).
+        whole = self._record.watched
+        sensors = (self._sensors.read(ctrl, self._record.sequence)
+                   if whole or self._sensing() else self._sensors.skip())
         self._io.poll(ctrl, self._record.sequence, self._reports)
         if not enabled or self._hold is None:
             self._hold = fbk.pos.copy()
@@ -142,7 +148,7 @@ class Executor:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
         self._velocity = np.asarray(vel, dtype=float)
-        model = self._record.model_torques(fbk, pos)
+        model = self._record.model_torques(fbk, pos, whole)
 
         key = (state.enable, state.estop)
         if key != self._last_state:   # first, so the server knows the power before the rest
@@ -159,6 +165,13 @@ class Executor:
     def set_payload(self, parameters) -> None:
         """What the flange carries now (10 dynamic parameters, arm_dynamics.py)."""
         self._record.set_payload(parameters)
+
+    def _sensing(self) -> bool:
+        """Whether the running motion has a sensor loop that reads this cycle's sensors."""
+        motion = self._motion
+        return motion is not None and (
+            motion.guard is not None or motion.compliance is not None
+            or motion.force_settle is not None or motion.stopped_by is not None)
 
     def _play(self, motion: Motion, fbk, sensors) -> tuple[np.ndarray, np.ndarray]:
         if motion.stopped_by is not None:
