@@ -11,12 +11,8 @@ A motion may carry a sensor loop (force_control.py): a guard (moveReact) that st
 sensor crosses a threshold (on a force, the stop then settles the force near the threshold), a
 compliance (comply) that shifts its setpoints to hold a force.
 Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. The I/O
-image and the I/O watches are read every cycle (cycle_inputs.py); the sensors in every cycle a
-sensor loop runs, so the loops see this cycle's readings, and in every cycle whose row a reader
-watches (feedback.FeedbackRing.watch). The arm model's joint torques for the motion the drives
-just followed (arm_dynamics.py: pinocchio's RNEA at the measured position and velocity and the
-commanded acceleration, with the payload the server declared) go into every watched row beside
-the measured ones.
+image and watches are read every cycle (cycle_inputs.py), the sensors while a loop or a reader of
+the rows needs them; the arm model's torques (arm_dynamics.py) go into watched rows (feedback.py).
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
@@ -125,11 +121,8 @@ class Executor:
         enabled = state.enable is EnableState.ENABLED
         while (msg := self.mailbox.poll()) is not None:
             self._handle(msg, fbk)
-        # Sensors and model torques only where they are used: a reader watching the rows, or
-        # this motion's sensor loops (they were a quarter of a back-to-back cycle's cost).
-        whole = self._record.watched
-        sensors = (self._sensors.read(ctrl, self._record.sequence)
-                   if whole or self._sensing() else self._sensors.skip())
+        whole = self._record.watched   # sensors, model torques: only where used (feedback.py)
+        sensors = self._sensors.read(ctrl, self._record.sequence, whole or self._sensing())
         self._io.poll(ctrl, self._record.sequence, self._reports)
         if not enabled or self._hold is None:
             self._hold = fbk.pos.copy()
@@ -166,12 +159,9 @@ class Executor:
         """What the flange carries now (10 dynamic parameters, arm_dynamics.py)."""
         self._record.set_payload(parameters)
 
-    def _sensing(self) -> bool:
-        """Whether the running motion has a sensor loop that reads this cycle's sensors."""
-        motion = self._motion
-        return motion is not None and (
-            motion.guard is not None or motion.compliance is not None
-            or motion.force_settle is not None or motion.stopped_by is not None)
+    def _sensing(self) -> bool:   # the running motion's sensor loops read this cycle's sensors
+        return (m := self._motion) is not None and (m.guard, m.compliance, m.force_settle,
+                                                     m.stopped_by) != (None,) * 4
 
     def _play(self, motion: Motion, fbk, sensors) -> tuple[np.ndarray, np.ndarray]:
         if motion.stopped_by is not None:

@@ -1,8 +1,8 @@
 """What the cycle reads besides the joints: the sensors, the I/O image and the I/O watches.
 
 Runs in the cycle process, every cycle, inside the Executor (executor.py); costs stay small:
-the sensors are read only in cycles that need them (a reader watches the ring, or a sensor
-loop runs), the force/torque sensor then once per cycle, the range sensor one every RANGE_PERIOD cycles
+the sensors only in cycles that need them (a reader watches the ring, or a sensor loop runs),
+the force/torque sensor then once per cycle, the range sensor once every RANGE_PERIOD cycles
 (every cycle while a guarded move watches it), the I/O image only the bits the server asked
 for, and a watch only its own bits at its own period.
 
@@ -43,7 +43,10 @@ class CycleSensors:
         self._known = False
         self._unread = True          # the last cycle skipped them (skip)
 
-    def read(self, ctrl, cycle: int) -> np.ndarray:
+    def read(self, ctrl, cycle: int, wanted: bool = True) -> np.ndarray:
+        """The readings of cycle `cycle`; NaN unless `wanted` (nobody needs them)."""
+        if not wanted:
+            return self._skip()
         fresh = self._unread   # the range too: the last value is not there to stay
         self._unread = False
         if not self._known:
@@ -59,8 +62,7 @@ class CycleSensors:
             self.values[RANGE] = ctrl.read_sensor(self._range)[0]
         return self.values
 
-    def skip(self) -> np.ndarray:
-        """A cycle nobody needs the readings of: `values` are NaN (not read)."""
+    def _skip(self) -> np.ndarray:
         if not self._unread:
             self._unread = True
             self.values[:] = math.nan
