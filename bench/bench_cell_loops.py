@@ -8,9 +8,12 @@ row) is measured with perf_counter, and the whole step (physics included) beside
 
   bare executor       the Executor with sensor and I/O reading and the model torques taken
                       out: the cost before issue 10 (same-run baseline)
-  holding             what every cycle pays now: the force/torque sensor, the range sensor
-                      every 5th cycle, the I/O image of the end effector's signals, the
-                      model torques (pinocchio's RNEA with the payload)
+  holding             what every cycle pays while a reader watches the rows (a state stream;
+                      always on the real-time clock): the force/torque sensor, the range
+                      sensor every 5th cycle, the I/O image of the end effector's signals,
+                      the model torques (pinocchio's RNEA with the payload)
+  holding, unwatched  the same with nobody watching the rows: no sensor, no model torques
+                      (what the fast clock pays running a program, issue 31 item 5)
   + guarded move      a moveReact's threshold monitor on a straight move
   + comply            the admittance loop (pinocchio Jacobian and pose, a damped solve)
   + Cartesian jog     jog integration with its reference pose (pinocchio, a damped solve)
@@ -68,11 +71,14 @@ class _Nothing:
         pass
 
 
-def _controller(bare: bool):
+def _controller(bare: bool, watched: bool = True):
     cell = load_cell()
     mailbox = Mailbox()
     parts = {"sensors": _Nothing(), "io": _Nothing(), "model_torques": False} if bare else {}
-    executor = Executor(mailbox, cell.controller.cycle_time, FeedbackRing(), cell.arm, **parts)
+    ring = FeedbackRing()
+    if watched:
+        ring.watch()
+    executor = Executor(mailbox, cell.controller.cycle_time, ring, cell.arm, **parts)
     timed = []
 
     def cyclic(ctrl):
@@ -147,6 +153,10 @@ def main() -> None:
     ctrl, mailbox, timed = _controller(bare=False)
     mailbox.inbox.append({"op": "io_image", "units": [(1, 0b1100111), (2, 0b111)]})
     _figures("holding", *_run(ctrl, timed, n))
+
+    unwatched, unwatched_box, unwatched_timed = _controller(bare=False, watched=False)
+    unwatched_box.inbox.append({"op": "io_image", "units": [(1, 0b1100111), (2, 0b111)]})
+    _figures("holding, unwatched", *_run(unwatched, unwatched_timed, n))
 
     _move(ctrl, mailbox, {"guard": GuardSpec("force_torque", (0.0, 0.0, -1e6), (0, 0, 0),
                                              1.0, CUP)})

@@ -154,15 +154,17 @@ class StateHub:
     async def stream(self, view: View):
         """The samples of one stream: (sequence, skipped) pairs, forever (until closed)."""
         self._opened()
+        whole = self.ring.watch()   # sensors and model torques in the rows (feedback.py)
         try:
-            async for sample in self._samples(view):
+            async for sample in self._samples(view, whole):
                 yield sample
         finally:
+            self.ring.unwatch()
             self._ended()
 
-    async def _samples(self, view: View):
+    async def _samples(self, view: View, whole: int):
         head = self.ring.head
-        due = max(head, 0)
+        due = max(head, whole, 0)
         previous = None
         while await self._wait_for(due):
             head = self.ring.head

@@ -17,23 +17,28 @@ class CycleRecord:
     def __init__(self, ring: FeedbackRing | None, cycle_time: float, dynamics=None):
         self.ring, self.cycle_time, self.dynamics = ring, cycle_time, dynamics
         self.sequence = ring.head + 1 if ring is not None else 0   # goes on after a restart
-        self.setpoints: np.ndarray | None = None   # (3, 6): the last three cycles', newest first
+        self.setpoints: tuple | None = None   # the last three cycles' (6,), newest first
         self._row = np.full(WIDTH, np.nan)
 
-    def model_torques(self, fbk, pos: np.ndarray) -> np.ndarray | float:
-        """The arm model's torques for the cycle the drives just played: they went from the
-        setpoint of two cycles ago to last cycle's (linearly, LLI 5.3.12), so the commanded
-        acceleration is the second difference of the last three setpoints. Then `pos` (this
-        cycle's) becomes the newest."""
+    @property
+    def watched(self) -> bool:
+        """Whether a reader wants this cycle's row whole (FeedbackRing.watch)."""
+        return self.ring is not None and self.ring.watched
+
+    def model_torques(self, fbk, pos: np.ndarray, wanted: bool = True) -> np.ndarray | float:
+        """The arm model's torques for the cycle the drives just played (NaN unless `wanted`):
+        they went from the setpoint of two cycles ago to last cycle's (linearly, LLI 5.3.12),
+        so the commanded acceleration is the second difference of the last three setpoints.
+        Then `pos` (this cycle's) becomes the newest."""
         past = self.setpoints
         if past is None:
-            past = self.setpoints = np.tile(fbk.pos, (3, 1))
+            past = (fbk.pos.copy(),) * 3
         model = np.nan
-        if self.dynamics is not None:
+        if wanted and self.dynamics is not None:
             acceleration = (past[0] - 2.0 * past[1] + past[2]) / (self.cycle_time ** 2)
             model = self.dynamics.torques(fbk.pos, fbk.vel, acceleration)
-        past[1:] = past[:2].copy()
-        past[0] = pos
+        # Shifted by reference, not copied row by row: every cycle pays for this one.
+        self.setpoints = (np.array(pos, dtype=float), past[0], past[1])
         return model
 
     def set_payload(self, parameters) -> None:

@@ -10,11 +10,9 @@ within the acceleration limits (playback.py).
 A motion may carry a sensor loop (force_control.py): a guard (moveReact) that stops it when a
 sensor crosses a threshold (on a force, the stop then settles the force near the threshold), a
 compliance (comply) that shifts its setpoints to hold a force.
-Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. Sensors,
-the I/O image and the I/O watches are read every cycle (cycle_inputs.py), so the loops see
-this cycle's readings. The arm model's joint torques for the motion the drives just followed
-(arm_dynamics.py: pinocchio's RNEA at the measured position and velocity and the commanded
-acceleration, with the payload the server declared) go into every row beside the measured ones.
+Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. The I/O
+image and watches are read every cycle (cycle_inputs.py), the sensors while a loop or a reader of
+the rows needs them; the arm model's torques (arm_dynamics.py) go into watched rows (feedback.py).
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
@@ -123,7 +121,8 @@ class Executor:
         enabled = state.enable is EnableState.ENABLED
         while (msg := self.mailbox.poll()) is not None:
             self._handle(msg, fbk)
-        sensors = self._sensors.read(ctrl, self._record.sequence)
+        whole = self._record.watched   # sensors, model torques: only where used (feedback.py)
+        sensors = self._sensors.read(ctrl, self._record.sequence, whole or self._sensing())
         self._io.poll(ctrl, self._record.sequence, self._reports)
         if not enabled or self._hold is None:
             self._hold = fbk.pos.copy()
@@ -142,7 +141,7 @@ class Executor:
             pos, vel = self._hold, np.zeros_like(self._hold)
         ctrl.set(JointCmd(pos, vel))
         self._velocity = np.asarray(vel, dtype=float)
-        model = self._record.model_torques(fbk, pos)
+        model = self._record.model_torques(fbk, pos, whole)
 
         key = (state.enable, state.estop)
         if key != self._last_state:   # first, so the server knows the power before the rest
@@ -159,6 +158,10 @@ class Executor:
     def set_payload(self, parameters) -> None:
         """What the flange carries now (10 dynamic parameters, arm_dynamics.py)."""
         self._record.set_payload(parameters)
+
+    def _sensing(self) -> bool:   # the running motion's sensor loops read this cycle's sensors
+        return (m := self._motion) is not None and (m.guard, m.compliance, m.force_settle,
+                                                     m.stopped_by) != (None,) * 4
 
     def _play(self, motion: Motion, fbk, sensors) -> tuple[np.ndarray, np.ndarray]:
         if motion.stopped_by is not None:

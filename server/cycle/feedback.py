@@ -15,6 +15,12 @@ takes with the payload the server declared; NaN when the cycle has no arm model.
 columns hold the cell's first force/torque sensor (read every cycle) and its first range
 sensor (read every RANGE_PERIOD cycles, every cycle while a guarded move watches it; between
 two reads the last one stays); `ring_sensors` says which sensors those are.
+
+Rows are whole (sensors and model torques in them) only while a reader watches them (`watch`:
+a state stream, and always on the real-time clock, where the cycle has time to spare): on the
+clocks that run cycles back to back, those columns were a quarter of what a cycle cost for
+readers that were not there (issue 31 item 5). Otherwise they are NaN, and a reader asks the
+controller (Sensors.reading).
 The I/O columns mirror up to IO_UNITS units of digital I/O, each read every cycle through the
 mask the server asked for (executor "io_image"): a bit field as a float, exact to 2**53.
 """
@@ -22,6 +28,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
 import time
 from dataclasses import dataclass
 
@@ -89,6 +96,8 @@ class FeedbackRing:
         self._data = ctx.RawArray("d", rows * WIDTH)
         self._head = ctx.RawArray("q", 1)       # sequence of the newest row, -1 before any
         self._head[0] = -1
+        self._watchers = ctx.RawArray("q", 2)   # readers that want whole rows; since which row
+        self._watch_lock = threading.Lock()
         self._tick_read, self._tick_write = os.pipe()
         os.set_blocking(self._tick_read, False)
         os.set_blocking(self._tick_write, False)
@@ -103,14 +112,15 @@ class FeedbackRing:
         # Into the cycle process: the shared arrays and the pipe's write end (as a duplicated
         # descriptor, which multiprocessing passes while spawning).
         from multiprocessing.reduction import DupFd
-        state = {k: v for k, v in self.__dict__.items() if k not in ("_table", "_tick_read",
-                                                                     "_tick_write")}
+        state = {k: v for k, v in self.__dict__.items() if k not in (
+            "_table", "_tick_read", "_tick_write", "_watch_lock")}
         state["_tick_write_dup"] = DupFd(self._tick_write)
         return state
 
     def __setstate__(self, state):
         self._tick_write = state.pop("_tick_write_dup").detach()
         self._tick_read = -1
+        self._watch_lock = threading.Lock()
         self.__dict__.update(state)
         os.set_blocking(self._tick_write, False)
         self._views()
@@ -128,7 +138,30 @@ class FeedbackRing:
             except (BlockingIOError, OSError):
                 pass   # the reader is behind (pipe full) or gone: it reads the ring anyway
 
+    @property
+    def watched(self) -> bool:
+        """Whether this cycle's row must be whole (read once per cycle by the writer)."""
+        return self._watchers[0] > 0
+
     # -- readers (the server)
+    def watch(self) -> int:
+        """One more reader wants whole rows (undo with `unwatch`); returns the first sequence
+        sure to be whole. The cycle looks at the count when it starts: the one running now may
+        have looked before, the one after it cannot have."""
+        with self._watch_lock:
+            if self._watchers[0] == 0:
+                self._watchers[1] = self.head + 2
+            self._watchers[0] += 1
+            return int(self._watchers[1])
+
+    def unwatch(self) -> None:
+        with self._watch_lock:
+            self._watchers[0] = max(0, self._watchers[0] - 1)
+
+    def whole(self, sequence: int) -> bool:
+        """Whether row `sequence` carries the sensors and model torques."""
+        return self._watchers[0] > 0 and sequence >= self._watchers[1]
+
     @property
     def head(self) -> int:
         """Sequence of the newest row, -1 before the first."""

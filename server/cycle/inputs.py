@@ -1,7 +1,8 @@
 """What the cycle reads besides the joints: the sensors, the I/O image and the I/O watches.
 
 Runs in the cycle process, every cycle, inside the Executor (executor.py); costs stay small:
-the force/torque sensor is one read per cycle, the range sensor one every RANGE_PERIOD cycles
+the sensors only in cycles that need them (a reader watches the ring, or a sensor loop runs),
+the force/torque sensor then once per cycle, the range sensor once every RANGE_PERIOD cycles
 (every cycle while a guarded move watches it), the I/O image only the bits the server asked
 for, and a watch only its own bits at its own period.
 
@@ -40,8 +41,14 @@ class CycleSensors:
         self._force: str | None = None
         self._range: str | None = None
         self._known = False
+        self._unread = True          # the last cycle skipped them (skip)
 
-    def read(self, ctrl, cycle: int) -> np.ndarray:
+    def read(self, ctrl, cycle: int, wanted: bool = True) -> np.ndarray:
+        """The readings of cycle `cycle`; NaN unless `wanted` (nobody needs them)."""
+        if not wanted:
+            return self._skip()
+        fresh = self._unread   # the range too: the last value is not there to stay
+        self._unread = False
         if not self._known:
             self._known = True
             for name, place in ring_sensors(ctrl.sensor_map()).items():
@@ -51,8 +58,14 @@ class CycleSensors:
                     self._force = name
         if self._force is not None:
             self.values[FORCE_TORQUE] = ctrl.read_sensor(self._force)
-        if self._range is not None and (self.watch_range or cycle % RANGE_PERIOD == 0):
+        if self._range is not None and (self.watch_range or fresh or cycle % RANGE_PERIOD == 0):
             self.values[RANGE] = ctrl.read_sensor(self._range)[0]
+        return self.values
+
+    def _skip(self) -> np.ndarray:
+        if not self._unread:
+            self._unread = True
+            self.values[:] = math.nan
         return self.values
 
 

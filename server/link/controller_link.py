@@ -68,6 +68,8 @@ class ControllerLink:
         self._pace = pace
         self.silence_cycles = silence_cycles
         self.feedback = FeedbackRing()
+        if clock == "realtime":   # a cycle with time to spare: whole rows, reads from the ring
+            self.feedback.watch()
         self.lost: str | None = None        # why the controller was lost, until restart()
         self._lost_lock = threading.Lock()
         self._closing = False

@@ -2,8 +2,9 @@
 
 The sensors are the controller's (Controller.sensor_map): a force/torque sensor at the
 flange and a laser standoff (range) sensor along the tool axis in the default cell, and any
-other the cell file declares. The ring carries the first of each kind every cycle
-(feedback.ring_sensors); others are read from the controller when asked.
+other the cell file declares. The ring carries the first of each kind every cycle while its
+rows are watched (feedback.ring_sensors, FeedbackRing.watch); others, and those while nobody
+watches, are read from the controller when asked.
 
 What a reading is, in SI (convert.py gives it in the client's units):
 - force_torque: (fx, fy, fz, tx, ty, tz) at the tool tip in the tool frame (the tool offset's
@@ -52,10 +53,13 @@ class Sensors:
 
     def reading(self, name: str) -> np.ndarray:
         """The sensor's present reading in SI (module docstring); a sensor the ring carries is
-        at most a cycle old, the others are asked of the controller (blocking)."""
+        at most a cycle old (while its rows are whole: FeedbackRing.watch), the others are
+        asked of the controller (blocking)."""
         info = self.info(name)
         if name in self._ring:
-            return self.from_row(name, self.link.sample().sensors)
+            sample = self.link.sample()
+            if self.link.feedback.whole(sample.sequence):
+                return self.from_row(name, sample.sensors)
         return self._tool_frame(info, np.asarray(self.link.proxy.read_sensor(name)))
 
     def from_row(self, name: str, sensors: np.ndarray) -> np.ndarray:

@@ -230,12 +230,12 @@ def test_on_the_fast_clock_a_cycle_process_held_off_the_cpu_is_not_a_hung_one():
 
 
 def _alive(pid: int) -> bool:
-    try:
+    try:   # it may be reaped between the two looks: gone then too
         os.kill(pid, 0)
-    except ProcessLookupError:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().split()[2] != "Z"
+    except (ProcessLookupError, FileNotFoundError):
         return False
-    with open(f"/proc/{pid}/stat") as stat:
-        return stat.read().split()[2] != "Z"
 
 
 def test_a_cycle_process_that_resumes_after_its_silence_never_commands_the_arm_again(realtime):

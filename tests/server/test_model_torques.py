@@ -76,9 +76,9 @@ def _streamed(arm) -> state_service_pb2.StateSample:
 
 
 def _rows_during(arm, act) -> list[Sample]:
-    """Every cycle's feedback from before act() until it returns."""
+    """Every cycle's feedback from before act() until it returns (whole rows: watched)."""
     ring, rows, done = arm.link.feedback, [], threading.Event()
-    first = ring.head + 1
+    first = ring.watch()
 
     def collect():
         seen = first - 1
@@ -96,6 +96,7 @@ def _rows_during(arm, act) -> list[Sample]:
     finally:
         done.set()
         reader.join()
+        ring.unwatch()
     assert [r.sequence for r in rows] == list(range(first, first + len(rows)))
     return rows
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from landscape.server.events import alarms
-from landscape.server.cycle.feedback import SENSORS, SEQ, WALL
+from landscape.server.cycle.feedback import MODEL_TAU, SENSORS, SEQ, WALL
 from landscape.server.device.states import State
 from landscape.v1 import (control_pb2, motion_pb2, sensing_pb2, settings_pb2, state_service_pb2,
                           state_service_pb2_grpc, types_pb2)
@@ -295,25 +295,51 @@ class _RingReader:
 
     def __init__(self, arm):
         self.ring, self.rows = arm.server.link.feedback, {}
+        self._first = self.ring.watch()   # whole rows (sensors in them) from this one on
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._read, daemon=True)
         self._thread.start()
 
     def _read(self):
-        seen = self.ring.head
+        seen = self._first - 1
         while not self._done.is_set():
             head = self.ring.head
             for sequence in range(seen + 1, head + 1):
                 row = self.ring.row(sequence)
                 assert row is not None, "the ring overtook the reader"
                 self.rows[sequence] = row
-            seen = head
+            seen = max(seen, head)
             time.sleep(0.005)
 
     def stop(self) -> np.ndarray:
         self._done.set()
         self._thread.join(5)
+        self.ring.unwatch()
         return np.array([self.rows[s] for s in sorted(self.rows)])
+
+
+def test_unwatched_rows_leave_the_sensors_unread_and_readings_stay_right(cup):
+    # Issue 31 item 5: with no reader of whole rows, the cycle reads no sensor and computes no
+    # model torques (they were a quarter of a back-to-back cycle); asking still reads them.
+    ring, sensors = cup.link.feedback, cup.server.workcell.sensors
+    newest = ring.latest()
+    assert np.isnan(newest.sensors).all() and np.isnan(newest.model_torque).all()
+    assert cup.reading()[:3] == pytest.approx([0, 0, CUP_MASS * 9.81], abs=0.02)
+    assert cup.reading("laser_standoff_sensor") == pytest.approx([0.03], abs=0.002)
+    for _ in range(6):   # watched from any cycle on: its first whole row has the range too
+        first = ring.watch()
+        try:
+            wait_until(lambda: ring.head >= first + 1, timeout=10)
+            rows = [ring.row(first), ring.row(first + 1)]
+        finally:
+            ring.unwatch()
+        for row in rows:
+            assert sensors.from_row("force_sensor", row[SENSORS])[2] == pytest.approx(
+                CUP_MASS * 9.81, abs=0.02)
+            assert sensors.from_row("laser_standoff_sensor", row[SENSORS]) == pytest.approx(
+                [0.03], abs=0.002)
+            assert np.isfinite(row[MODEL_TAU]).all()
+        wait_until(lambda: np.isnan(ring.latest().sensors).all(), timeout=10)
 
 
 def test_a_state_stream_carries_the_sensors_asked_for(cup):
