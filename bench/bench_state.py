@@ -254,12 +254,8 @@ class Holder:
     """The lock holder in this process: runs a long blended ring path while others watch."""
 
     def __init__(self, server):
-        from landscape.client import Session
         self.server = server
-        self.session = Session(grpc.insecure_channel(server.target), "holder").open()
-        self.session.lock()
-        self.device = device_service_pb2_grpc.DeviceServiceStub(self.session.channel)
-        self.device.Activate(control_pb2.ActivateRequest(), timeout=10)
+        self._take()
         header = motion_pb2.PathHeader(path_name="tags", frame=JOINT,
                                        motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
                                        offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
@@ -273,7 +269,24 @@ class Holder:
         except grpc.RpcError:
             pass
 
+    def _take(self):
+        from landscape.client import Session
+        self.session = Session(grpc.insecure_channel(self.server.target), "holder").open()
+        self.session.lock()
+        self.device = device_service_pb2_grpc.DeviceServiceStub(self.session.channel)
+        self.device.Activate(control_pb2.ActivateRequest(), timeout=10)
+
     def run(self, cycles: int):
+        """Run the path `cycles` times, once the device rests (the path's last tag comes
+        before the arm has settled at its end); locked again if the session was lost (a
+        machine at load 14 can hold its keep-alives back for the device's 2 s)."""
+        end = time.monotonic() + 30
+        while self.server.device.state is not State.RESTING and time.monotonic() < end:
+            if self.server.device.state is State.UNLOCKED:
+                print("  (the holder's session was lost: locked again)")
+                self.session.close()
+                self._take()
+            time.sleep(0.02)
         return self.device.PathMove(motion_pb2.PathMoveRequest(path_name="tags",
                                                                number_of_cycles=cycles))
 
