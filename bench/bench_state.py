@@ -18,18 +18,23 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import functools
+import itertools
 import math
 import multiprocessing as mp
 import os
 import statistics
+import threading
 import time
 
 import grpc
-from common import BareServer, in_child, pct, record
+from common import BareServer, collect, in_child, pct, record
 from google.protobuf import wrappers_pb2
 
+from landscape.server.api.convert import event_to_proto
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
+from landscape.server.events.bus import EventBus, Phase
 from landscape.server.api.stream_caps import DEFAULT_CAPS, Cap
 from landscape.server.device.states import State
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
@@ -39,6 +44,10 @@ from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 HOME = [0.0, 0.0, 1.5708, 0.0, 1.5708, 0.0]
 OWN_CONNECTION = [("grpc.use_local_subchannel_pool", 1)]
+# The grpc.aio options the device server runs with (app.py), for the bare servers beside it.
+DEVICE_SERVER_OPTIONS = [("grpc.max_receive_message_length", ServerConfig().max_message_bytes),
+                         ("grpc.so_reuseport", 0)]
+TAGS = 50   # of the holder's path: the event latency's events per round
 
 
 def rss_mb(pid: int | None = None) -> float:
@@ -73,18 +82,71 @@ async def _ticking(request: wrappers_pb2.UInt64Value, context):
         yield message
 
 
+class BareEvents:
+    """The event latency's baseline: the bus's work done bare. A thread (as the link's is for
+    the device) stamps a tag event every `interval` s and wakes every waiting stream with one
+    hand-over to the server's loop; each stream then sends it as a plain grpc.aio stream does
+    (a message per stream, serialized by grpc). Same message size as the device's tag events,
+    same streams, same clients."""
+
+    def __init__(self):
+        self.loop: asyncio.AbstractEventLoop | None = None   # the bare server's (BareServer)
+        self.streams = 0
+        self._sent: list[event_service_pb2.SubscribeResponse] = []
+        self._waiting: list[asyncio.Future] = []   # one per waiting stream, as the bus has
+
+    async def stream(self, request, context):
+        self.streams += 1
+        try:
+            i = len(self._sent)
+            while True:
+                while i >= len(self._sent):
+                    waiter = asyncio.get_running_loop().create_future()
+                    self._waiting.append(waiter)
+                    await waiter
+                yield self._sent[i]
+                i += 1
+        finally:
+            self.streams -= 1
+
+    def publish(self, interval: float) -> None:
+        """The path's tag events, t0 .. t49, `interval` s apart (call from a thread)."""
+        event_bus = EventBus()
+        due = time.time()
+        for i in range(TAGS):
+            due += interval
+            time.sleep(max(0.0, due - time.time()))
+            event = event_bus.command("PathMove-3", "PathMove", Phase.TAG_REACHED, "tags",
+                                      f"t{i}", i)
+            self.loop.call_soon_threadsafe(self._deliver, event_service_pb2.SubscribeResponse(
+                event=event_to_proto(event)))
+
+    def _deliver(self, message) -> None:
+        self._sent.append(message)
+        waiting, self._waiting = self._waiting, []
+        for waiter in waiting:
+            if not waiter.done():   # else its stream was cancelled
+                waiter.set_result(None)
+
+
 async def _echo(request: wrappers_pb2.UInt64Value, context):
     return request
 
 
-def bare_server() -> BareServer:
-    return BareServer("bench.Bare", {
+def bare_server(events: BareEvents) -> BareServer:
+    server = BareServer("bench.Bare", {
+        "Events": grpc.unary_stream_rpc_method_handler(
+            events.stream, request_deserializer=wrappers_pb2.UInt64Value.FromString,
+            response_serializer=event_service_pb2.SubscribeResponse.SerializeToString),
         "Tick": grpc.unary_stream_rpc_method_handler(
             _ticking, request_deserializer=wrappers_pb2.UInt64Value.FromString,
             response_serializer=state_service_pb2.StreamStateResponse.SerializeToString),
         "Echo": grpc.unary_unary_rpc_method_handler(
             _echo, request_deserializer=wrappers_pb2.UInt64Value.FromString,
-            response_serializer=wrappers_pb2.UInt64Value.SerializeToString)})
+            response_serializer=wrappers_pb2.UInt64Value.SerializeToString)},
+        options=DEVICE_SERVER_OPTIONS)
+    events.loop = server.loop
+    return server
 
 
 # -- children ----------------------------------------------------------------------------------
@@ -157,26 +219,24 @@ async def unary_latency(target: str, n: int, bare: bool):
         return out
 
 
-async def event_watchers(target: str, n: int, until_tag: str, bare: bool, ticks: int):
-    """n event streams until the tag named `until_tag`: (sequence, receive time) per tag event;
-    bare: receive - stamp of the bare tick stream, ms."""
+async def event_watchers(target: str, n: int, bare: bool, last: str):
+    """n event streams until the tag named `last`: per stream, (sequence, receive time, the
+    event's own time) per tag event. The bare server's streams carry tag events too."""
     async def one(channel):
         got = []
         if bare:
             call = channel.unary_stream(
-                "/bench.Bare/Tick", request_serializer=wrappers_pb2.UInt64Value.SerializeToString,
-                response_deserializer=state_service_pb2.StreamStateResponse.FromString)(
-                wrappers_pb2.UInt64Value(value=ticks))
-            async for message in call:
-                got.append((time.time() - message.sample.time.ToNanoseconds() / 1e9) * 1000)
-            return got
-        call = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
-            event_service_pb2.SubscribeRequest())
+                "/bench.Bare/Events", request_serializer=wrappers_pb2.UInt64Value.SerializeToString,
+                response_deserializer=event_service_pb2.SubscribeResponse.FromString)(
+                wrappers_pb2.UInt64Value())
+        else:
+            call = event_service_pb2_grpc.EventServiceStub(channel).Subscribe(
+                event_service_pb2.SubscribeRequest())
         async for reply in call:
             event = reply.event
             if event.event_id == "tag_reached":
-                got.append((event.sequence, time.time()))
-                if event.command.tag_name == until_tag:
+                got.append((event.sequence, time.time(), event.time.ToNanoseconds() / 1e9))
+                if event.command.tag_name == last:
                     break
         call.cancel()
         return got
@@ -194,26 +254,39 @@ class Holder:
     """The lock holder in this process: runs a long blended ring path while others watch."""
 
     def __init__(self, server):
-        from landscape.client import Session
         self.server = server
-        self.session = Session(grpc.insecure_channel(server.target), "holder").open()
-        self.session.lock()
-        self.device = device_service_pb2_grpc.DeviceServiceStub(self.session.channel)
-        self.device.Activate(control_pb2.ActivateRequest(), timeout=10)
+        self._take()
         header = motion_pb2.PathHeader(path_name="tags", frame=JOINT,
                                        motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
                                        offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
         tags = [types_pb2.TagStruct(
-            joint_values=[0.4 * math.sin(2 * math.pi * i / 50), 0.1 * math.cos(2 * math.pi * i / 50),
+            joint_values=[0.4 * math.sin(2 * math.pi * i / TAGS), 0.1 * math.cos(2 * math.pi * i / TAGS),
                           1.5708, 0.0, 1.5708, 0.0], tag_name=f"t{i}", transition_speed=30)
-            for i in range(50)]
+            for i in range(TAGS)]
         try:
             self.device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=tags)]),
                                  timeout=60)
         except grpc.RpcError:
             pass
 
+    def _take(self):
+        from landscape.client import Session
+        self.session = Session(grpc.insecure_channel(self.server.target), "holder").open()
+        self.session.lock()
+        self.device = device_service_pb2_grpc.DeviceServiceStub(self.session.channel)
+        self.device.Activate(control_pb2.ActivateRequest(), timeout=10)
+
     def run(self, cycles: int):
+        """Run the path `cycles` times, once the device rests (the path's last tag comes
+        before the arm has settled at its end); locked again if the session was lost (a
+        machine at load 14 can hold its keep-alives back for the device's 2 s)."""
+        end = time.monotonic() + 30
+        while self.server.device.state is not State.RESTING and time.monotonic() < end:
+            if self.server.device.state is State.UNLOCKED:
+                print("  (the holder's session was lost: locked again)")
+                self.session.close()
+                self._take()
+            time.sleep(0.02)
         return self.device.PathMove(motion_pb2.PathMoveRequest(path_name="tags",
                                                                number_of_cycles=cycles))
 
@@ -300,11 +373,15 @@ def unary_latency_in_child(target: str, is_bare: bool, n: int = 2000):
     return queue.get(timeout=300)
 
 
-def event_latency(server, bare: BareServer, holder: Holder):
-    print("\nevent latency, the cycle that passed a tag -> a subscriber receives it, ms:")
+def event_latency(server, bare: BareServer, events: BareEvents, holder: Holder, rounds: int):
+    """Rounds alternate device, bare, device, ...: the figures are the medians of the rounds'
+    percentiles, so a busy moment of the shared machine spoils one round, not one side."""
+    print(f"\nevent latency, a tag's cycle (bare: its stamp) -> a subscriber receives it, ms; "
+          f"medians of {rounds} alternating rounds:")
     motions = server.device.motions
     cycle_of: dict[int, float] = {}
     original = motions.on_report
+    device_cpu, bare_cpu = loop_cpu(server.runner.loop), loop_cpu(bare.loop)
 
     def on_report(msg):   # which cycle each tag event comes from (the executor stamps it)
         original(msg)
@@ -313,28 +390,65 @@ def event_latency(server, bare: BareServer, holder: Holder):
     motions.on_report = on_report
     try:
         for n in (1, 50):
-            before = server.bus.subscriber_count
-            children = [in_child(event_watchers, server.target, min(n, 10), "t49", False, 0)
-                        for _ in range(max(1, n // 10))]
-            deadline = time.monotonic() + 120
-            while server.bus.subscriber_count < before + n and time.monotonic() < deadline:
-                time.sleep(0.05)
-            holder.run(cycles=1)
-            got = [g for _, q in children for g in q.get(timeout=300)]
-            latencies = [(t - cycle_of[s]) * 1000 for stream in got for s, t in stream
-                         if s in cycle_of]
-            base = [x for _, q in [in_child(event_watchers, bare.target, min(n, 10), "", True,
-                                             250) for _ in range(max(1, n // 10))]
-                    for stream in q.get(timeout=120) for x in stream]
-            print(f"  {n:2d} subscriber(s): p50 {pct(latencies, 50):6.2f} p99 "
-                  f"{pct(latencies, 99):6.2f} ({len(latencies)} events)   bare tick stream "
-                  f"p50 {pct(base, 50):6.2f} p99 {pct(base, 99):6.2f}")
-            record(f"event latency p99, {n} subscriber(s)", pct(latencies, 99), "ms",
-                   baseline=pct(base, 99), baseline_name="bare tick stream",
-                   goal=8.0 if n == 50 else None)
-            time.sleep(2.0)
+            device, published, base, cpu = [], [], [], {"device": [], "bare": []}
+            for _ in range(rounds):
+                got, used = _event_round(n, server.target, False,
+                                         lambda: server.bus.subscriber_count,
+                                         lambda: holder.run(1), device_cpu)
+                cpu["device"].append(used)
+                device.append([(t - cycle_of[s]) * 1000 for s, t, _ in got if s in cycle_of])
+                published.append([(t - stamp) * 1000 for _, t, stamp in got])
+                cycles = sorted({cycle_of[s] for s, _, _ in got if s in cycle_of})
+                interval = statistics.median(b - a for a, b in itertools.pairwise(cycles))
+                got, used = _event_round(n, bare.target, True, lambda: events.streams,
+                                         functools.partial(events.publish, interval), bare_cpu)
+                cpu["bare"].append(used)
+                base.append([(t - stamp) * 1000 for _, t, stamp in got])
+                time.sleep(1.0)
+            figures = {name: [statistics.median(pct(r, q) for r in runs) for q in (50, 99)]
+                       for name, runs in (("device", device), ("published", published),
+                                          ("bare", base))}
+            (p50, p99), (pub50, pub99), (b50, b99) = figures.values()
+            print(f"  {n:2d} subscriber(s): p50 {p50:6.2f} p99 {p99:6.2f} (from the bus: "
+                  f"{pub50:5.2f} / {pub99:5.2f})   bare stream p50 {b50:6.2f} p99 {b99:6.2f}"
+                  f"   x{p99 / b99:.2f} at p99; rounds' p99: "
+                  f"{' '.join(f'{pct(d, 99):.1f}/{pct(b, 99):.1f}' for d, b in zip(device, base))}")
+            loop_us = {side: statistics.median(used) for side, used in cpu.items()}
+            print(f"      the server loop's CPU per event and subscriber: {loop_us['device']:.0f} "
+                  f"us, bare {loop_us['bare']:.0f} us (x{loop_us['device'] / loop_us['bare']:.2f})")
+            record(f"event fan-out, loop CPU per event and subscriber, {n} subscriber(s)",
+                   loop_us["device"], "us", baseline=loop_us["bare"],
+                   baseline_name="bare event stream")
+            record(f"event latency p99, {n} subscriber(s)", p99, "ms", baseline=b99,
+                   baseline_name="bare event stream", goal=1.2 * b99)
     finally:
         motions.on_report = original
+
+
+def _event_round(n: int, target: str, bare: bool, subscribed, publish,
+                 loop_cpu) -> tuple[list[tuple], float]:
+    """n subscribers (10 to a child process) until the last tag; `publish()` once they all
+    listen. Every subscriber's (sequence, receive time, the event's time) of every tag, and
+    the server loop's CPU time per tag and subscriber, us (the machine's load barely moves
+    it, unlike the latencies)."""
+    before = subscribed()
+    children = [in_child(event_watchers, target, min(n, 10), bare, f"t{TAGS - 1}")
+                for _ in range(max(1, n // 10))]
+    deadline = time.monotonic() + 120
+    while subscribed() < before + n and time.monotonic() < deadline:
+        time.sleep(0.05)
+    cpu = loop_cpu()
+    publish()
+    got = [tag for child in children for stream in collect(child, 300) for tag in stream]
+    return got, (loop_cpu() - cpu) / len(got) * 1e6
+
+
+def loop_cpu(loop: asyncio.AbstractEventLoop):
+    """A function giving the CPU seconds used so far by the thread that runs `loop`."""
+    async def ident():
+        return threading.get_ident()
+    clock = time.pthread_getcpuclockid(asyncio.run_coroutine_threadsafe(ident(), loop).result())
+    return lambda: time.clock_gettime(clock)
 
 
 SECTIONS = ["fan-out", "events", "idle"]
@@ -350,7 +464,8 @@ def main() -> None:
     # whose per-client share (limits.DEFAULT_CAPS) is for a cell's supervisors, not 1,000.
     caps = {**DEFAULT_CAPS, "watch": Cap(per_client=2_000, total=20_000)}
     server = serve(ServerConfig(port=0, clock="realtime", stream_caps=caps))
-    bare = bare_server()
+    events = BareEvents()
+    bare = bare_server(events)
     holder = Holder(server)
     try:
         print(f"state sample message: {_sample_size_message().ByteSize()} bytes; real-time "
@@ -358,7 +473,7 @@ def main() -> None:
         if "fan-out" in args.only:
             fan_out(server, bare, holder, 3.0 if args.quick else 6.0)
         if "events" in args.only:
-            event_latency(server, bare, holder)
+            event_latency(server, bare, events, holder, 3 if args.quick else 5)
         holder.device.Deactivate(control_pb2.DeactivateRequest(), timeout=10)
         holder.close()
         if "idle" in args.only:

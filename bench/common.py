@@ -47,17 +47,18 @@ def skipped(reason: str) -> None:
 
 class BareServer:
     """A bare grpc.aio server on a loop thread of this process, like the device server's:
-    `handlers` maps method names of service `service` to grpc method handlers."""
+    `handlers` maps method names of service `service` to grpc method handlers; `options`:
+    the grpc.aio server's channel options."""
 
-    def __init__(self, service: str, handlers: dict):
+    def __init__(self, service: str, handlers: dict, options=()):
         self.loop = asyncio.new_event_loop()
         threading.Thread(target=self.loop.run_forever, daemon=True).start()
         self.server, port = asyncio.run_coroutine_threadsafe(
-            self._start(service, handlers), self.loop).result()
+            self._start(service, handlers, options), self.loop).result()
         self.target = f"127.0.0.1:{port}"
 
-    async def _start(self, service: str, handlers: dict):
-        server = grpc.aio.server()
+    async def _start(self, service: str, handlers: dict, options):
+        server = grpc.aio.server(options=options)
         server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler(service,
                                                                              handlers),))
         port = server.add_insecure_port("127.0.0.1:0")

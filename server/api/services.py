@@ -37,7 +37,8 @@ class ServiceSpec:
 
     def add_to_server(self, servicer, server) -> None:
         """The generated registration, except that the requests of RAW_REQUESTS reach the
-        servicer as their bytes: grpc would parse them on the event loop."""
+        servicer as their bytes (grpc would parse them on the event loop), and the servicer
+        sends the responses of RAW_RESPONSES as bytes it has serialized."""
         handlers = _Handlers()
         getattr(self.grpc, f"add_{self.name}Servicer_to_server")(servicer, handlers)
         table = handlers.table
@@ -45,6 +46,10 @@ class ServiceSpec:
             handler = table[method]
             table[method] = grpc.stream_unary_rpc_method_handler(
                 handler.stream_unary, response_serializer=handler.response_serializer)
+        for method in RAW_RESPONSES.get(self.name, ()):
+            handler = table[method]
+            table[method] = grpc.unary_stream_rpc_method_handler(
+                handler.unary_stream, request_deserializer=handler.request_deserializer)
         # Generic handlers only: grpc.aio keeps a pending request per registered method and
         # waits on all of them for every call (58 tasks: about 100 us of the event loop's time
         # per call, issue 31 item 1); a generic handler is one dictionary lookup.
@@ -81,6 +86,10 @@ class _Handlers:
 # 10,000 points takes about 0.5 ms to parse, which is the planning process's job, not the
 # event loop's (planning_process.py).
 RAW_REQUESTS = {"DeviceService": ("PathLoad",)}
+
+# Server-streaming calls whose servicer yields serialized messages: every subscriber of the
+# event stream sends the same event, serialized once for all of them (servicers/events.py).
+RAW_RESPONSES = {"EventService": ("Subscribe",)}
 
 
 DEVICE = ServiceSpec("DeviceService", device_service_pb2, device_service_pb2_grpc)

@@ -7,7 +7,7 @@ import grpc
 import pytest
 
 from landscape.server.api.read_cache import ReplyCache
-from landscape.v1 import motion_pb2, settings_pb2, types_pb2
+from landscape.v1 import control_pb2, motion_pb2, settings_pb2, types_pb2
 
 from support import locked_session, stubs, wait_until
 
@@ -141,3 +141,22 @@ def test_the_position_since_moves_with_the_arm(arm):
     finally:
         clock.release()
     assert hub.position_since() > resting
+
+
+def test_the_device_state_read_follows_each_change_and_each_change_back(server):
+    """GetDeviceState's reply is kept while the status is the same (issue 31 item 1): every
+    change shows in the next read, and so does a change back to a status read before (a reply
+    kept for the older status must not come back with it)."""
+    with grpc.insecure_channel(server.target) as channel:
+        reader, _, _ = stubs(channel)
+
+        def read():
+            reply = reader.GetDeviceState(control_pb2.GetDeviceStateRequest(), timeout=5)
+            return reply.state, reply.locked, reply.lock_holder
+        unlocked = read()
+        assert read() == unlocked
+        for _ in range(2):
+            holder = locked_session(server, "holder")
+            assert read() == (types_pb2.DEVICE_STATE_INACTIVE, True, "holder")
+            holder.close()
+            wait_until(lambda: read() == unlocked)

@@ -382,11 +382,16 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
         return control_pb2.ResetResponse(ret_val=convert.ok(), state=convert.DEVICE_STATE_PB[state])
 
     def GetDeviceState(self, request, context):
+        # The reply kept while the status is the same: the version is the status read once,
+        # and the reply is built from that very status, never from a later one.
         s = self.device.status()
-        return control_pb2.GetDeviceStateResponse(
-            ret_val=convert.ok(), state=convert.DEVICE_STATE_PB[s.state], locked=s.locked,
-            lock_holder=s.lock_holder, error=s.error, estop=s.estop,
-            manual_control=s.manual_control, command_id=s.command_id)
+        version = (s.state, s.locked, s.lock_holder, s.error, s.estop, s.manual_control,
+                   s.command_id)
+        return self.replies.reply("GetDeviceState", version, lambda: (
+            control_pb2.GetDeviceStateResponse(
+                ret_val=convert.ok(), state=convert.DEVICE_STATE_PB[s.state], locked=s.locked,
+                lock_holder=s.lock_holder, error=s.error, estop=s.estop,
+                manual_control=s.manual_control, command_id=s.command_id)))
 
     @blocking(lane="panel")
     def OperatePanel(self, request, context):
