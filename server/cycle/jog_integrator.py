@@ -12,7 +12,12 @@ speeds and to the manual-mode tip speed (ISO 10218-1: 250 mm/s); the velocity mo
 within the acceleration limits, at the arm's full deceleration when stopping; and each joint
 brakes so as to stop before the end of its range. The joints follow that velocity through a
 jerk-limited tracker (jerk_tracker.py: the set jerk, the arm's when stopping), so a jog, its
-stops and its deadman never step an acceleration (issue 30).
+stops and its deadman never step an acceleration (issue 30). A tracker speeding up cannot stop
+speeding up at once (a|a|/2j more per joint): a step after which the tip could no longer level
+off within the manual speed is taken levelling off instead, and a step whose tip would still
+move faster than the manual speed is shortened to it (its jerk then may step: the speed is the
+safety limit). Without this the joints, lagging a Cartesian jog's line where their
+accelerations cannot keep up, then racing its correction, commanded the tip at 286 mm/s.
 
 The deadman: no request for `deadman` cycles, or a request with the deadman released, brakes
 the arm to rest along its direction. Silence ends the session ("aborted", saying why); a
@@ -151,10 +156,42 @@ class JogIntegrator:
         if self._frame != "joint" and not stopping and self._wanted is not None:
             trend = (limited - self._wanted) / dt
         self._wanted = limited
-        tracker.step(limited, limits.stop_acceleration if braking else limits.acceleration,
-                     limits.stop_jerk if braking else limits.jerk, trend)
+        accel = limits.stop_acceleration if braking else limits.acceleration
+        jerk = limits.stop_jerk if braking else limits.jerk
+        before = self.q, self.qd, tracker.acceleration.copy()
+        tracker.step(limited, accel, jerk, trend)
+        if self._committed_tip_speed(jerk) > limits.tip_speed:
+            # Too fast to stop speeding up within the manual speed (a jerk-limited tracker
+            # takes a|a|/2j more): level off where it is instead, and let the line catch up.
+            tracker.position, tracker.velocity, tracker.acceleration = before
+            tracker.step(before[1], accel, jerk)
+        self._within_tip_speed(before[0])
         self.q, self.qd = tracker.position.copy(), tracker.velocity.copy()
         return self.q, self.qd
+
+    def _committed_tip_speed(self, jerk: np.ndarray) -> float:
+        """The tip speed (m/s) the joints reach at least before their accelerations, brought
+        to zero at the jerk limit, let them level off (each joint a|a|/2j past its velocity)."""
+        tracker = self._tracker
+        committed = tracker.velocity + tracker.acceleration * np.abs(tracker.acceleration) / (
+            2.0 * jerk)
+        return float(np.linalg.norm(self.tip.jacobian(tracker.position)[:3] @ committed))
+
+    def _within_tip_speed(self, q: np.ndarray) -> None:
+        """The last guard of the manual speed: a step whose tip would move faster than it
+        (the levelling off above is a prediction, the joints' synchronised jerks may differ)
+        is shortened to it, its velocity alike. Its jerk may then step: speed is the safety
+        limit here."""
+        tracker, tip, dt = self._tracker, self.tip, self.dt
+        start = tip.forward(q)[:3, 3].copy()
+        for _ in range(3):   # the tip's chord is near linear in the step: one pass, or two
+            speed = float(np.linalg.norm(tip.forward(tracker.position)[:3, 3] - start)) / dt
+            if speed <= self.limits.tip_speed:
+                return
+            factor = self.limits.tip_speed / speed * (1.0 - 1e-6)
+            tracker.position = q + (tracker.position - q) * factor
+            tracker.velocity = tracker.velocity * factor
+            tracker.acceleration = (tracker.velocity - self.qd) / dt
 
     def _clear_of_obstacles(self, qd: np.ndarray) -> np.ndarray:
         """qd scaled down as a whole (its direction holds: the arm does not slide along what

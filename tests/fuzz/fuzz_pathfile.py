@@ -16,7 +16,10 @@ from pathlib import Path
 
 import atheris
 
-with atheris.instrument_imports():
+# Coverage of the reader and the values it makes, not of the client package's gRPC side that
+# importing it brings in (instrumenting all of that took 7 of a 12 s test).
+with atheris.instrument_imports(include=["landscape.client.pathfile",
+                                         "landscape.client.values"]):
     from landscape.client.pathfile import PathFileError, read_path
 
 _FOLDER = Path(tempfile.mkdtemp(prefix="fuzz-pathfile-"))

@@ -175,3 +175,27 @@ def test_a_late_clearance_allows_no_approach_and_a_silent_guard_holds_the_arm():
         jog.command(_request("joint", [0, 0, 0, 0, 0, 2.0]))
         _, qd = jog.step()
     assert not np.any(qd)                                 # no word from the guard: held
+
+
+@pytest.mark.parametrize("velocity, released", [
+    ([0.661, -0.007, 0.521, 0, 0, 0], ()),                         # it starts
+    ([0.63, 0.581, 1.295, 0.845, -0.144, 0.787], range(113, 172)),  # and starts again
+])
+def test_a_cartesian_jog_whose_joints_lag_its_line_keeps_the_manual_speed(velocity, released):
+    """The joints follow the line's twist a few cycles behind where their accelerations cannot
+    keep up; the line's correction then asks up to the manual speed, and the jerk-limited
+    tracker, speeding up towards it, cannot stop speeding up in time: the tip was commanded at
+    286 mm/s (test_jog saw 254.5 mm/s on the real server, under load). Commanded speeds are
+    measured as the issue measured them: the chord of the tip's setpoints over a cycle."""
+    jog, tip = _jog(), TipModel(ARM)
+    previous = tip.forward(START)[:3, 3].copy()
+    speeds = []
+    for k in range(300):
+        jog.command(_request("base", velocity, deadman=k not in released))
+        q, _ = jog.step()
+        now = tip.forward(q)[:3, 3].copy()
+        speeds.append(np.linalg.norm(now - previous) / DT)
+        previous = now
+    assert max(speeds) <= MANUAL_TIP_SPEED * (1 + 1e-6)
+    # Jogging at speed (the headroom's), not held back: for 80 ms at least.
+    assert np.count_nonzero(np.array(speeds) > 0.94 * MANUAL_TIP_SPEED) >= 20

@@ -36,12 +36,33 @@ def arm(tmp_path):
     a.close()
 
 
-@pytest.fixture
-def cup(arm):
-    """The arm with the vacuum cup, its tip 3 cm over a free spot of the table."""
+def _with_cup(arm):
     arm.get_tool("vacuum")
     arm.move_down_to(*FREE_SPOT, TABLE_TOP + 0.03)
     return arm
+
+
+@pytest.fixture
+def cup(arm):
+    """The arm with the vacuum cup, its tip 3 cm over a free spot of the table."""
+    return _with_cup(arm)
+
+
+# Shared by the tests that only read, or whose calls are refused (each of them checks that
+# nothing moved and the arm rests): a server and a tool change each less per test. (Not a
+# MoveReact refused for a collision: it has tared the force sensor by then.)
+@pytest.fixture(scope="module")
+def still_arm(tmp_path_factory):
+    a = Arm(tmp_path_factory.mktemp("still_arm"))
+    yield a
+    a.close()
+
+
+@pytest.fixture(scope="module")
+def still_cup(tmp_path_factory):
+    a = _with_cup(Arm(tmp_path_factory.mktemp("still_cup")))
+    yield a
+    a.close()
 
 
 def _react(arm, **fields) -> list:
@@ -84,10 +105,10 @@ def test_readings_come_in_the_current_units_and_an_unknown_sensor_lists_the_know
     assert "force_sensor" in error.details() and "laser_standoff_sensor" in error.details()
 
 
-def test_the_force_sensor_reads_at_the_tool_tip_in_the_tool_frame(cup):
+def test_the_force_sensor_reads_at_the_tool_tip_in_the_tool_frame(still_cup):
     # The cup hangs down: its weight pulls the flange along the tool's z; at the tip, whose
     # frame is the flange's moved along z, the torques stay zero.
-    reading = cup.reading()
+    reading = still_cup.reading()
     assert reading[:3] == pytest.approx([0, 0, CUP_MASS * 9.81], abs=0.02)
     assert np.abs(reading[3:]).max() < 1e-3
 
@@ -251,13 +272,13 @@ def test_move_react_lets_only_the_tool_touch_its_surface_the_arm_stays_checked(c
     ({"sensor_type": "sonar", "motion": Z(z=0.1), "speed": 1, "thresholds": Z(z=-20)},
      grpc.StatusCode.INVALID_ARGUMENT),
 ])
-def test_bad_move_react_parameters_are_refused_and_nothing_moves(arm, fields, code):
-    before = arm.joints().copy()
+def test_bad_move_react_parameters_are_refused_and_nothing_moves(still_arm, fields, code):
+    before = still_arm.joints().copy()
     fields = {"sensor_type": "force_sensor", **fields}
-    error = _refused(lambda: arm.device.MoveReact(sensing_pb2.MoveReactRequest(**fields)))
+    error = _refused(lambda: still_arm.device.MoveReact(sensing_pb2.MoveReactRequest(**fields)))
     assert error.code() is code
-    assert np.allclose(arm.joints(), before, atol=1e-6)
-    assert arm.server.device.state is State.RESTING
+    assert np.allclose(still_arm.joints(), before, atol=1e-6)
+    assert still_arm.server.device.state is State.RESTING
 
 
 # ---- 3.7.2 comply ---------------------------------------------------------------------------
@@ -342,8 +363,8 @@ def test_unwatched_rows_leave_the_sensors_unread_and_readings_stay_right(cup):
         wait_until(lambda: np.isnan(ring.latest().sensors).all(), timeout=10)
 
 
-def test_a_state_stream_carries_the_sensors_asked_for(cup):
-    stream = state_service_pb2_grpc.StateServiceStub(cup.session.channel).StreamState(
+def test_a_state_stream_carries_the_sensors_asked_for(still_cup):
+    stream = state_service_pb2_grpc.StateServiceStub(still_cup.session.channel).StreamState(
         state_service_pb2.StreamStateRequest(sensors=["force_sensor", "laser_standoff_sensor"]))
     assert next(stream).HasField("started")
     sample = next(stream).sample
@@ -473,16 +494,16 @@ def test_comply_is_checked_with_its_compliance_at_both_ends(cup):
     {"max_timeout": 0},                                                   # in place, forever
     {"compliance_speed": 0},
 ])
-def test_bad_comply_parameters_are_refused_and_nothing_moves(arm, fields):
-    before = arm.joints().copy()
-    error = _refused(lambda: _comply(arm, **fields))
+def test_bad_comply_parameters_are_refused_and_nothing_moves(still_arm, fields):
+    before = still_arm.joints().copy()
+    error = _refused(lambda: _comply(still_arm, **fields))
     assert error.code() in (grpc.StatusCode.INVALID_ARGUMENT, grpc.StatusCode.OUT_OF_RANGE)
-    assert np.allclose(arm.joints(), before, atol=1e-6)
-    assert arm.server.device.state is State.RESTING
+    assert np.allclose(still_arm.joints(), before, atol=1e-6)
+    assert still_arm.server.device.state is State.RESTING
 
 
-def test_a_state_stream_refuses_an_unknown_sensor(arm):
-    stream = state_service_pb2_grpc.StateServiceStub(arm.session.channel).StreamState(
+def test_a_state_stream_refuses_an_unknown_sensor(still_arm):
+    stream = state_service_pb2_grpc.StateServiceStub(still_arm.session.channel).StreamState(
         state_service_pb2.StreamStateRequest(sensors=["sonar"]))
     error = _refused(lambda: next(stream))
     assert error.code() is grpc.StatusCode.INVALID_ARGUMENT
