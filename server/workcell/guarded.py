@@ -112,11 +112,14 @@ class GuardedMotion:
         guard = GuardSpec(kind, tuple(thresholds), tuple(envelope_max),
                           float(gains[0]) or 1.0, settings.tool_offset, tuple(motion),
                           limits.linear_velocity, limits.linear_acceleration)
-        allow = self._meant_to_touch([trajectory])
+        # Checked before the tare: a refused MoveReact leaves the sensor as it was (a tare
+        # cannot be undone).
+        self.motions.check_collisions([trajectory], f"MoveReact {sensor}",
+                                      allow=self._meant_to_touch([trajectory]))
         if kind == FORCE:
             self.sensors.tare(sensor)
         return self.motions.start(
-            "MoveReact", sensor, [trajectory], allow=allow, loops={"guard": guard},
+            "MoveReact", sensor, [trajectory], loops={"guard": guard}, checked=True,
             finish=lambda report: self._react_outcome(report, kind))
 
     def _react_outcome(self, report: dict, kind: str) -> str:

@@ -250,7 +250,9 @@ def test_a_reading_beyond_the_envelope_ends_move_react_as_failed(cup):
 
 def test_move_react_lets_only_the_tool_touch_its_surface_the_arm_stays_checked(cup):
     """Issue 11: the cup may meet the table it searches for; the flange may not. A search
-    planned 30 cm down would take the flange (12 cm above the cup's tip) into the table."""
+    planned 30 cm down would take the flange (12 cm above the cup's tip) into the table.
+    Refused, it changes nothing: the force sensor keeps its tare (it read 0 N under the cup's
+    weight after a refused MoveReact had tared it)."""
     before = cup.joints().copy()
     error = _refused(lambda: cup.device.MoveReact(sensing_pb2.MoveReactRequest(
         sensor_type="force_sensor", motion=Z(z=0.3), speed=1, thresholds=Z(z=-20))))
@@ -259,6 +261,7 @@ def test_move_react_lets_only_the_tool_touch_its_surface_the_arm_stays_checked(c
     assert info.metadata["body_a"].startswith("link") and info.metadata["body_b"] == "table"
     assert np.allclose(cup.joints(), before, atol=1e-6)
     assert cup.server.device.state is State.RESTING
+    assert cup.reading()[:3] == pytest.approx([0, 0, CUP_MASS * 9.81], abs=0.02)
 
 
 @pytest.mark.parametrize("fields, code", [
