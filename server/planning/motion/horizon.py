@@ -48,16 +48,17 @@ class RawStretch(NamedTuple):
 
 
 def raw_in_stretches(path: JointPath, grid: np.ndarray, acceleration: np.ndarray,
-                     caps: np.ndarray, rows=None, *, stretch: float, horizon: float
-                     ) -> Iterator[RawStretch]:
-    """The rest-to-rest profile along `path` over `grid`, as topp_ra's arguments (acceleration
+                     caps: np.ndarray, rows=None, *, stretch: float, horizon: float,
+                     first: int = 0, x_start: float = 0.0) -> Iterator[RawStretch]:
+    """The profile to rest along `path` over `grid`, as topp_ra's arguments (acceleration
     (6,) or a row per stage, caps (G,), rows), kept `stretch` of path (rad of s) at a time,
-    each timed over `horizon` (> stretch) ahead of its start. Lazy: each piece is timed when
-    asked for, so a caller sends one before the next is timed."""
+    each timed over `horizon` (> stretch) ahead of its start; from gridpoint `first` at the
+    squared speed x_start (a seam of pieces kept before). Lazy: each piece is timed when asked
+    for, so a caller sends one before the next is timed."""
     if not 0 < stretch < horizon:
         raise ValueError(f"need 0 < stretch < horizon, got {stretch!r}, {horizon!r}")
     acceleration = np.asarray(acceleration, dtype=float)
-    last, first, x_start = len(grid) - 1, 0, 0.0
+    last = len(grid) - 1
     while first < last:
         keep = _at_least_one_after(grid, first, stretch)
         end = max(_at_least_one_after(grid, first, horizon), keep + 1) if keep < last else last
