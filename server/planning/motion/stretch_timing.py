@@ -97,9 +97,10 @@ def time_in_stretches(waypoints, limits: Limits, dt: float, *, tool_path=None,
         if max(speed.max(), accel.max()) > 1.0 + LIMIT_SLACK:
             rounds += 1
             if rounds > _MAX_ROUNDS:
+                worst = int(np.argmax(np.maximum(speed, accel)))
                 raise PlanningError("LIMITS", "the sampled motion stays above the limits after "
-                                    "slowing it down", index=int(where[path_piece(
-                                        path, s[int(np.argmax(np.maximum(speed, accel)))][None])[0]]))
+                                    "slowing it down",
+                                    index=int(where[path_piece(path, s[worst:worst + 1])[0]]))
             seam = pieces.slow_down(raw, window, t, speed, accel, frozen)
             judged = min(judged, int(raw.times[seam] / dt) + 1)
             continue
