@@ -10,6 +10,10 @@ round trip in the same run. Prints figures, no pass/fail.
   message sent to the cycle (planning, the collision check, the hand-over), sent -> the tick
   that played it (the cycle's period: up to 4 ms by design).
 
+- A long blended path's timing (100 points, about 20 s of motion), in this process: the first
+  chunk of rows time_in_stretches gives out (issue 31 item 4, not yet wired into PathMove)
+  beside time_path's timing of the whole section, same run.
+
 The device server runs here on the real-time clock (its cycle process apart); the client runs
 in a child process, and reads the recorder there (a shared-memory ring), so the bench adds no
 work to the server's interpreter beyond its stamps. Run:
@@ -38,6 +42,9 @@ HOME = [0.0, 0.0, 1.5708, 0.0, 1.5708, 0.0]
 RING = [[0.3 * math.sin(i / 15), 0.2 * math.sin(i / 25), 1.5708 + 0.1 * math.cos(i / 20),
          0.0, 1.5708, 0.0] for i in range(100)]
 KINDS = ("joint move", "100-point path")
+# A long blended walk: 100 points, 0.3 rad apart, inside the joint ranges (about 20 s).
+LONG = np.cumsum(np.vstack([[0.0, 0.3, 1.4, 0.0, 0.9, 0.0],
+                            np.random.default_rng(11).normal(0.0, 0.3, (99, 6))]), axis=0)
 GOALS = {"joint move": 10.0, "100-point path": 20.0}
 
 
@@ -187,6 +194,31 @@ def main() -> None:
                goal=GOALS[kind])
         record(f"send to first moving cycle p50, {kind}", pct(first, 50), "ms",
                baseline=pct(echoes, 50), baseline_name="bare unary echo round trip p50")
+    long_path_timing(runs)
+
+
+def long_path_timing(runs: int) -> None:
+    """ms to time_in_stretches' first chunk against time_path's whole timing, per run."""
+    from landscape.robot.arm import arm_model
+    from landscape.server.planning.motion.stretch_timing import time_in_stretches
+    from landscape.server.planning.motion.timing import time_path
+    from landscape.server.planning.motion.trajectory import Limits
+    arm = arm_model()
+    limits = Limits.scaled(arm, 100, 100)
+    W = np.clip(LONG, 0.8 * arm.lower, 0.8 * arm.upper)
+    first, whole = [], []
+    for _ in range(runs):
+        start = time.perf_counter()
+        next(time_in_stretches(W, limits, 0.004))
+        first.append((time.perf_counter() - start) * 1000)
+        start = time.perf_counter()
+        time_path(W, limits, 0.004)
+        whole.append((time.perf_counter() - start) * 1000)
+    print(f"  long path timing (100 points, ~20 s), ms (p50 / p99): first chunk "
+          f"{pct(first, 50):.2f} / {pct(first, 99):.2f}; time_path whole {pct(whole, 50):.2f} / "
+          f"{pct(whole, 99):.2f}")
+    record("long path: first chunk timed p50", pct(first, 50), "ms", baseline=pct(whole, 50),
+           baseline_name="time_path of the whole section p50")
 
 
 if __name__ == "__main__":
