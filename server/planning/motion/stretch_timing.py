@@ -165,6 +165,14 @@ class _Pieces:
                                              self.accel[:n - 1])
         lowered = np.flatnonzero((caps < self.caps[:n]) | np.append(
             np.any(limits < self.accel[:n - 1], axis=1), False))
+        if self.rows is not None:   # the tool's acceleration rows lowered as the joints'
+            need = np.max(self.accel[:n - 1] / limits, axis=1)
+            at_point = np.maximum(np.append(need, 1.0), np.insert(need, 0, 1.0))[frozen + 1:]
+            ku, kx, h = self.rows
+            ku, kx = ku.copy(), kx.copy()
+            ku[frozen + 1:n] *= at_point[:, None]
+            kx[frozen + 1:n] *= at_point[:, None]
+            self.rows = (ku, kx, h)
         self.caps[frozen + 1:n] = caps[frozen + 1:]         # the frozen stages stay as played
         self.accel[frozen:n - 1] = limits[frozen:]
         first = max(int(lowered[0]) - 1, frozen) if lowered.size else frozen

@@ -11,6 +11,11 @@ import numpy as np
 import pytest
 
 from landscape.robot.arm import arm_model
+from landscape.robot.kinematics import Kinematics
+from landscape.server.device.motion_settings import MotionSettings
+from landscape.server.planning.moves import Planner
+from landscape.server.planning.path_planning import plan_run, plan_run_lazily
+from landscape.server.planning.paths import PathPoint, StoredPath
 from landscape.server.planning.motion.sample_check import excess_per_sample
 from landscape.server.planning.motion.stretch_timing import time_in_stretches
 from landscape.server.planning.motion.timing import (LIMIT_SLACK, chord_parameters, time_path)
@@ -46,8 +51,8 @@ def assert_a_valid_section(W, q, v, marks, limits) -> None:
     assert rows == sorted(rows) and rows[0] == 0 and rows[-1] == len(q) - 1
     s, keep = chord_parameters(W)
     path = JointPath(s, W[keep])
-    dense = path.evaluate(np.linspace(0.0, s[-1], 100_001), (0,))[0]
-    gap = max(float(np.min(np.linalg.norm(dense - row, axis=1))) for row in q[::25])
+    dense = path.evaluate(np.linspace(0.0, s[-1], 50_001), (0,))[0]
+    gap = max(float(np.min(np.linalg.norm(dense - row, axis=1))) for row in q[::50])
     assert gap < 1e-3, f"a row {gap:.2e} rad off the path"
 
 
@@ -102,3 +107,86 @@ def test_a_short_section_is_one_chunk_and_a_point_is_one_row():
     assert_a_valid_section(W, q, v, marks, limits)
     point = list(time_in_stretches(W[:1], limits, DT))
     assert len(point) == 1 and len(point[0].positions) == 1
+
+
+# ---- a path run planned lazily (path_planning.plan_run_lazily) -----------------------------
+
+def long_path(points: int, dwell_at: int) -> StoredPath:
+    """A blended joint path of `points` points (passed at 50 %), a dwell in the middle."""
+    W = walk(points, seed=8)
+    return StoredPath("long", False, tuple(np.eye(4).ravel()), tuple(
+        PathPoint(tuple(float(v) for v in q), f"p{i}", i, time_delay=0.5 if i == dwell_at else 0.0,
+                  transition_speed=0.0 if i in (0, points - 1) else 50.0)
+        for i, q in enumerate(W)))
+
+
+def test_a_long_path_run_comes_in_chunks_labelled_as_the_whole_run():
+    """Two cycles of a 60-point path with a dwell at point 30: two long stretches, each in
+    chunks that continue one another (one moving segment each, every sample within the
+    limits across the seams), every point's label in the same order as plan_run's, the later
+    cycle reusing the first's pieces, within 0.5 % of plan_run's rows."""
+    planner = Planner(Kinematics(ARM), DT)
+    settings = MotionSettings(ARM)
+    path = long_path(60, dwell_at=30)
+    start = np.array(path.points[0].joints)
+    whole = plan_run(planner, path, start, settings, 2)
+    lazy = plan_run_lazily(planner, path, start, settings, 2)
+    first, continues = next(lazy)
+    assert not continues and len(first) < len(whole[0]) / 5     # before the rest is timed
+    run = [(first, continues), *lazy]
+    labels = [label for piece, _ in run for _, label in piece.marks]
+    assert labels == [label for piece in whole for _, label in piece.marks]
+    assert labels == [*range(60), *range(60)]
+    assert sum(len(p) for p, _ in run) <= 1.005 * sum(len(p) for p in whole)
+    segments = []
+    for piece, continues in run:
+        if continues:
+            segments[-1] = (np.concatenate([segments[-1][0], piece.positions]),
+                            np.concatenate([segments[-1][1], piece.velocities]))
+        else:
+            segments.append((piece.positions, piece.velocities))
+    assert len(segments) == len(whole)       # the dwells' holds, the stretches, the way back
+    limits = planner.limits(settings, None)
+    for q, v in segments:
+        assert excess_per_sample(q, v, DT, limits).stretch() <= 1.0 + LIMIT_SLACK
+    half = len(run) // 2
+    assert all(a is b for (a, _), (b, _) in zip(run[:half], run[half + 1:]))   # reused
+
+
+def test_a_short_path_is_planned_whole_as_before():
+    planner = Planner(Kinematics(ARM), DT)
+    settings = MotionSettings(ARM)
+    path = long_path(6, dwell_at=3)
+    start = np.array(path.points[0].joints)
+    lazy = [piece for piece, continues in plan_run_lazily(planner, path, start, settings, 1)
+            if not continues]
+    whole = plan_run(planner, path, start, settings, 1)
+    assert len(lazy) == len(whole)
+    assert all(np.array_equal(a.positions, b.positions) and a.marks == b.marks
+               for a, b in zip(lazy, whole))
+
+
+def test_a_straight_line_keeps_the_tool_limits_across_stretches():
+    """A dense Cartesian path with the tool's speed and acceleration limits: every sample
+    within them (the tool rows are cut with the grid, and lowered with the joints' limits
+    where a sample exceeds: before, the slow-downs left a tool excess of 1.0007 in place and
+    the section was refused)."""
+    from landscape.robot.units import pose_matrix
+    from landscape.server.planning.motion.cartesian import straight_line, tool_pose
+    kin = Kinematics(ARM)
+    tcp = pose_matrix([0.0, 0.0, 0.15], [0.0, 0.0, 0.0])
+    start = pose_matrix([0.5, -0.4, 0.55], [np.pi, 0.0, 0.0])
+    q0, _ = kin.reverse(start @ np.linalg.inv(tcp), Q_HOME)
+    goal = start.copy()
+    goal[:3, 3] += [0.0, 0.8, 0.0]
+    W = straight_line(kin, q0, goal, tcp=tcp)
+    tip = tool_pose(kin, tcp)
+    limits = Limits.scaled(ARM, 100, 100, linear_velocity=1.0, linear_acceleration=3.0)
+    chunks = list(time_in_stretches(W, limits, DT, tool_path=tip, stretch=0.2, horizon=1.0))
+    assert len(chunks) > 2
+    q, v, _ = joined(chunks)
+    assert excess_per_sample(q, v, DT, limits, tip).stretch() <= 1.0 + LIMIT_SLACK
+    # A line alone takes time_path's window of T with flat turns; the stretches take 2 T (a
+    # long section has many turns): T (5 cycles) longer, once per section.
+    ramp = round(float(np.max(limits.acceleration / limits.jerk)) / DT)
+    assert len(q) <= len(time_path(W, limits, DT, tool_path=tip).positions) + ramp + 1
