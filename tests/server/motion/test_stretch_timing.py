@@ -190,3 +190,27 @@ def test_a_straight_line_keeps_the_tool_limits_across_stretches():
     # long section has many turns): T (5 cycles) longer, once per section.
     ramp = round(float(np.max(limits.acceleration / limits.jerk)) / DT)
     assert len(q) <= len(time_path(W, limits, DT, tool_path=tip).positions) + ramp + 1
+
+
+def test_a_long_straight_path_run_in_chunks_labels_its_points_and_keeps_the_tool_limits():
+    """STRAIGHT_MOTION: the dense rows between points carry no label, the points theirs, in
+    order; the joined chunks keep the tool's limits (the default Cartesian ones)."""
+    from landscape.server.planning.motion.cartesian import tool_pose
+    from landscape.server.planning.path_planning import PointSpec, load
+    from landscape.server.planning.targets import Frame
+    planner = Planner(Kinematics(ARM), DT)
+    settings = MotionSettings(ARM)
+    specs = [PointSpec(Q_HOME + [0.6 * np.sin(i / 2), 0.1 * np.cos(i / 3), 0.1 * np.sin(i / 4),
+                                 0.0, 0.1 * np.sin(i / 2), 0.0], f"p{i}", i,
+                       transition_speed=0.0 if i in (0, 39) else 40.0) for i in range(40)]
+    path = load(planner, None, "line", Frame.JOINT, True, False, specs, settings, set(), Q_HOME)
+    start = np.array(path.points[0].joints)
+    run = list(plan_run_lazily(planner, path, start, settings, 1, long_section=0.3))
+    assert len(run) > 5 and not run[0][1] and all(continues for _, continues in run[1:])
+    assert [label for piece, _ in run for _, label in piece.marks] == list(range(40))
+    q = np.concatenate([piece.positions for piece, _ in run])
+    v = np.concatenate([piece.velocities for piece, _ in run])
+    tip = tool_pose(planner.kinematics, path.tcp_matrix)
+    excess = excess_per_sample(q, v, DT, planner.limits(settings, None), tip)
+    assert excess.stretch() <= 1.0 + LIMIT_SLACK
+    assert len(q) <= 1.005 * sum(len(p) for p in plan_run(planner, path, start, settings, 1))
