@@ -27,7 +27,7 @@ import signal
 import threading
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 from google.protobuf.message import DecodeError
@@ -85,6 +85,8 @@ class PlanningContext:
     scene: CollisionScene
     streams: dict[str, PathLoadStream] = field(default_factory=dict)
     runs: dict[str, run_check.RunCheck] = field(default_factory=dict)   # checked ahead
+    # The pieces of runs timed as they play, not timed yet (plan_run_lazily), by key.
+    untimed: dict[str, Iterator] = field(default_factory=dict)
 
     def stream(self, key: str) -> PathLoadStream:
         stream = self.streams.get(key)
@@ -180,13 +182,57 @@ def check_path_ahead(ctx: PlanningContext, key: str, start: int, stop: int) -> N
         ctx.runs.pop(key, None)
 
 
+def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
+                     settings: MotionSettings, cycles: int, what: str
+                     ) -> tuple[list, list, int, bool]:
+    """plan_path_start for a run timed as it plays (issue 31 item 4): its first pieces, enough
+    rows to brake from the arm's top speed plus run_check.LEAD, timed and checked; the rest
+    waits under `key` for next_pieces. Returns (pieces, continues, brake rows, more)."""
+    arm = ctx.planner.arm
+    brake = run_check.brake_rows_from(np.asarray(arm.max_velocity), ctx.planner.dt,
+                                      np.asarray(arm.max_acceleration), np.asarray(arm.max_jerk))
+    ctx.untimed[key] = path_planning.plan_run_lazily(ctx.planner, path, q_start, settings,
+                                                     cycles)
+    ctx.runs[key] = run_check.RunCheck([], what)
+    return (*next_pieces(ctx, key, brake + run_check.LEAD)[:2], brake,
+            key in ctx.untimed)
+
+
+def next_pieces(ctx: PlanningContext, key: str, rows: int) -> tuple[list, list, bool]:
+    """The next pieces of a run plan_path_lazily started, at least `rows` rows of them unless
+    it ends first, timed and checked against the cell as it is now: (pieces, continues, more).
+    The run is forgotten after its last piece or a refusal."""
+    run, untimed = ctx.runs.get(key), ctx.untimed.get(key)
+    if run is None or untimed is None:   # the planning process holding it ended
+        raise Internal("the rest of this run was lost with the planning process that held it")
+    pieces, continues, more = [], [], True
+    try:
+        while sum(len(p) for p in pieces) < rows:
+            piece = next(untimed, None)
+            if piece is None:
+                more = False
+                break
+            pieces.append(piece[0])
+            continues.append(piece[1])
+        start = run.rows
+        run.extend(pieces)
+        run.check(ctx.scene, start, run.rows)
+    except Exception:
+        drop_run(ctx, key)
+        raise
+    if not more:
+        drop_run(ctx, key)
+    return pieces, continues, more
+
+
 def drop_run(ctx: PlanningContext, key: str) -> None:
     ctx.runs.pop(key, None)
+    ctx.untimed.pop(key, None)
 
 
 JOBS = {job.__name__: job for job in (open_stream, feed_stream, finish_stream, load_path,
                                       plan_path_run, plan_path_start, check_path_ahead,
-                                      drop_run)}
+                                      plan_path_lazily, next_pieces, drop_run)}
 _keys = itertools.count(1)
 
 
