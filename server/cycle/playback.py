@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from landscape.server.cycle.ramps import RampPlanner, hermite_at
+from landscape.server.cycle.run_arrays import GrowingSegments, Segments
 
 if TYPE_CHECKING:
     from landscape.server.cycle.force_loops import Admittance, ForceSettle, ThresholdMonitor
@@ -74,6 +75,10 @@ class Motion:
         self.checked: int | None = msg.get("checked")
         self.brake_rows = int(msg.get("brake", 0))
         self.awaiting = False
+        # A run timed as it plays: more pieces are coming ("append"), so its last segment so
+        # far is not its end; the blocks they came in (mapped until the motion is dropped).
+        self.more = bool(msg.get("more", False))
+        self._blocks: list = []
 
     def _load(self, index: int) -> None:
         self.segment = index
@@ -89,7 +94,10 @@ class Motion:
         """At the end of a segment: go on with the next one, if any; stopping, the play waits
         at the next one's start (the same place, at rest) rather than ending."""
         if self.segment + 1 >= len(self.segments):
-            return False
+            if self.more:   # late after all (keep_to_checked brakes before): wait here
+                self.rate, self.rate_change, self._ramp = 0.0, 0.0, None
+                self.target_rate, self.awaiting = 0.0, True
+            return self.more
         self.first_row += len(self.positions)
         self._load(self.segment + 1)
         # The last one ended at rest: this one starts as planned, or waits there.
@@ -159,6 +167,27 @@ class Motion:
                               or self.first_row + self.s + self.brake_rows < self.checked):
             self.awaiting = False
             self.target_rate = 1.0
+
+    def append(self, arrays, continues: bool, rows: int, everything: bool) -> None:
+        """Pieces timed and checked later (run_arrays.pack_run's arrays, shared): after the
+        segments so far, the first joined to the last one if it `continues` it (the playing
+        one included); `rows`: the run's rows so far, all checked; `everything`: none to
+        come."""
+        if not isinstance(self.segments, GrowingSegments):
+            self.segments = GrowingSegments(self.segments)
+        playing_last = self.segment == len(self.segments) - 1
+        self._blocks.append(arrays)
+        self.segments.append(Segments(arrays.open()), continues)
+        self.more = not everything
+        if playing_last and continues:
+            self._reload()
+        self.checked_to(rows, everything)
+
+    def _reload(self) -> None:
+        """The playing segment read again (continued): the play goes on where it is."""
+        s, next_mark = self.s, self.next_mark
+        self._load(self.segment)
+        self.s, self.next_mark, self._curve_at = s, next_mark, None
 
     def refuse(self, message: str) -> bool:
         """A later stretch was refused: brake along the path, to fail with `message` at rest;
