@@ -3,6 +3,9 @@ ring (one row per cycle): the cycle that takes a run from the server already mov
 from __future__ import annotations
 
 import itertools
+import os
+import signal
+import threading
 
 import numpy as np
 import pytest
@@ -36,6 +39,20 @@ def started_cycles(arm) -> list[float]:
         original(msg)
     device.on_cycle_message = spy
     return stamps
+
+
+def marked(arm) -> list[int]:
+    """The labels of the executor's "mark" reports from now on (a path's point indices)."""
+    labels: list[int] = []
+    device = arm.server.device
+    original = device.on_cycle_message
+
+    def spy(msg):
+        if isinstance(msg, dict) and msg.get("op") == "mark":
+            labels.append(msg["label"])
+        original(msg)
+    device.on_cycle_message = spy
+    return labels
 
 
 def setpoint_step(arm, wall_time: float) -> float:
@@ -97,7 +114,8 @@ def sent_to_cycle(arm) -> list[tuple[dict, np.ndarray]]:
     original = link.send
 
     def spy(message):
-        if isinstance(message, dict) and message.get("op") in ("run", "checked", "refused"):
+        if isinstance(message, dict) and message.get("op") in ("run", "checked", "refused",
+                                                                "append"):
             sent.append(({k: v for k, v in message.items() if k != "arrays"},
                          link.feedback.latest().command.copy()))
         original(message)
@@ -157,6 +175,82 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
     middle = steps[moving[0]:moving[-1]]
     assert (middle < 1e-9).sum() >= 10, "the arm never waited for a late stretch"
     assert np.allclose(fast.joints(), points[-1], atol=1e-4)
+
+
+def test_a_long_path_starts_before_it_is_fully_timed(fast):
+    """A path whose blended section is long (240 points) is timed as it plays: the run goes to
+    the cycle with its first pieces, the later ones follow ("append"), and the arm has left
+    its start when the last of them is sent. It ends done at the last point, having passed
+    every point's mark in order."""
+    points = long_path(fast, "long", 240)
+    motions = fast.server.device.motions
+    motions.time_ahead = True   # as on the real-time clock
+    motions.check_ahead_delay = 0.05
+    sent, marks = sent_to_cycle(fast), marked(fast)
+    run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="long"),
+                                           timeout=30))
+    assert marks == list(range(len(points))), "the points' marks, each once, in order"
+    (start, _), *later = sent
+    assert start["op"] == "run"
+    assert later and [m["op"] for m, _ in later] == ["append"] * len(later)
+    assert [m["all"] for m, _ in later] == [False] * (len(later) - 1) + [True]
+    _, where = later[-1]
+    assert np.abs(where - np.array(points[0])).max() > 1e-3, "the arm had not left its start"
+    assert np.allclose(fast.joints(), points[-1], atol=1e-4)
+
+
+@pytest.fixture
+def paced(tmp_path):
+    """The kinematic backend at the pace of the wall clock (a late planning process is late
+    for the arm too; the recording keeps the whole run)."""
+    a = Arm(tmp_path, backend="kinematic", pace=1.0)
+    yield a
+    a.close()
+
+
+def test_a_path_timed_late_never_stops_dead(paced):
+    """The planning process (a real one) stopped for 1.5 s (SIGSTOP) as a long path starts on
+    its first timed pieces (about 1.5 s of play, 1 s before it brakes for them): the arm
+    brakes to rest along the path before the rows not yet timed and goes on when they come.
+    Every cycle keeps the velocity, acceleration and jerk limits, every setpoint lies on the
+    timed path, and the motion ends done at the last point."""
+    from landscape.server.planning import path_planning
+    from landscape.server.planning.process import PlanningProcess
+    points = long_path(paced, "late", 240)
+    motions = paced.server.device.motions
+    planned = np.concatenate([t.positions for t, _ in path_planning.plan_run_lazily(
+        motions.planner, motions.paths.get("late"), motions.planning_start(),
+        paced.server.device.settings, 1)])
+    motions.planning = planning = PlanningProcess(motions.collisions, motions.planner.dt)
+    motions.time_ahead = True   # as on the real-time clock
+    link, resumed = motions.link, []
+    send = link.send
+
+    def stop_planning_as_the_run_starts(message):
+        if isinstance(message, dict) and message.get("op") == "run" and not resumed:
+            os.kill(planning.pid, signal.SIGSTOP)   # the next pieces are 1.5 s late
+            resumed.append(threading.Timer(1.5, os.kill, (planning.pid, signal.SIGCONT)))
+            resumed[0].start()
+        send(message)
+    link.send = stop_planning_as_the_run_starts
+    paced.record_start()
+    reply = paced.device.PathMove(motion_pb2.PathMoveRequest(path_name="late"), timeout=60)
+    assert paced.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+    cmd = paced.recorded_tips()[1]["cmd_pos"]
+    model = paced.server.device.arm
+    dt = 0.004
+    for order, limit in ((1, model.max_velocity), (2, model.max_acceleration),
+                         (3, model.max_jerk)):
+        peak = (np.abs(np.diff(cmd, order, axis=0)).max(axis=0) / dt**order / np.array(limit))
+        assert peak.max() <= 1 + 1e-6, (order, peak)
+    steps = np.linalg.norm(np.diff(cmd, axis=0), axis=1)
+    moving = np.flatnonzero(steps > 1e-9)
+    for q in cmd[moving[0] + 1:]:
+        k = int(np.argmin(np.linalg.norm(planned - q, axis=1)))
+        assert _on_chords(planned[max(k - 2, 0):k + 3], q, 1e-4), q
+    middle = steps[moving[0]:moving[-1]]
+    assert (middle < 1e-9).sum() >= 10, "the arm never waited for the late pieces"
+    assert np.allclose(paced.joints(), points[-1], atol=1e-4)
 
 
 def _on_chords(near: np.ndarray, q: np.ndarray, tolerance: float) -> bool:
