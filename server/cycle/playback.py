@@ -75,9 +75,8 @@ class Motion:
         self.checked: int | None = msg.get("checked")
         self.brake_rows = int(msg.get("brake", 0))
         self.awaiting = False
-        # A run timed as it plays: more pieces are coming ("append"), so its last segment so
-        # far is not its end; the blocks they came in (mapped until the motion is dropped).
-        self.more = bool(msg.get("more", False))
+        # A run timed as it plays: the blocks of its later pieces ("append"), mapped until the
+        # motion is dropped.
         self._blocks: list = []
 
     def _load(self, index: int) -> None:
@@ -94,10 +93,11 @@ class Motion:
         """At the end of a segment: go on with the next one, if any; stopping, the play waits
         at the next one's start (the same place, at rest) rather than ending."""
         if self.segment + 1 >= len(self.segments):
-            if self.more:   # late after all (keep_to_checked brakes before): wait here
+            if self.checked is not None:   # more to come (keep_to_checked braked before it)
                 self.rate, self.rate_change, self._ramp = 0.0, 0.0, None
                 self.target_rate, self.awaiting = 0.0, True
-            return self.more
+                return True
+            return False
         self.first_row += len(self.positions)
         self._load(self.segment + 1)
         # The last one ended at rest: this one starts as planned, or waits there.
@@ -151,34 +151,34 @@ class Motion:
     # ---- a run checked as it plays ----------------------------------------------------------
 
     def keep_to_checked(self) -> None:
-        """Brake along the path in time to rest before the rows not checked yet (the cycle
-        never waits for them: it slows down, and goes on once they are checked)."""
-        if (self.checked is not None and not self.awaiting and self.target_rate == 1.0
-                and self.first_row + self.s + self.brake_rows >= self.checked):
-            self.awaiting = True
-            self.target_rate = 0.0
-            self._braking = (self.stop_limit, self.stop_jerk)
+        """Each cycle: brake along the path in time to rest before the rows not checked yet
+        (the cycle never waits for them: it slows down), and go on once they are checked and
+        the braking ramp is over (a resume planned in the middle of a stop ramp may not fit
+        its bounds: ruckig refuses the input)."""
+        if self.checked is not None and not self.awaiting and self.target_rate == 1.0:
+            if self.first_row + self.s + self.brake_rows >= self.checked:
+                self.awaiting = True
+                self.target_rate = 0.0
+                self._braking = (self.stop_limit, self.stop_jerk)
+        elif self.awaiting and self._ramp is None and (
+                self.checked is None or self.first_row + self.s + self.brake_rows < self.checked):
+            self.awaiting = False
+            self.target_rate = 1.0
 
     def checked_to(self, rows: int, everything: bool) -> None:
         """The rows up to `rows` are checked (`everything`: all of them): a play held for them
-        goes on."""
+        goes on (keep_to_checked)."""
         self.checked = None if everything else rows
-        if self.awaiting and (self.checked is None
-                              or self.first_row + self.s + self.brake_rows < self.checked):
-            self.awaiting = False
-            self.target_rate = 1.0
 
     def append(self, arrays, continues: bool, rows: int, everything: bool) -> None:
         """Pieces timed and checked later (run_arrays.pack_run's arrays, shared): after the
         segments so far, the first joined to the last one if it `continues` it (the playing
-        one included); `rows`: the run's rows so far, all checked; `everything`: none to
-        come."""
+        one included); then as checked_to."""
         if not isinstance(self.segments, GrowingSegments):
             self.segments = GrowingSegments(self.segments)
         playing_last = self.segment == len(self.segments) - 1
         self._blocks.append(arrays)
         self.segments.append(Segments(arrays.open()), continues)
-        self.more = not everything
         if playing_last and continues:
             self._reload()
         self.checked_to(rows, everything)

@@ -65,8 +65,7 @@ class RunningMotion:
     # The final report's message, from the report (sensor loops: guarded.py); may act on it.
     finish: Callable[[dict], str] | None = None
     report: dict = field(default_factory=dict)   # the final report, once it came
-    rows: int = 0   # sent to the cycle so far
-    appended: list = field(default_factory=list)   # SharedArrays of later pieces (_append)
+    appended: list = field(default_factory=list)   # SharedArrays of later pieces (_hand_on)
 
 
 class MotionControl:
@@ -199,36 +198,39 @@ class MotionControl:
                           settings: MotionSettings | None) -> str:
         """path_move on a run timed as it plays (issue 31 item 4): it starts on its first
         pieces timed and checked, and run_check.follow_lazily hands the cycle the rest."""
-        pieces, continues, brake, more = self.planning.run(
+        pieces, continues, checked, brake, everything = self.planning.run(
             "plan_path_lazily", key, path, self.planning_start(),
             settings or self.settings.current, cycles, f"PathMove {path.name}")
         trajectories, _ = run_check.joined(pieces, continues)
         try:
-            motion = self._start("PathMove", path.name, trajectories, *self._path_marks(
-                path, cycles), checked=True, ahead=(sum(len(t) for t in trajectories), brake)
-                if more else None, more=more)
+            motion = self._start("PathMove", path.name, trajectories,
+                                 *self._path_marks(path, cycles), checked=True,
+                                 ahead=None if everything else (checked, brake))
         except BaseException:
             self.planning.run("drop_run", key)
             raise
-        if more:
+        if not everything:
             run_check.following_lazily(self.planning, key, motion.command_id,
-                                       lambda *args: self._append(motion, *args), self.send,
+                                       lambda *args: self._hand_on(motion, *args), self.send,
                                        lambda: self.check_ahead_delay)
         return motion.command_id
 
-    def _append(self, motion: RunningMotion, pieces: list, continues: list,
-                last: bool) -> bool:
-        """Later pieces of a run timed as it plays sent to the cycle, all checked; False if
-        the motion no longer runs (nothing sent)."""
-        trajectories, joins = run_check.joined(pieces, continues)
+    def _hand_on(self, motion: RunningMotion, pieces: list, continues: list, checked: int,
+                 everything: bool) -> bool:
+        """Later pieces of a run timed as it plays, and how far it is checked, sent to the
+        cycle; False if the motion no longer runs (nothing sent)."""
         with self._appending:
             if self._motion is not motion:
                 return False
+            if not pieces:
+                self.send({"op": "checked", "id": motion.command_id, "rows": checked,
+                           "all": everything})
+                return True
+            trajectories, joins = run_check.joined(pieces, continues)
             arrays = self.link.share(pack_run(trajectories, self.planner.dt))
-            motion.rows += sum(len(t) for t in trajectories)
             motion.appended.append(arrays)
             self.send({"op": "append", "id": motion.command_id, "arrays": arrays,
-                       "continues": joins, "rows": motion.rows, "all": last})
+                       "continues": joins, "rows": checked, "all": everything})
         return True
 
     @staticmethod
@@ -261,18 +263,15 @@ class MotionControl:
                            loops=loops, finish=finish, checked=checked).command_id
 
     def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
-               loops=None, finish=None, checked=False, ahead=None, more=False
-               ) -> RunningMotion:
-        """start(); `ahead`: (rows checked, brake rows) of a run checked as it plays; `more`:
-        a run timed as it plays, its later pieces appended (_append)."""
+               loops=None, finish=None, checked=False, ahead=None) -> RunningMotion:
+        """start(); `ahead`: (rows checked, brake rows) of a run checked (and timed: _hand_on)
+        as it plays."""
         if not checked:
             self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
         arrays = self.link.share(pack_run(trajectories, self.planner.dt))
         motion = RunningMotion(f"{command}-{next(self._ids)}", command, point_name, tags or {},
                                aux or {}, arrays, finish=finish)
-        motion.rows = sum(len(t) for t in trajectories)
-        unchecked = {} if ahead is None else {"checked": ahead[0], "brake": ahead[1],
-                                               "more": more}
+        unchecked = {} if ahead is None else {"checked": ahead[0], "brake": ahead[1]}
         try:
             self._begin(motion, {"op": "run", "id": motion.command_id, "arrays": arrays,
                                  **self._ramps(), **(loops or {}), **unchecked})

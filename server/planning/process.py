@@ -85,8 +85,7 @@ class PlanningContext:
     scene: CollisionScene
     streams: dict[str, PathLoadStream] = field(default_factory=dict)
     runs: dict[str, run_check.RunCheck] = field(default_factory=dict)   # checked ahead
-    # The pieces of runs timed as they play, not timed yet (plan_run_lazily), by key.
-    untimed: dict[str, Iterator] = field(default_factory=dict)
+    untimed: dict[str, "Untimed"] = field(default_factory=dict)   # runs timed as they play
 
     def stream(self, key: str) -> PathLoadStream:
         stream = self.streams.get(key)
@@ -94,6 +93,16 @@ class PlanningContext:
             raise Internal("this PathLoad stream was lost with the planning process that held "
                            "it; send the path again")
         return stream
+
+
+@dataclass
+class Untimed:
+    """A run timed as it plays: its pieces not timed yet (plan_run_lazily), whether any are
+    left, and how many of its rows are checked."""
+
+    pieces: Iterator
+    more: bool = True
+    checked: int = 0
 
 
 @dataclass(frozen=True)
@@ -184,45 +193,51 @@ def check_path_ahead(ctx: PlanningContext, key: str, start: int, stop: int) -> N
 
 def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
                      settings: MotionSettings, cycles: int, what: str
-                     ) -> tuple[list, list, int, bool]:
-    """plan_path_start for a run timed as it plays (issue 31 item 4): its first pieces, enough
-    rows to brake from the arm's top speed plus run_check.LEAD, timed and checked; the rest
-    waits under `key` for next_pieces. Returns (pieces, continues, brake rows, more)."""
+                     ) -> tuple[list, list, int, int, bool]:
+    """plan_path_start for a run TIMED as it plays as well (issue 31 item 4): its first
+    pieces, timed until they hold enough rows to brake from the arm's top speed plus
+    run_check.LEAD, and those rows checked; the rest waits under `key` for next_pieces.
+    Returns next_pieces' (pieces, continues, rows checked, all checked) with the brake rows
+    before the last."""
     arm = ctx.planner.arm
     brake = run_check.brake_rows_from(np.asarray(arm.max_velocity), ctx.planner.dt,
                                       np.asarray(arm.max_acceleration), np.asarray(arm.max_jerk))
-    ctx.untimed[key] = path_planning.plan_run_lazily(ctx.planner, path, q_start, settings,
-                                                     cycles)
+    ctx.untimed[key] = Untimed(path_planning.plan_run_lazily(ctx.planner, path, q_start,
+                                                             settings, cycles))
     ctx.runs[key] = run_check.RunCheck([], what)
-    return (*next_pieces(ctx, key, brake + run_check.LEAD)[:2], brake,
-            key in ctx.untimed)
+    pieces, continues, checked, everything = next_pieces(ctx, key, brake + run_check.LEAD)
+    return pieces, continues, checked, brake, everything
 
 
-def next_pieces(ctx: PlanningContext, key: str, rows: int) -> tuple[list, list, bool]:
-    """The next pieces of a run plan_path_lazily started, at least `rows` rows of them unless
-    it ends first, timed and checked against the cell as it is now: (pieces, continues, more).
-    The run is forgotten after its last piece or a refusal."""
+def next_pieces(ctx: PlanningContext, key: str, rows: int) -> tuple[list, list, int, bool]:
+    """The next `rows` rows of a run plan_path_lazily started checked against the cell as it
+    is now, and the pieces timed for them (none if they were timed already; a piece that
+    `continues` the one before follows on from it, moving): (pieces, continues, rows checked
+    so far, all checked). The run is forgotten once all is checked, or on a refusal."""
     run, untimed = ctx.runs.get(key), ctx.untimed.get(key)
     if run is None or untimed is None:   # the planning process holding it ended
         raise Internal("the rest of this run was lost with the planning process that held it")
-    pieces, continues, more = [], [], True
+    goal = untimed.checked + rows
+    pieces, continues = [], []
     try:
-        while sum(len(p) for p in pieces) < rows:
-            piece = next(untimed, None)
+        while untimed.more and run.rows + sum(len(p) for p in pieces) < goal:
+            piece = next(untimed.pieces, None)
             if piece is None:
-                more = False
-                break
-            pieces.append(piece[0])
-            continues.append(piece[1])
-        start = run.rows
+                untimed.more = False
+            else:
+                pieces.append(piece[0])
+                continues.append(piece[1])
         run.extend(pieces)
-        run.check(ctx.scene, start, run.rows)
+        stop = min(goal, run.rows)
+        run.check(ctx.scene, untimed.checked, stop)
     except Exception:
         drop_run(ctx, key)
         raise
-    if not more:
+    untimed.checked = stop
+    everything = not untimed.more and stop >= run.rows
+    if everything:
         drop_run(ctx, key)
-    return pieces, continues, more
+    return pieces, continues, stop, everything
 
 
 def drop_run(ctx: PlanningContext, key: str) -> None:

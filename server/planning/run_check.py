@@ -149,18 +149,20 @@ def following_lazily(*args) -> threading.Thread:
 
 
 def follow_lazily(planning, key: str, command_id: str,
-                  append: Callable[[list, list, bool], bool], send: Callable[[dict], None],
-                  delay: Callable[[], float] = lambda: 0.0) -> None:
-    """The server's side of a run timed as it plays: the next pieces of the run under `key`
-    timed and checked by `planning` (process.py's next_pieces, about STRETCH rows at a time)
-    and handed to `append(pieces, continues, last)`, which sends them to the cycle (False:
-    the motion no longer runs); a refusal is sent as in follow. `delay()` as in follow."""
+                  hand_on: Callable[[list, list, int, bool], bool],
+                  send: Callable[[dict], None], delay: Callable[[], float] = lambda: 0.0
+                  ) -> None:
+    """The server's side of a run timed as it plays: its next STRETCH rows checked, and the
+    pieces timed for them, by `planning` (process.py's next_pieces) one stretch after the
+    other, each handed to `hand_on(pieces, continues, rows checked, all checked)`, which
+    sends them to the cycle (False: the motion no longer runs, and this ends); a refusal is
+    sent as in follow. `delay()` as in follow."""
     try:
-        more = True
-        while more:
+        everything = False
+        while not everything:
             time.sleep(delay())
-            pieces, continues, more = planning.run("next_pieces", key, STRETCH)
-            if not append(pieces, continues, not more):
+            pieces, continues, checked, everything = planning.run("next_pieces", key, STRETCH)
+            if not hand_on(pieces, continues, checked, everything):
                 planning.run("drop_run", key)
                 return
     except CommandError as refusal:   # a collision, a timing refused, the process lost

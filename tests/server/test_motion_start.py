@@ -179,9 +179,9 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
 
 def test_a_long_path_starts_before_it_is_fully_timed(fast):
     """A path whose blended section is long (240 points) is timed as it plays: the run goes to
-    the cycle with its first pieces, the later ones follow ("append"), and the arm has left
-    its start when the last of them is sent. It ends done at the last point, having passed
-    every point's mark in order."""
+    the cycle with its first pieces, the later ones follow ("append", with how far the run is
+    checked), and the arm has left its start when the last of them is sent. It ends done at
+    the last point, having passed every point's mark in order."""
     points = long_path(fast, "long", 240)
     motions = fast.server.device.motions
     motions.time_ahead = True   # as on the real-time clock
@@ -192,10 +192,12 @@ def test_a_long_path_starts_before_it_is_fully_timed(fast):
     assert marks == list(range(len(points))), "the points' marks, each once, in order"
     (start, _), *later = sent
     assert start["op"] == "run"
-    assert later and [m["op"] for m, _ in later] == ["append"] * len(later)
+    assert {m["op"] for m, _ in later} <= {"append", "checked"}
     assert [m["all"] for m, _ in later] == [False] * (len(later) - 1) + [True]
-    _, where = later[-1]
-    assert np.abs(where - np.array(points[0])).max() > 1e-3, "the arm had not left its start"
+    appended = [where for m, where in later if m["op"] == "append"]
+    assert appended, "every piece was timed before the run started"
+    assert np.abs(appended[-1] - np.array(points[0])).max() > 1e-3, \
+        "the arm had not left its start when the last piece was sent"
     assert np.allclose(fast.joints(), points[-1], atol=1e-4)
 
 
@@ -252,6 +254,51 @@ def test_a_path_timed_late_never_stops_dead(paced):
     assert (middle < 1e-9).sum() >= 10, "the arm never waited for the late pieces"
     assert np.allclose(paced.joints(), points[-1], atol=1e-4)
 
+
+@pytest.mark.parametrize("accel", [20, 50])
+@pytest.mark.parametrize("checked", [0.3, 0.5, 0.7])
+@pytest.mark.parametrize("late_by", [1, 4, 10, 40])
+def test_rows_checked_while_the_arm_brakes_for_them_keep_it_within_the_limits(accel, checked,
+                                                                              late_by):
+    """The rest of a run checked (or timed: "append") `late_by` cycles after the play began
+    to brake (at the arm's full limits) before the rows not checked: playback.Motion, as the
+    executor plays it (the run at `accel` percent), stays within the arm's acceleration and
+    jerk limits and goes on to the end. Found wiring the run timed as it plays: a resume planned in the middle of that stop
+    ramp raised in the cycle (ruckig's -101, or an empty stretch in ramps.py)."""
+    from landscape.robot.arm import arm_model
+    from landscape.server.cycle.playback import Motion
+    from landscape.server.planning.motion.timing import time_path
+    from landscape.server.planning.motion.trajectory import Limits
+    dt, arm = 0.004, arm_model()
+    limits = Limits.scaled(arm, 100, accel)
+    timed = time_path(np.array([[0.4 * np.sin(i / 9), 0.3 + 0.15 * np.sin(i / 13),
+                                 1.4 + 0.1 * np.cos(i / 11), 0.2 * np.sin(i / 7), 0.9, 0.0]
+                                for i in range(120)]), limits, dt)
+    rows = len(timed.positions)
+    motion = Motion({"id": "m", "acceleration": limits.acceleration, "jerk": limits.jerk,
+                     "segments": [{"positions": timed.positions,
+                                   "velocities": timed.velocities}],
+                     "checked": int(rows * checked), "brake": 273}, dt)
+    motion.stop_limit = np.array(arm.max_acceleration, dtype=float)   # as executor.py's
+    motion.stop_jerk = np.array(arm.max_jerk, dtype=float)
+    played, braking = [motion.position()] * 3, None
+    for cycle in range(20 * rows):
+        if braking is None and motion.awaiting:
+            braking = cycle
+        if braking is not None and cycle == braking + late_by:
+            motion.checked_to(rows, True)
+        motion.keep_to_checked()
+        motion.advance()
+        played.append(motion.position())
+        if motion.s >= motion.last and not motion.next_segment():
+            break
+    else:
+        raise AssertionError("the run did not end")
+    played = np.array(played + [motion.position()] * 3)
+    for order, limit in ((2, arm.max_acceleration), (3, arm.max_jerk)):
+        peak = (np.abs(np.diff(played, order, axis=0)) / dt**order / np.array(limit)).max()
+        assert peak <= 1 + 1e-6, (order, peak)
+    assert np.allclose(played[-1], timed.positions[-1])
 
 def _on_chords(near: np.ndarray, q: np.ndarray, tolerance: float) -> bool:
     """Whether q lies within `tolerance` (rad) of the chords between consecutive rows."""
