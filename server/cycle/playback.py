@@ -170,10 +170,11 @@ class Motion:
         goes on (keep_to_checked)."""
         self.checked = None if everything else rows
 
-    def append(self, arrays, continues: bool, rows: int, everything: bool) -> None:
+    def append(self, arrays, continues: bool, rows: int, brake: int, everything: bool) -> None:
         """Pieces timed and checked later (run_arrays.pack_run's arrays, shared): after the
         segments so far, the first joined to the last one if it `continues` it (the playing
-        one included); then as checked_to."""
+        one included); `brake`: the rows a stop may take from the fastest of them all (the
+        arm is never faster than the fastest it has); then as checked_to."""
         if not isinstance(self.segments, GrowingSegments):
             self.segments = GrowingSegments(self.segments)
         playing_last = self.segment == len(self.segments) - 1
@@ -181,6 +182,7 @@ class Motion:
         self.segments.append(Segments(arrays.open()), continues)
         if playing_last and continues:
             self._reload()
+        self.brake_rows = brake
         self.checked_to(rows, everything)
 
     def _reload(self) -> None:

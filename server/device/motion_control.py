@@ -216,9 +216,9 @@ class MotionControl:
         return motion.command_id
 
     def _hand_on(self, motion: RunningMotion, pieces: list, continues: list, checked: int,
-                 everything: bool) -> bool:
-        """Later pieces of a run timed as it plays, and how far it is checked, sent to the
-        cycle; False if the motion no longer runs (nothing sent)."""
+                 brake: int, everything: bool) -> bool:
+        """Later pieces of a run timed as it plays, how far it is checked and the brake rows
+        for its fastest so far, sent to the cycle; False if the motion no longer runs."""
         with self._appending:
             if self._motion is not motion:
                 return False
@@ -230,7 +230,8 @@ class MotionControl:
             arrays = self.link.share(pack_run(trajectories, self.planner.dt))
             motion.appended.append(arrays)
             self.send({"op": "append", "id": motion.command_id, "arrays": arrays,
-                       "continues": joins, "rows": checked, "all": everything})
+                       "continues": joins, "rows": checked, "brake": brake,
+                       "all": everything})
         return True
 
     @staticmethod

@@ -46,8 +46,8 @@ def brake_rows(trajectories: list, dt: float, acceleration: np.ndarray,
 
 def brake_rows_from(speed: np.ndarray, dt: float, acceleration: np.ndarray,
                     jerk: np.ndarray) -> int:
-    """brake_rows for joints moving at most at `speed` (rad/s): for a run not timed yet, the
-    arm's top speed."""
+    """brake_rows for joints moving at most at `speed` (rad/s): a run timed as it plays
+    has its fastest so far."""
     fastest = float(np.max(np.asarray(speed) / acceleration))
     seconds = fastest + float(np.max(acceleration / jerk))
     return int(math.ceil(BRAKE_FACTOR * seconds / dt)) + SPARE
@@ -149,20 +149,22 @@ def following_lazily(*args) -> threading.Thread:
 
 
 def follow_lazily(planning, key: str, command_id: str,
-                  hand_on: Callable[[list, list, int, bool], bool],
+                  hand_on: Callable[[list, list, int, int, bool], bool],
                   send: Callable[[dict], None], delay: Callable[[], float] = lambda: 0.0
                   ) -> None:
     """The server's side of a run timed as it plays: its next STRETCH rows checked, and the
     pieces timed for them, by `planning` (process.py's next_pieces) one stretch after the
-    other, each handed to `hand_on(pieces, continues, rows checked, all checked)`, which
+    other, each handed to `hand_on(pieces, continues, rows checked, brake rows, all
+    checked)`, which
     sends them to the cycle (False: the motion no longer runs, and this ends); a refusal is
     sent as in follow. `delay()` as in follow."""
     try:
         everything = False
         while not everything:
             time.sleep(delay())
-            pieces, continues, checked, everything = planning.run("next_pieces", key, STRETCH)
-            if not hand_on(pieces, continues, checked, everything):
+            answer = planning.run("next_pieces", key, STRETCH)
+            everything = answer[-1]
+            if not hand_on(*answer):
                 planning.run("drop_run", key)
                 return
     except CommandError as refusal:   # a collision, a timing refused, the process lost
