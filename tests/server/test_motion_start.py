@@ -27,32 +27,28 @@ def fast(tmp_path):
     a.close()
 
 
-def started_cycles(arm) -> list[float]:
-    """The tick stamps of the cycles that took a run (the executor's "started" reports)."""
-    stamps: list[float] = []
+def reported(arm, op: str, field: str) -> list:
+    """`field` of each of the executor's `op` reports from now on."""
+    values: list = []
     device = arm.server.device
     original = device.on_cycle_message
 
     def spy(msg):
-        if isinstance(msg, dict) and msg.get("op") == "started":
-            stamps.append(msg["wall_time"])
+        if isinstance(msg, dict) and msg.get("op") == op:
+            values.append(msg[field])
         original(msg)
     device.on_cycle_message = spy
-    return stamps
+    return values
+
+
+def started_cycles(arm) -> list[float]:
+    """The tick stamps of the cycles that took a run (the executor's "started" reports)."""
+    return reported(arm, "started", "wall_time")
 
 
 def marked(arm) -> list[int]:
     """The labels of the executor's "mark" reports from now on (a path's point indices)."""
-    labels: list[int] = []
-    device = arm.server.device
-    original = device.on_cycle_message
-
-    def spy(msg):
-        if isinstance(msg, dict) and msg.get("op") == "mark":
-            labels.append(msg["label"])
-        original(msg)
-    device.on_cycle_message = spy
-    return labels
+    return reported(arm, "mark", "label")
 
 
 def setpoint_step(arm, wall_time: float) -> float:
