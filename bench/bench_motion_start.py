@@ -10,6 +10,13 @@ round trip in the same run. Prints figures, no pass/fail.
   message sent to the cycle (planning, the collision check, the hand-over), sent -> the tick
   that played it (the cycle's period: up to 4 ms by design).
 
+- A long blended path's timing (100 points, about 20 s of motion), in this process: the first
+  chunk of rows time_in_stretches gives out (issue 31 item 4) beside time_path's timing of
+  the whole section, same run.
+- A long path (WAVY, 240 points) run by PathMove, send -> first moving cycle, timed as it plays (as in
+  service on this clock: MotionControl.time_ahead) beside timed whole before it starts, same
+  run; each run stopped and aborted once it moves.
+
 The device server runs here on the real-time clock (its cycle process apart); the client runs
 in a child process, and reads the recorder there (a shared-memory ring), so the bench adds no
 work to the server's interpreter beyond its stamps. Run:
@@ -38,6 +45,13 @@ HOME = [0.0, 0.0, 1.5708, 0.0, 1.5708, 0.0]
 RING = [[0.3 * math.sin(i / 15), 0.2 * math.sin(i / 25), 1.5708 + 0.1 * math.cos(i / 20),
          0.0, 1.5708, 0.0] for i in range(100)]
 KINDS = ("joint move", "100-point path")
+# A long blended walk: 100 points, 0.3 rad apart, inside the joint ranges (about 20 s).
+LONG = np.cumsum(np.vstack([[0.0, 0.3, 1.4, 0.0, 0.9, 0.0],
+                            np.random.default_rng(11).normal(0.0, 0.3, (99, 6))]), axis=0)
+# A long blended joint path that PathMove runs (tests/server/test_motion_start.py's): 240
+# points, one section of about 9 rad of joint path, 5.6 s.
+WAVY = [[0.4 * math.sin(i / 9), 0.3 + 0.15 * math.sin(i / 13), 1.4 + 0.1 * math.cos(i / 11),
+         0.2 * math.sin(i / 7), 0.9, 0.0] for i in range(240)]
 GOALS = {"joint move": 10.0, "100-point path": 20.0}
 
 
@@ -187,6 +201,92 @@ def main() -> None:
                goal=GOALS[kind])
         record(f"send to first moving cycle p50, {kind}", pct(first, 50), "ms",
                baseline=pct(echoes, 50), baseline_name="bare unary echo round trip p50")
+    long_path_timing(runs)
+    long_path_start(runs)
+
+
+def long_path_start(runs: int) -> None:
+    """send -> first moving cycle of the long path's PathMove, timed as it plays and whole."""
+    server = serve(ServerConfig(port=0, clock="realtime"))
+    try:
+        first = {}
+        for lazily in (False, True):
+            server.device.motions.time_ahead = lazily
+            first[lazily] = collect(in_child(long_starter, server.target, server.link.feedback,
+                                             runs, not first), 900)
+    finally:
+        server.stop(grace=None)
+    print(f"  long path PathMove (240 points, ~5.6 s), send -> first moving cycle, ms "
+          f"(p50 / p99): timed as it plays {pct(first[True], 50):.2f} / "
+          f"{pct(first[True], 99):.2f}; timed whole first {pct(first[False], 50):.2f} / "
+          f"{pct(first[False], 99):.2f}")
+    record("long path PathMove: send to first moving cycle p50", pct(first[True], 50), "ms",
+           baseline=pct(first[False], 50), baseline_name="the same, timed whole first, p50")
+
+
+async def long_starter(target: str, ring, runs: int, load: bool) -> list[float]:
+    """The lock holder: the long path (WAVY) loaded if `load`, then per run from its first
+    point, PathMove's send -> first moving cycle (ms), the run stopped and aborted once it
+    moves."""
+    async with grpc.aio.insecure_channel(target) as channel, \
+            AsyncSession(channel, "bench") as session:
+        await session.lock()
+        device = device_service_pb2_grpc.DeviceServiceStub(channel)
+        md = session.metadata()
+        await device.Activate(control_pb2.ActivateRequest(), metadata=md)
+        header = motion_pb2.PathHeader(path_name="long", frame=JOINT,
+                                       motion_type=types_pb2.MOTION_TYPE_JOINT_MOTION,
+                                       offset_type=types_pb2.OFFSET_TYPE_ABSOLUTE_DATA)
+        if load:
+            await device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=[
+                types_pb2.TagStruct(joint_values=q, transition_speed=60) for q in WAVY])]),
+                metadata=md)
+
+        async def resting():
+            while (await device.GetDeviceState(control_pb2.GetDeviceStateRequest())
+                   ).state != types_pb2.DEVICE_STATE_RESTING:
+                await asyncio.sleep(0.02)
+            await asyncio.sleep(0.1)
+
+        out = []
+        for _ in range(runs):
+            await resting()
+            await device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT,
+                                                                     values=WAVY[0]),
+                                      metadata=md)
+            await resting()
+            began = time.time()
+            await device.PathMove(motion_pb2.PathMoveRequest(path_name="long"), metadata=md)
+            out.append((first_moving(ring, began) - began) * 1000)
+            await device.StopMotion(motion_pb2.StopMotionRequest(), metadata=md)
+            await device.AbortMotion(motion_pb2.AbortMotionRequest(), metadata=md)
+        await resting()
+        await device.Deactivate(control_pb2.DeactivateRequest(), metadata=md)
+        return out
+
+
+def long_path_timing(runs: int) -> None:
+    """ms to time_in_stretches' first chunk against time_path's whole timing, per run."""
+    from landscape.robot.arm import arm_model
+    from landscape.server.planning.motion.stretch_timing import time_in_stretches
+    from landscape.server.planning.motion.timing import time_path
+    from landscape.server.planning.motion.trajectory import Limits
+    arm = arm_model()
+    limits = Limits.scaled(arm, 100, 100)
+    W = np.clip(LONG, 0.8 * arm.lower, 0.8 * arm.upper)
+    first, whole = [], []
+    for _ in range(runs):
+        start = time.perf_counter()
+        next(time_in_stretches(W, limits, 0.004))
+        first.append((time.perf_counter() - start) * 1000)
+        start = time.perf_counter()
+        time_path(W, limits, 0.004)
+        whole.append((time.perf_counter() - start) * 1000)
+    print(f"  long path timing (100 points, ~20 s), ms (p50 / p99): first chunk "
+          f"{pct(first, 50):.2f} / {pct(first, 99):.2f}; time_path whole {pct(whole, 50):.2f} / "
+          f"{pct(whole, 99):.2f}")
+    record("long path: first chunk timed p50", pct(first, 50), "ms", baseline=pct(whole, 50),
+           baseline_name="time_path of the whole section p50")
 
 
 if __name__ == "__main__":

@@ -341,6 +341,8 @@ class Executor:
                 self._attach(self._motion, msg)
         elif op == "checked" and motion is not None and motion.id == msg["id"]:
             motion.checked_to(msg["rows"], msg["all"])
+        elif op == "append" and motion is not None and motion.id == msg["id"]:
+            motion.append(msg["arrays"], msg["continues"], msg["rows"], msg["brake"], msg["all"])
         elif op == "refused" and motion is not None and motion.id == msg["id"]:
             if motion.refuse(msg["message"]):
                 self._end("failed", message=msg["message"])

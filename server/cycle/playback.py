@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from landscape.server.cycle.ramps import RampPlanner, hermite_at
+from landscape.server.cycle.run_arrays import GrowingSegments, Segments
 
 if TYPE_CHECKING:
     from landscape.server.cycle.force_loops import Admittance, ForceSettle, ThresholdMonitor
@@ -74,6 +75,9 @@ class Motion:
         self.checked: int | None = msg.get("checked")
         self.brake_rows = int(msg.get("brake", 0))
         self.awaiting = False
+        # A run timed as it plays: the blocks of its later pieces ("append"), mapped until the
+        # motion is dropped.
+        self._blocks: list = []
 
     def _load(self, index: int) -> None:
         self.segment = index
@@ -89,6 +93,10 @@ class Motion:
         """At the end of a segment: go on with the next one, if any; stopping, the play waits
         at the next one's start (the same place, at rest) rather than ending."""
         if self.segment + 1 >= len(self.segments):
+            if self.checked is not None:   # more to come (keep_to_checked braked before it)
+                self.rate, self.rate_change, self._ramp = 0.0, 0.0, None
+                self.target_rate, self.awaiting = 0.0, True
+                return True
             return False
         self.first_row += len(self.positions)
         self._load(self.segment + 1)
@@ -143,22 +151,45 @@ class Motion:
     # ---- a run checked as it plays ----------------------------------------------------------
 
     def keep_to_checked(self) -> None:
-        """Brake along the path in time to rest before the rows not checked yet (the cycle
-        never waits for them: it slows down, and goes on once they are checked)."""
-        if (self.checked is not None and not self.awaiting and self.target_rate == 1.0
-                and self.first_row + self.s + self.brake_rows >= self.checked):
-            self.awaiting = True
-            self.target_rate = 0.0
-            self._braking = (self.stop_limit, self.stop_jerk)
+        """Each cycle: brake along the path in time to rest before the rows not checked yet
+        (the cycle never waits for them: it slows down), and go on once they are checked and
+        the braking ramp is over (a resume planned in the middle of a stop ramp may not fit
+        its bounds: ruckig refuses the input)."""
+        if self.checked is not None and not self.awaiting and self.target_rate == 1.0:
+            if self.first_row + self.s + self.brake_rows >= self.checked:
+                self.awaiting = True
+                self.target_rate = 0.0
+                self._braking = (self.stop_limit, self.stop_jerk)
+        elif self.awaiting and self._ramp is None and (
+                self.checked is None or self.first_row + self.s + self.brake_rows < self.checked):
+            self.awaiting = False
+            self.target_rate = 1.0
 
     def checked_to(self, rows: int, everything: bool) -> None:
         """The rows up to `rows` are checked (`everything`: all of them): a play held for them
-        goes on."""
+        goes on (keep_to_checked)."""
         self.checked = None if everything else rows
-        if self.awaiting and (self.checked is None
-                              or self.first_row + self.s + self.brake_rows < self.checked):
-            self.awaiting = False
-            self.target_rate = 1.0
+
+    def append(self, arrays, continues: bool, rows: int, brake: int, everything: bool) -> None:
+        """Pieces timed and checked later (run_arrays.pack_run's arrays, shared): after the
+        segments so far, the first joined to the last one if it `continues` it (the playing
+        one included); `brake`: the rows a stop may take from the fastest of them all (the
+        arm is never faster than the fastest it has); then as checked_to."""
+        if not isinstance(self.segments, GrowingSegments):
+            self.segments = GrowingSegments(self.segments)
+        playing_last = self.segment == len(self.segments) - 1
+        self._blocks.append(arrays)
+        self.segments.append(Segments(arrays.open()), continues)
+        if playing_last and continues:
+            self._reload()
+        self.brake_rows = brake
+        self.checked_to(rows, everything)
+
+    def _reload(self) -> None:
+        """The playing segment read again (continued): the play goes on where it is."""
+        s, next_mark = self.s, self.next_mark
+        self._load(self.segment)
+        self.s, self.next_mark, self._curve_at = s, next_mark, None
 
     def refuse(self, message: str) -> bool:
         """A later stretch was refused: brake along the path, to fail with `message` at rest;

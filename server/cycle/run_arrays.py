@@ -41,3 +41,35 @@ class Segments:
                 "velocities": self._a["velocities"][start:end],
                 "accelerations": self._a["accelerations"][start:end],
                 "marks": self._a["marks"][m0:m1]}
+
+
+class GrowingSegments:
+    """The segments of a run timed as it plays (issue 31 item 4): blocks of Segments appended
+    as they come, a block's first segment joined to the one before if it continues it (its
+    rows follow on, the arm moving: one segment to play). A joined segment's arrays are
+    copied when read."""
+
+    def __init__(self, first):
+        self._parts: list[list[tuple]] = [[(first, i)] for i in range(len(first))]
+
+    def __len__(self) -> int:
+        return len(self._parts)
+
+    def append(self, block, continues: bool) -> None:
+        """The block's segments after those so far, its first joined to the last if it
+        `continues` it."""
+        for i in range(len(block)):
+            if i == 0 and continues:
+                self._parts[-1].append((block, i))
+            else:
+                self._parts.append([(block, i)])
+
+    def __getitem__(self, index: int) -> dict:
+        parts = [block[i] for block, i in self._parts[index]]
+        if len(parts) == 1:
+            return parts[0]
+        offsets = np.cumsum([0, *(len(p["positions"]) for p in parts[:-1])])
+        marks = [p["marks"] + np.array([offset, 0]) for p, offset in zip(parts, offsets)]
+        return {**{name: np.concatenate([p[name] for p in parts])
+                   for name in ("positions", "velocities", "accelerations")},
+                "marks": np.concatenate(marks).reshape(-1, 2)}

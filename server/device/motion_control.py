@@ -65,6 +65,7 @@ class RunningMotion:
     # The final report's message, from the report (sensor loops: guarded.py); may act on it.
     finish: Callable[[dict], str] | None = None
     report: dict = field(default_factory=dict)   # the final report, once it came
+    appended: list = field(default_factory=list)   # SharedArrays of later pieces (_hand_on)
 
 
 class MotionControl:
@@ -89,6 +90,10 @@ class MotionControl:
         # `check_ahead_delay` s (the arm then slows along the path, run_check.py).
         self.check_ahead = link.clock_kind == "realtime"
         self.check_ahead_delay = 0.0
+        # A long path run is TIMED as it plays as well (issue 31 item 4), on the real-time
+        # clock only for the same reason; tests turn it on there.
+        self.time_ahead = link.clock_kind == "realtime"
+        self._appending = threading.Lock()   # an append and a motion's end, one at a time
         # Long paths are planned beside a cycle process in a process of their own as well.
         self.planning = (PlanningProcess(collisions, link.cycle_time, self._planning_lost)
                          if link.clock_kind in PROCESS_CLOCKS
@@ -170,15 +175,15 @@ class MotionControl:
         if path is None:
             raise NotFound(f"no path named {name!r}")
         key = f"run-{next(self._ids)}"
+        if self.time_ahead:
+            return self._path_move_lazily(key, path, cycles, settings)
         trajectories, checked, brake = self.planning.run(
             "plan_path_start", key, path, self.planning_start(),
             settings or self.settings.current, cycles, f"PathMove {name}", self.check_ahead)
-        tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
-        aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
-                                      if p.aux_commands}
         rows = sum(len(t) for t in trajectories)
         try:
-            motion = self._start("PathMove", name, trajectories, tags, aux, checked=True,
+            motion = self._start("PathMove", name, trajectories,
+                                 *self._path_marks(path, cycles), checked=True,
                                  ahead=(checked, brake) if checked < rows else None)
         except BaseException:
             self.planning.run("drop_run", key)
@@ -188,6 +193,54 @@ class MotionControl:
                                 self.send, lambda: self._motion is motion,
                                 lambda: self.check_ahead_delay)
         return motion.command_id
+
+    def _path_move_lazily(self, key: str, path, cycles: int,
+                          settings: MotionSettings | None) -> str:
+        """path_move on a run timed as it plays (issue 31 item 4): it starts on its first
+        pieces timed and checked, and run_check.follow_lazily hands the cycle the rest."""
+        pieces, continues, checked, brake, everything = self.planning.run(
+            "plan_path_lazily", key, path, self.planning_start(),
+            settings or self.settings.current, cycles, f"PathMove {path.name}")
+        trajectories, _ = run_check.joined(pieces, continues)
+        try:
+            motion = self._start("PathMove", path.name, trajectories,
+                                 *self._path_marks(path, cycles), checked=True,
+                                 ahead=None if everything else (checked, brake))
+        except BaseException:
+            self.planning.run("drop_run", key)
+            raise
+        if not everything:
+            run_check.following_lazily(self.planning, key, motion.command_id,
+                                       lambda *args: self._hand_on(motion, *args), self.send,
+                                       lambda: self.check_ahead_delay)
+        return motion.command_id
+
+    def _hand_on(self, motion: RunningMotion, pieces: list, continues: list, checked: int,
+                 brake: int, everything: bool) -> bool:
+        """Later pieces of a run timed as it plays, how far it is checked and the brake rows
+        for its fastest so far, sent to the cycle; False if the motion no longer runs."""
+        with self._appending:
+            if self._motion is not motion:
+                return False
+            if not pieces:
+                self.send({"op": "checked", "id": motion.command_id, "rows": checked,
+                           "all": everything})
+                return True
+            trajectories, joins = run_check.joined(pieces, continues)
+            arrays = self.link.share(pack_run(trajectories, self.planner.dt))
+            motion.appended.append(arrays)
+            self.send({"op": "append", "id": motion.command_id, "arrays": arrays,
+                       "continues": joins, "rows": checked, "brake": brake,
+                       "all": everything})
+        return True
+
+    @staticmethod
+    def _path_marks(path, cycles: int) -> tuple[dict, dict]:
+        """A path run's (tags, aux) by mark label (point index); no aux in a dry run."""
+        tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
+        aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
+                                      if p.aux_commands}
+        return tags, aux
 
     # ---- starting ----------------------------------------------------------------------------
 
@@ -212,7 +265,8 @@ class MotionControl:
 
     def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
                loops=None, finish=None, checked=False, ahead=None) -> RunningMotion:
-        """start(); `ahead`: (rows checked, brake rows) of a run checked as it plays."""
+        """start(); `ahead`: (rows checked, brake rows) of a run checked (and timed: _hand_on)
+        as it plays."""
         if not checked:
             self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
         arrays = self.link.share(pack_run(trajectories, self.planner.dt))
@@ -405,8 +459,11 @@ class MotionControl:
             self.bus.alarm(Severity.ERROR if op == "failed" else Severity.WARNING,
                            alarms.MOTION, f"{motion.command} {motion.point_name}: "
                            f"{msg.get('message', op)}".strip(), motion.command_id)
-        if op in ENDED and motion.arrays is not None:
-            motion.arrays.discard()
+        if op in ENDED:
+            with self._appending:   # none appended after this
+                for arrays in (motion.arrays, *motion.appended):
+                    if arrays is not None:
+                        arrays.discard()
         with self._changed:
             self._changed.notify_all()
 

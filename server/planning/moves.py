@@ -8,6 +8,7 @@ import numpy as np
 from landscape.server.errors import OutOfRange, ParamError, Unreachable
 from landscape.server.planning.joint_line import time_joint_line
 from landscape.server.planning.motion.cartesian import MAX_SAMPLES, arc, circle, straight_line, tool_pose
+from landscape.server.planning.motion.stretch_timing import time_in_stretches
 from landscape.server.planning.motion.timing import duration_lower_bound, time_path
 from landscape.server.planning.motion.trajectory import Limits, PlanningError, Reason, Trajectory
 from landscape.server.device.motion_settings import MAX_MOTION_SECONDS, MIN_PERCENT, MotionSettings
@@ -147,6 +148,23 @@ class Planner:
                              max_duration=max_duration, pass_speeds=pass_speeds)
         except PlanningError as error:
             raise _unreachable(error) from None
+
+    def timed_in_stretches(self, waypoints: np.ndarray, limits: Limits, tool_path=None, *,
+                           pass_speeds: dict[int, float] | None = None):
+        """time_in_stretches of one section (at rest at its ends only), its chunks as they are
+        timed; refused as `timed` before any planning if it cannot end within
+        MAX_MOTION_SECONDS, and raising as it does from a later chunk."""
+        check_duration(waypoints, limits, MAX_MOTION_SECONDS, None, tool_path)
+        return _refused_as_commands(time_in_stretches(waypoints, limits, self.dt,
+                                                      tool_path=tool_path,
+                                                      pass_speeds=pass_speeds))
+
+
+def _refused_as_commands(chunks):
+    try:
+        yield from chunks
+    except PlanningError as error:
+        raise _unreachable(error) from None
 
 
 def check_duration(waypoints: np.ndarray, limits: Limits, max_duration: float, stops=None,

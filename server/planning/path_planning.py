@@ -22,6 +22,8 @@ as they allow.
 """
 from __future__ import annotations
 
+import math
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -38,6 +40,9 @@ from landscape.server.planning.targets import Frame, check_joints, check_pose_va
 
 MAX_CYCLES = 10_000
 MAX_POINTS = 100_000    # per path: a bound on what one client can make the server keep
+# rad of joint path: a stretch between stops longer than this is timed in stretches by
+# plan_run_lazily (several of stretch_timing's horizons; a shorter one times whole in a few ms)
+LONG_SECTION = 8.0
 
 
 @dataclass(frozen=True)
@@ -145,20 +150,44 @@ def plan_run(planner: Planner, path: StoredPath, q_start: np.ndarray, settings: 
     cheap lower bound refuses a longer one before anything is planned (OutOfRange naming the
     speed, the acceleration or the time delay), and every piece is planned within what is
     left."""
+    return [piece for piece, _ in plan_run_lazily(planner, path, q_start, settings, cycles,
+                                                  long_section=math.inf)]
+
+
+def plan_run_lazily(planner: Planner, path: StoredPath, q_start: np.ndarray,
+                    settings: MotionSettings, cycles: int, long_section: float = LONG_SECTION
+                    ) -> Iterator[tuple[Trajectory, bool]]:
+    """plan_run's trajectories as (trajectory, continues) pairs, each timed when asked for; a
+    stretch between stops longer than `long_section` (rad of joint path) comes in chunks as
+    time_in_stretches gives them out (issue 31 item 4), each but the first `continues` the
+    one before (its rows follow on, the arm moving: one segment for the cycle). The refusals
+    before anything is planned are raised by this call; a later chunk may still raise a
+    CommandError (the rows before it stay valid)."""
     if not path.points:
         raise ParamError(f"path {path.name!r} has no points")
     if not 0 <= cycles <= MAX_CYCLES:
         raise OutOfRange(f"number of cycles must be 0 to {MAX_CYCLES}, got {cycles}")
-    first, last = np.array(path.points[0].joints), np.array(path.points[-1].joints)
+    last = np.array(path.points[-1].joints)
     stretches = _stretches(planner, path, settings)
     _check_pass(planner, path, settings, stretches, [q_start, last] if cycles > 1 else [q_start])
+    return _run(planner, path, q_start, settings, cycles, stretches, long_section)
+
+
+def _run(planner, path, q_start, settings, cycles: int, stretches, long_section: float):
+    first, last = np.array(path.points[0].joints), np.array(path.points[-1].joints)
     approach = _approach(planner, q_start, first, settings, MAX_MOTION_SECONDS)
-    body = _plan_points(planner, path, stretches, MAX_MOTION_SECONDS - _seconds(approach))
-    run = [*approach, *body]
+    yield from ((piece, False) for piece in approach)
+    body = []
+    for piece in _plan_points(planner, path, stretches, MAX_MOTION_SECONDS - _seconds(approach),
+                              long_section):
+        body.append(piece)
+        yield piece
     if cycles > 1:
-        back = _approach(planner, last, first, settings, MAX_MOTION_SECONDS - _seconds(body))
-        run += [*back, *body] * (cycles - 1)
-    return run
+        back = _approach(planner, last, first, settings,
+                         MAX_MOTION_SECONDS - _seconds([p for p, _ in body]))
+        for _ in range(cycles - 1):
+            yield from ((piece, False) for piece in back)
+            yield from body
 
 
 def _seconds(pieces: list[Trajectory]) -> float:
@@ -210,30 +239,33 @@ def _check_pass(planner: Planner, path: StoredPath, settings: MotionSettings, st
         check_duration(np.array([q, joints[0]]), limits, MAX_MOTION_SECONDS, before=before)
 
 
-def _plan_points(planner: Planner, path: StoredPath, stretches, max_duration: float
-                 ) -> list[Trajectory]:
-    """From point 0 through the last point, dwells included; marks labelled by point index;
-    the whole within max_duration (s)."""
+def _plan_points(planner: Planner, path: StoredPath, stretches, max_duration: float,
+                 long_section: float) -> Iterator[tuple[Trajectory, bool]]:
+    """From point 0 through the last point, dwells included, as (trajectory, continues)
+    pairs (plan_run_lazily); marks labelled by point index; the whole within max_duration (s)."""
     points = path.points
     # Point 0 is reached by the approach: its mark sits on a hold there if it has a dwell (or
     # is the only point), else on the first stretch's first sample: a hold of its own would
     # cost the run's first cycle (it moves on the cycle that takes it).
     held = points[0].time_delay > 0 or not stretches
-    pieces = [_hold(planner.dt, points[0].joints, points[0].time_delay, mark=0)] if held else []
+    if held:
+        yield _hold(planner.dt, points[0].joints, points[0].time_delay, mark=0), False
+    marked = held
     left = max_duration - sum(p.time_delay for p in points)
     for start, end, limits in stretches:
-        piece = _time_stretch(planner, path, points[start:end + 1], limits, start, left)
-        if not pieces:
-            piece = replace(piece, marks=((0, 0), *piece.marks))
-        pieces.append(piece)
-        left -= piece.duration
+        for k, piece in enumerate(_time_stretch(planner, path, points[start:end + 1], limits,
+                                                start, left, long_section)):
+            if not marked:
+                piece, marked = replace(piece, marks=((0, 0), *piece.marks)), True
+            yield piece, k > 0
+            left -= piece.duration
         if points[end].time_delay > 0:
-            pieces.append(_hold(planner.dt, points[end].joints, points[end].time_delay))
-    return pieces
+            yield _hold(planner.dt, points[end].joints, points[end].time_delay), False
 
 
 def _time_stretch(planner: Planner, path: StoredPath, stretch, limits, first_label: int,
-                  max_duration: float) -> Trajectory:
+                  max_duration: float, long_section: float) -> Iterator[Trajectory]:
+    """The stretch's trajectory, or its chunks if it is longer than long_section (rad)."""
     joints = np.array([p.joints for p in stretch])
     kin, tcp = planner.kinematics, path.tcp_matrix
     try:
@@ -249,16 +281,29 @@ def _time_stretch(planner: Planner, path: StoredPath, stretch, limits, first_lab
                    if 0 < i < len(stretch) - 1}
     except PlanningError as error:
         raise Unreachable(f"path {path.name!r}: {error}", reason_code=str(error.reason)) from None
+    tool = tool_pose(kin, tcp) if path.straight else None
     try:
-        timed = planner.timed(dense, limits, tool_pose(kin, tcp) if path.straight else None,
-                              max_duration=max_duration, pass_speeds=passing)
+        if np.sum(np.linalg.norm(np.diff(dense, axis=0), axis=1)) > long_section:
+            given = 0   # rows of the stretch in the chunks before
+            for chunk in planner.timed_in_stretches(dense, limits, tool, pass_speeds=passing):
+                yield _labelled(planner.dt, chunk.positions, chunk.velocities,
+                                [(row - given, w) for row, w in chunk.marks], label_of)
+                given += len(chunk.positions)
+            return
+        timed = planner.timed(dense, limits, tool, max_duration=max_duration,
+                              pass_speeds=passing)
     except CommandError as error:
         error.message = f"path {path.name!r}: {error.message}"
         error.args = (error.message,)
         raise
-    # The first point of a stretch was marked by the stretch before; dense rows carry no mark.
-    marks = tuple((sample, label_of[w]) for sample, w in timed.marks if w in label_of)
-    return Trajectory(timed.dt, timed.positions, timed.velocities, marks)
+    yield _labelled(timed.dt, timed.positions, timed.velocities, timed.marks, label_of)
+
+
+def _labelled(dt: float, positions, velocities, marks, label_of: dict) -> Trajectory:
+    """A trajectory with its marks (sample, dense row) labelled by point index; the first
+    point of a stretch was marked by the stretch before, dense rows carry no mark."""
+    return Trajectory(dt, positions, velocities,
+                      tuple((sample, label_of[w]) for sample, w in marks if w in label_of))
 
 
 def _hold(dt: float, joints, seconds: float, mark: int | None = None) -> Trajectory:

@@ -27,7 +27,7 @@ import signal
 import threading
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 from google.protobuf.message import DecodeError
@@ -85,6 +85,7 @@ class PlanningContext:
     scene: CollisionScene
     streams: dict[str, PathLoadStream] = field(default_factory=dict)
     runs: dict[str, run_check.RunCheck] = field(default_factory=dict)   # checked ahead
+    untimed: dict[str, "Untimed"] = field(default_factory=dict)   # runs timed as they play
 
     def stream(self, key: str) -> PathLoadStream:
         stream = self.streams.get(key)
@@ -92,6 +93,18 @@ class PlanningContext:
             raise Internal("this PathLoad stream was lost with the planning process that held "
                            "it; send the path again")
         return stream
+
+
+@dataclass
+class Untimed:
+    """A run timed as it plays: its pieces not timed yet (plan_run_lazily), whether any are
+    left, how many of its rows are checked, and the fastest speed of each joint timed so
+    far (rad/s)."""
+
+    pieces: Iterator
+    more: bool = True
+    checked: int = 0
+    speed: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
 
 @dataclass(frozen=True)
@@ -180,13 +193,78 @@ def check_path_ahead(ctx: PlanningContext, key: str, start: int, stop: int) -> N
         ctx.runs.pop(key, None)
 
 
+def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
+                     settings: MotionSettings, cycles: int, what: str
+                     ) -> tuple[list, list, int, int, bool]:
+    """plan_path_start for a run TIMED as it plays as well (issue 31 item 4): its first
+    pieces, timed until they hold enough rows to brake from their fastest plus
+    run_check.LEAD, and those rows checked; the rest waits under `key` for next_pieces.
+    Returns next_pieces' answer for all of them."""
+    ctx.untimed[key] = Untimed(path_planning.plan_run_lazily(ctx.planner, path, q_start,
+                                                             settings, cycles))
+    ctx.runs[key] = run_check.RunCheck([], what)
+    pieces, continues = [], []
+    while True:
+        untimed = ctx.untimed.get(key)
+        brake = _brake_rows(ctx, untimed.speed) if untimed is not None else 0
+        if untimed is None or untimed.checked >= brake + run_check.LEAD:
+            break   # all of it is checked, or enough
+        more, joins, checked, brake, everything = next_pieces(
+            ctx, key, brake + run_check.LEAD - untimed.checked)
+        pieces, continues = pieces + more, continues + joins
+    return pieces, continues, checked, brake, everything
+
+
+def _brake_rows(ctx: PlanningContext, speed: np.ndarray) -> int:
+    arm = ctx.planner.arm
+    return run_check.brake_rows_from(speed, ctx.planner.dt, np.asarray(arm.max_acceleration),
+                                     np.asarray(arm.max_jerk))
+
+
+def next_pieces(ctx: PlanningContext, key: str, rows: int
+                ) -> tuple[list, list, int, int, bool]:
+    """The next `rows` rows of a run plan_path_lazily started checked against the cell as it
+    is now, and the pieces timed for them (none if they were timed already; a piece that
+    `continues` the one before follows on from it, moving): (pieces, continues, rows checked
+    so far, brake rows, all checked). The brake rows cover the fastest row timed so far
+    (run_check.brake_rows): the arm plays only those. The run is forgotten once all is
+    checked, or on a refusal."""
+    run, untimed = ctx.runs.get(key), ctx.untimed.get(key)
+    if run is None or untimed is None:   # the planning process holding it ended
+        raise Internal("the rest of this run was lost with the planning process that held it")
+    goal = untimed.checked + rows
+    pieces, continues = [], []
+    try:
+        while untimed.more and run.rows + sum(len(p) for p in pieces) < goal:
+            piece = next(untimed.pieces, None)
+            if piece is None:
+                untimed.more = False
+            else:
+                pieces.append(piece[0])
+                continues.append(piece[1])
+                untimed.speed = np.maximum(untimed.speed,
+                                           np.max(np.abs(piece[0].velocities), axis=0))
+        run.extend(pieces)
+        stop = min(goal, run.rows)
+        run.check(ctx.scene, untimed.checked, stop)
+    except Exception:
+        drop_run(ctx, key)
+        raise
+    untimed.checked = stop
+    everything = not untimed.more and stop >= run.rows
+    if everything:
+        drop_run(ctx, key)
+    return pieces, continues, stop, _brake_rows(ctx, untimed.speed), everything
+
+
 def drop_run(ctx: PlanningContext, key: str) -> None:
     ctx.runs.pop(key, None)
+    ctx.untimed.pop(key, None)
 
 
 JOBS = {job.__name__: job for job in (open_stream, feed_stream, finish_stream, load_path,
                                       plan_path_run, plan_path_start, check_path_ahead,
-                                      drop_run)}
+                                      plan_path_lazily, next_pieces, drop_run)}
 _keys = itertools.count(1)
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from landscape.server.errors import Collision, CommandError
 from landscape.server.planning.collision import CollisionScene, check_motion
+from landscape.server.planning.motion.trajectory import Trajectory
 
 LEAD = 50       # rows (200 ms at 4 ms) played while the next stretch is checked
 STRETCH = 500   # rows checked by each later job
@@ -39,7 +40,15 @@ def brake_rows(trajectories: list, dt: float, acceleration: np.ndarray,
     """Rows (samples at rate 1) the play may advance while it brakes from any sample of the
     run: a joint at v rad/s stops within v / a + a / j s at acceleration a and jerk j, and
     the play moves at most one row per cycle meanwhile."""
-    fastest = max(float(np.max(np.abs(t.velocities) / acceleration)) for t in trajectories)
+    speed = np.max([np.max(np.abs(t.velocities), axis=0) for t in trajectories], axis=0)
+    return brake_rows_from(speed, dt, acceleration, jerk)
+
+
+def brake_rows_from(speed: np.ndarray, dt: float, acceleration: np.ndarray,
+                    jerk: np.ndarray) -> int:
+    """brake_rows for joints moving at most at `speed` (rad/s): a run timed as it plays
+    has its fastest so far."""
+    fastest = float(np.max(np.asarray(speed) / acceleration))
     seconds = fastest + float(np.max(acceleration / jerk))
     return int(math.ceil(BRAKE_FACTOR * seconds / dt)) + SPARE
 
@@ -53,6 +62,11 @@ class RunCheck:
         self.trajectories, self.what = trajectories, what
         self.rows = sum(len(t) for t in trajectories)
         self._done: dict[int, int] = {}   # id(piece) -> its rows checked so far
+
+    def extend(self, trajectories: list) -> None:
+        """Pieces timed later (a run timed as it plays), after the rows so far."""
+        self.trajectories = [*self.trajectories, *trajectories]
+        self.rows += sum(len(t) for t in trajectories)
 
     def check(self, scene: CollisionScene, start: int, stop: int, model=None) -> None:
         model = model or scene.model()
@@ -108,6 +122,56 @@ def follow(planning, key: str, command_id: str, checked: int, rows: int,
     except Exception as error:   # never a silent end: the arm would wait at rest for rows
         log.exception("checking %s ahead of the arm failed", command_id)
         _refuse(send, command_id, f"internal error checking the path ahead: {error!r}")
+
+
+def joined(pieces: list, continues: list[bool]) -> tuple[list, bool]:
+    """Pieces as the cycle plays them: each that continues the one before joined to it (one
+    segment); and whether the first continues a piece sent before."""
+    out: list = []
+    for piece, joins in zip(pieces, continues):
+        if joins and out:
+            before = out[-1]
+            out[-1] = Trajectory(before.dt, np.concatenate([before.positions, piece.positions]),
+                                 np.concatenate([before.velocities, piece.velocities]),
+                                 (*before.marks, *((s + len(before), label)
+                                                   for s, label in piece.marks)))
+        else:
+            out.append(piece)
+    return out, bool(continues and continues[0])
+
+
+def following_lazily(*args) -> threading.Thread:
+    """`follow_lazily(*args)` on a thread of its own, started."""
+    thread = threading.Thread(target=follow_lazily, args=args, name=f"time {args[2]}",
+                              daemon=True)
+    thread.start()
+    return thread
+
+
+def follow_lazily(planning, key: str, command_id: str,
+                  hand_on: Callable[[list, list, int, int, bool], bool],
+                  send: Callable[[dict], None], delay: Callable[[], float] = lambda: 0.0
+                  ) -> None:
+    """The server's side of a run timed as it plays: its next STRETCH rows checked, and the
+    pieces timed for them, by `planning` (process.py's next_pieces) one stretch after the
+    other, each handed to `hand_on(pieces, continues, rows checked, brake rows, all
+    checked)`, which
+    sends them to the cycle (False: the motion no longer runs, and this ends); a refusal is
+    sent as in follow. `delay()` as in follow."""
+    try:
+        everything = False
+        while not everything:
+            time.sleep(delay())
+            answer = planning.run("next_pieces", key, STRETCH)
+            everything = answer[-1]
+            if not hand_on(*answer):
+                planning.run("drop_run", key)
+                return
+    except CommandError as refusal:   # a collision, a timing refused, the process lost
+        _refuse(send, command_id, refusal.message)
+    except Exception as error:   # never a silent end: the arm would wait at rest for rows
+        log.exception("timing %s ahead of the arm failed", command_id)
+        _refuse(send, command_id, f"internal error timing the path ahead: {error!r}")
 
 
 def _refuse(send: Callable[[dict], None], command_id: str, message: str) -> None:

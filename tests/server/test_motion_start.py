@@ -3,6 +3,9 @@ ring (one row per cycle): the cycle that takes a run from the server already mov
 from __future__ import annotations
 
 import itertools
+import os
+import signal
+import threading
 
 import numpy as np
 import pytest
@@ -24,18 +27,28 @@ def fast(tmp_path):
     a.close()
 
 
-def started_cycles(arm) -> list[float]:
-    """The tick stamps of the cycles that took a run (the executor's "started" reports)."""
-    stamps: list[float] = []
+def reported(arm, op: str, field: str) -> list:
+    """`field` of each of the executor's `op` reports from now on."""
+    values: list = []
     device = arm.server.device
     original = device.on_cycle_message
 
     def spy(msg):
-        if isinstance(msg, dict) and msg.get("op") == "started":
-            stamps.append(msg["wall_time"])
+        if isinstance(msg, dict) and msg.get("op") == op:
+            values.append(msg[field])
         original(msg)
     device.on_cycle_message = spy
-    return stamps
+    return values
+
+
+def started_cycles(arm) -> list[float]:
+    """The tick stamps of the cycles that took a run (the executor's "started" reports)."""
+    return reported(arm, "started", "wall_time")
+
+
+def marked(arm) -> list[int]:
+    """The labels of the executor's "mark" reports from now on (a path's point indices)."""
+    return reported(arm, "mark", "label")
 
 
 def setpoint_step(arm, wall_time: float) -> float:
@@ -97,7 +110,8 @@ def sent_to_cycle(arm) -> list[tuple[dict, np.ndarray]]:
     original = link.send
 
     def spy(message):
-        if isinstance(message, dict) and message.get("op") in ("run", "checked", "refused"):
+        if isinstance(message, dict) and message.get("op") in ("run", "checked", "refused",
+                                                                "append"):
             sent.append(({k: v for k, v in message.items() if k != "arrays"},
                          link.feedback.latest().command.copy()))
         original(message)
@@ -158,6 +172,129 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
     assert (middle < 1e-9).sum() >= 10, "the arm never waited for a late stretch"
     assert np.allclose(fast.joints(), points[-1], atol=1e-4)
 
+
+def test_a_long_path_starts_before_it_is_fully_timed(fast):
+    """A path whose blended section is long (240 points) is timed as it plays: the run goes to
+    the cycle with its first pieces, the later ones follow ("append", with how far the run is
+    checked), and the arm has left its start when the last of them is sent. It ends done at
+    the last point, having passed every point's mark in order."""
+    points = long_path(fast, "long", 240)
+    motions = fast.server.device.motions
+    motions.time_ahead = True   # as on the real-time clock
+    motions.check_ahead_delay = 0.05
+    sent, marks = sent_to_cycle(fast), marked(fast)
+    run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="long"),
+                                           timeout=30))
+    assert marks == list(range(len(points))), "the points' marks, each once, in order"
+    (start, _), *later = sent
+    assert start["op"] == "run"
+    assert {m["op"] for m, _ in later} <= {"append", "checked"}
+    assert [m["all"] for m, _ in later] == [False] * (len(later) - 1) + [True]
+    appended = [where for m, where in later if m["op"] == "append"]
+    assert appended, "every piece was timed before the run started"
+    assert np.abs(appended[-1] - np.array(points[0])).max() > 1e-3, \
+        "the arm had not left its start when the last piece was sent"
+    assert np.allclose(fast.joints(), points[-1], atol=1e-4)
+
+
+@pytest.fixture
+def paced(tmp_path):
+    """The kinematic backend at the pace of the wall clock (a late planning process is late
+    for the arm too; the recording keeps the whole run)."""
+    a = Arm(tmp_path, backend="kinematic", pace=1.0)
+    yield a
+    a.close()
+
+
+def test_a_path_timed_late_never_stops_dead(paced):
+    """The planning process (a real one) stopped for 1.5 s (SIGSTOP) as a long path starts on
+    its first timed pieces (about 1.5 s of play, 1 s before it brakes for them): the arm
+    brakes to rest along the path before the rows not yet timed and goes on when they come.
+    Every cycle keeps the velocity, acceleration and jerk limits, every setpoint lies on the
+    timed path, and the motion ends done at the last point."""
+    from landscape.server.planning import path_planning
+    from landscape.server.planning.process import PlanningProcess
+    points = long_path(paced, "late", 240)
+    motions = paced.server.device.motions
+    planned = np.concatenate([t.positions for t, _ in path_planning.plan_run_lazily(
+        motions.planner, motions.paths.get("late"), motions.planning_start(),
+        paced.server.device.settings, 1)])
+    motions.planning = planning = PlanningProcess(motions.collisions, motions.planner.dt)
+    motions.time_ahead = True   # as on the real-time clock
+    link, resumed = motions.link, []
+    send = link.send
+
+    def stop_planning_as_the_run_starts(message):
+        if isinstance(message, dict) and message.get("op") == "run" and not resumed:
+            os.kill(planning.pid, signal.SIGSTOP)   # the next pieces are 1.5 s late
+            resumed.append(threading.Timer(1.5, os.kill, (planning.pid, signal.SIGCONT)))
+            resumed[0].start()
+        send(message)
+    link.send = stop_planning_as_the_run_starts
+    paced.record_start()
+    reply = paced.device.PathMove(motion_pb2.PathMoveRequest(path_name="late"), timeout=60)
+    assert paced.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
+    cmd = paced.recorded_tips()[1]["cmd_pos"]
+    model = paced.server.device.arm
+    dt = 0.004
+    for order, limit in ((1, model.max_velocity), (2, model.max_acceleration),
+                         (3, model.max_jerk)):
+        peak = (np.abs(np.diff(cmd, order, axis=0)).max(axis=0) / dt**order / np.array(limit))
+        assert peak.max() <= 1 + 1e-6, (order, peak)
+    steps = np.linalg.norm(np.diff(cmd, axis=0), axis=1)
+    moving = np.flatnonzero(steps > 1e-9)
+    for q in cmd[moving[0] + 1:]:
+        k = int(np.argmin(np.linalg.norm(planned - q, axis=1)))
+        assert _on_chords(planned[max(k - 2, 0):k + 3], q, 1e-4), q
+    middle = steps[moving[0]:moving[-1]]
+    assert (middle < 1e-9).sum() >= 10, "the arm never waited for the late pieces"
+    assert np.allclose(paced.joints(), points[-1], atol=1e-4)
+
+
+@pytest.mark.parametrize("accel", [20, 50])
+@pytest.mark.parametrize("checked", [0.3, 0.5, 0.7])
+@pytest.mark.parametrize("late_by", [1, 4, 10, 40])
+def test_rows_checked_while_the_arm_brakes_for_them_keep_it_within_the_limits(accel, checked,
+                                                                              late_by):
+    """The rest of a run checked (or timed: "append") `late_by` cycles after the play began
+    to brake (at the arm's full limits) before the rows not checked: playback.Motion, as the
+    executor plays it (the run at `accel` percent), stays within the arm's acceleration and
+    jerk limits and goes on to the end. Found wiring the run timed as it plays: a resume planned in the middle of that stop
+    ramp raised in the cycle (ruckig's -101, or an empty stretch in ramps.py)."""
+    from landscape.robot.arm import arm_model
+    from landscape.server.cycle.playback import Motion
+    from landscape.server.planning.motion.timing import time_path
+    from landscape.server.planning.motion.trajectory import Limits
+    dt, arm = 0.004, arm_model()
+    limits = Limits.scaled(arm, 100, accel)
+    timed = time_path(np.array([[0.4 * np.sin(i / 9), 0.3 + 0.15 * np.sin(i / 13),
+                                 1.4 + 0.1 * np.cos(i / 11), 0.2 * np.sin(i / 7), 0.9, 0.0]
+                                for i in range(120)]), limits, dt)
+    rows = len(timed.positions)
+    motion = Motion({"id": "m", "acceleration": limits.acceleration, "jerk": limits.jerk,
+                     "segments": [{"positions": timed.positions,
+                                   "velocities": timed.velocities}],
+                     "checked": int(rows * checked), "brake": 273}, dt)
+    motion.stop_limit = np.array(arm.max_acceleration, dtype=float)   # as executor.py's
+    motion.stop_jerk = np.array(arm.max_jerk, dtype=float)
+    played, braking = [motion.position()] * 3, None
+    for cycle in range(20 * rows):
+        if braking is None and motion.awaiting:
+            braking = cycle
+        if braking is not None and cycle == braking + late_by:
+            motion.checked_to(rows, True)
+        motion.keep_to_checked()
+        motion.advance()
+        played.append(motion.position())
+        if motion.s >= motion.last and not motion.next_segment():
+            break
+    else:
+        raise AssertionError("the run did not end")
+    played = np.array(played + [motion.position()] * 3)
+    for order, limit in ((2, arm.max_acceleration), (3, arm.max_jerk)):
+        peak = (np.abs(np.diff(played, order, axis=0)) / dt**order / np.array(limit)).max()
+        assert peak <= 1 + 1e-6, (order, peak)
+    assert np.allclose(played[-1], timed.positions[-1])
 
 def _on_chords(near: np.ndarray, q: np.ndarray, tolerance: float) -> bool:
     """Whether q lies within `tolerance` (rad) of the chords between consecutive rows."""

@@ -109,7 +109,7 @@ def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | N
     if stop.shape != (M,):
         raise ValueError(f"stops must have one flag per waypoint ({M}), got {stop.shape}")
     stop[0] = stop[-1] = True
-    _check_range(W, limits, np.arange(M))
+    check_range(W, limits, np.arange(M))
 
     positions, velocities, marks = [W[:1]], [np.zeros((1, 6))], [(0, 0)]
     ends = np.flatnonzero(stop)
@@ -128,9 +128,31 @@ def time_path(waypoints, limits: Limits, dt: float, *, stops: Sequence[bool] | N
 def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, tool_path,
                   max_duration: float = math.inf, pass_speeds: dict[int, float] | None = None):
     """One rest-to-rest section: (positions (n, 6), velocities (n, 6), sample of each waypoint)."""
-    s, keep = chord_parameters(W)
-    if len(s) < 2:                                          # all one point: no motion
+    problem = section_problem(W, index, limits, dt, tool_path, pass_speeds)
+    if problem is None:                                     # all one point: no motion
         return W[:1].copy(), np.zeros((1, 6)), [0] * len(W)
+    path, grid, knot_at, caps, rows, keep, of_waypoint = problem
+    xs = topp_ra(path, grid, limits.acceleration, caps, rows)
+    profile = ConstAccelProfile(grid, xs)
+    if profile.duration > max_duration:
+        raise PlanningError("TOO_LONG", f"the motion would last {profile.duration:.4g} s, "
+                            f"longer than the {max(max_duration, 0.0):.4g} s allowed",
+                            index=int(index[0]))
+    section = _Section(W, index, keep, of_waypoint, path, limits, dt, tool_path, max_duration)
+    if limits.jerk is None:
+        return section.sampled(profile, profile.times[knot_at])[:3]
+    return _jerk_limited(section, grid, xs, caps, rows)
+
+
+def section_problem(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, tool_path,
+                    pass_speeds: dict[int, float] | None = None):
+    """What TOPP-RA times one rest-to-rest section through waypoints W (M, 6) (their indices
+    `index` in the whole, for pass_speeds' keys) with: (path, grid (G,), knot_at (M',), caps
+    (G,), rows, keep (M,), of_waypoint (M,): the kept waypoint each belongs to), or None if
+    the section is all one point."""
+    s, keep = chord_parameters(W)
+    if len(s) < 2:
+        return None
     path = JointPath(s, W[keep])
     grid, knot_at = gridpoints(path)
     # The waypoint a dropped (repeated) point belongs to: the last kept one at or before it.
@@ -149,16 +171,7 @@ def _time_section(W: np.ndarray, index: np.ndarray, limits: Limits, dt: float, t
         caps[at] = np.minimum(caps[at], xcap)
     if limits.jerk is not None:
         caps = np.minimum(caps, jerk_caps(path, grid, limits.jerk))
-    xs = topp_ra(path, grid, limits.acceleration, caps, rows)
-    profile = ConstAccelProfile(grid, xs)
-    if profile.duration > max_duration:
-        raise PlanningError("TOO_LONG", f"the motion would last {profile.duration:.4g} s, "
-                            f"longer than the {max(max_duration, 0.0):.4g} s allowed",
-                            index=int(index[0]))
-    section = _Section(W, index, keep, of_waypoint, path, limits, dt, tool_path, max_duration)
-    if limits.jerk is None:
-        return section.sampled(profile, profile.times[knot_at])[:3]
-    return _jerk_limited(section, grid, xs, caps, rows)
+    return path, grid, knot_at, caps, rows, keep, of_waypoint
 
 
 def _jerk_limited(section: _Section, grid: np.ndarray, xs: np.ndarray, caps: np.ndarray, rows):
@@ -246,7 +259,7 @@ class _Section:
         v = dq * (sd_k / stretch)[:, None]
         q[0], q[-1] = W[0], W[-1]                           # exact ends, at rest
         v[0] = v[-1] = 0.0
-        _check_range(q, limits, self.index[self.keep][path_piece(path, s_k)])
+        check_range(q, limits, self.index[self.keep][path_piece(path, s_k)])
         return _Taken(q, v, s_k, times, stretch,
                       excess_per_sample(q, v, dt, limits, self.tool_path))
 
@@ -316,7 +329,7 @@ def path_piece(path: JointPath, s: np.ndarray) -> np.ndarray:
     return np.clip(np.searchsorted(path.s, s, side="right") - 1, 0, len(path.s) - 2)
 
 
-def _check_range(q: np.ndarray, limits: Limits, where: np.ndarray) -> None:
+def check_range(q: np.ndarray, limits: Limits, where: np.ndarray) -> None:
     """Raise OUT_OF_JNT_RANGE at the waypoint `where[k]` of the first sample k out of range."""
     if limits.position_min is None and limits.position_max is None:
         return

@@ -16,19 +16,23 @@ __all__ = ["topp_ra", "ConstAccelProfile", "toppra_reference"]
 
 _A_FLOOR = 1e-9           # |dq_j/ds| below this: the joint's acceleration row ignores u
 _NEWTON_STEPS = 12        # on the acceleration limit curve; the pairs take any stage left
+_X_START_SLACK = 1e-9     # relative (and absolute, (rad/s)^2): a start speed this far above
+                          # the controllable set is rounding, taken as its top
 
 
 def topp_ra(path: JointPath, grid: np.ndarray, acceleration: np.ndarray,
-            xcap: np.ndarray, rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-            ) -> np.ndarray:
-    """Squared path speeds x (G,) of the time-optimal rest-to-rest motion along `path`.
+            xcap: np.ndarray, rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+            x_start: float = 0.0) -> np.ndarray:
+    """Squared path speeds x (G,) of the time-optimal motion along `path` from the squared
+    speed x_start (0: from rest) to rest.
 
     grid (G,): gridpoints from path_interval[0] to [1]; acceleration (6,) rad/s^2 (symmetric),
     or (G-1, 6), a row per stage (the jerk-limited timing lowers it where its samples exceed);
     xcap (G,): the velocity bounds on x (speed_caps); rows: more second-order constraints, one
     sided, per gridpoint: (ku (G, R), kx (G, R), h (R,)) with ku u + kx x <= h (the tool's
     acceleration, tool_constraints). Raises PlanningError("LIMITS") when the path cannot be
-    followed (a stage with no admissible motion).
+    followed (a stage with no admissible motion), or when x_start is above the first
+    gridpoint's controllable set (the arm could not brake to rest by the end from it).
 
     Stage i (from s_i to s_{i+1}, length D) has the path acceleration u constant and
     x_{i+1} = x_i + 2 D u. Each row, at s_i or at s_{i+1} (where its x is x_i + 2 D u), bounds
@@ -76,10 +80,13 @@ def topp_ra(path: JointPath, grid: np.ndarray, acceleration: np.ndarray,
     K = np.append(xhi, 0.0)
     K = _backward(K, keep, back_p, back_q)
 
-    # Forward pass: from rest, the greatest x the next controllable set admits (again an
+    # Forward pass: from x_start, the greatest x the next controllable set admits (again an
     # envelope of lines, in x_i over [0, K_i]).
+    if x_start > K[0] * (1.0 + _X_START_SLACK) + _X_START_SLACK:
+        raise PlanningError("LIMITS", f"the path speed {np.sqrt(x_start):.4g} rad/s at its "
+                            f"start is above the {np.sqrt(K[0]):.4g} rad/s it can brake from")
     keep = _binding_rows(d, c, K[:-1], K[1:])
-    xs = _forward(K, keep, d, c)
+    xs = _forward(K, keep, d, c, min(x_start, float(K[0])))
     xs[-1] = 0.0
     stalled = (xs[1:-1] <= 0.0)
     if stalled.any():
@@ -189,13 +196,14 @@ def _backward(K: np.ndarray, keep: np.ndarray, p: np.ndarray, q: np.ndarray) -> 
     return np.array(Kl)
 
 
-def _forward(K: np.ndarray, keep: np.ndarray, d: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """x_0 = 0, x_{i+1} = min(K_{i+1}, min over kept rows r of stage i: d_r x_i + c_r), one
+def _forward(K: np.ndarray, keep: np.ndarray, d: np.ndarray, c: np.ndarray,
+             x_start: float) -> np.ndarray:
+    """x_0 = x_start, x_{i+1} = min(K_{i+1}, min over kept rows r of stage i: d_r x_i + c_r), one
     flat loop over the kept rows, first stage first."""
     stage = np.nonzero(keep)[0].tolist()
     Dl, Cl = d[keep].tolist(), c[keep].tolist()
     xs = K.tolist()
-    xs[0] = 0.0
+    xs[0] = x_start
     for i, dr, cr in zip(stage, Dl, Cl):
         bound = dr * xs[i] + cr
         if bound < xs[i + 1]:
