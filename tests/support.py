@@ -308,3 +308,13 @@ class Arm:
     def history(self) -> list:
         """Every event the bus still keeps, oldest first."""
         return bus_history(self.server)
+
+
+def random_walk(arm, start: np.ndarray, n: int, seed: int, step: float) -> np.ndarray:
+    """n waypoints (n, 6) of a seeded random walk from `start`, each joint kept inside 80 % of
+    the arm's range: the paths the timing tests draw."""
+    rng = np.random.default_rng(seed)
+    W = [np.asarray(start, dtype=float)]
+    for _ in range(n - 1):
+        W.append(np.clip(W[-1] + rng.normal(0.0, step, 6), 0.8 * arm.lower, 0.8 * arm.upper))
+    return np.array(W)

@@ -18,18 +18,14 @@ from landscape.server.planning.motion.jerk_timing import FilteredProfile
 from landscape.server.planning.motion.timing import (ConstAccelProfile, chord_parameters,
                                                      gridpoints, tool_constraints, topp_ra)
 from landscape.server.planning.motion.trajectory import JointPath, Limits, PlanningError
+from support import random_walk
 
 ARM = arm_model()
 Q_HOME = np.array([0.0, 0.3, 1.4, 0.0, 0.9, 0.0])
 
 
 def walk(n: int, seed: int, step: float = 0.3) -> np.ndarray:
-    """A random walk of n waypoints inside 80% of the joint ranges."""
-    rng = np.random.default_rng(seed)
-    W = [Q_HOME]
-    for _ in range(n - 1):
-        W.append(np.clip(W[-1] + rng.normal(0.0, step, 6), 0.8 * ARM.lower, 0.8 * ARM.upper))
-    return np.array(W)
+    return random_walk(ARM, Q_HOME, n, seed, step)
 
 
 def section(W, limits: Limits, tool_path=None):

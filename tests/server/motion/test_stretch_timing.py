@@ -20,6 +20,7 @@ from landscape.server.planning.motion.sample_check import excess_per_sample
 from landscape.server.planning.motion.stretch_timing import time_in_stretches
 from landscape.server.planning.motion.timing import (LIMIT_SLACK, chord_parameters, time_path)
 from landscape.server.planning.motion.trajectory import JointPath, Limits
+from support import random_walk
 
 ARM = arm_model()
 DT = 0.004
@@ -27,12 +28,7 @@ Q_HOME = np.array([0.0, 0.3, 1.4, 0.0, 0.9, 0.0])
 
 
 def walk(n: int, seed: int, step: float = 0.3) -> np.ndarray:
-    """A random walk of n waypoints inside 80% of the joint ranges."""
-    rng = np.random.default_rng(seed)
-    W = [Q_HOME]
-    for _ in range(n - 1):
-        W.append(np.clip(W[-1] + rng.normal(0.0, step, 6), 0.8 * ARM.lower, 0.8 * ARM.upper))
-    return np.array(W)
+    return random_walk(ARM, Q_HOME, n, seed, step)
 
 
 def joined(chunks):

@@ -20,6 +20,7 @@ from landscape.server.planning.motion.timing import (LIMIT_SLACK, ConstAccelProf
                                             toppra_reference)
 from landscape.server.planning.motion.trajectory import JointPath, Limits, PlanningError, Trajectory
 from landscape.robot.arm import arm_model
+from support import random_walk
 
 ARM = arm_model()
 DT = 0.004
@@ -47,12 +48,7 @@ def trapezoid_time(distance: float, v: float, a: float) -> float:
 
 
 def walk(n: int, seed: int, step: float = 0.4) -> np.ndarray:
-    """A random walk of n waypoints inside 80% of the joint ranges."""
-    rng = np.random.default_rng(seed)
-    W = [Q_HOME]
-    for _ in range(n - 1):
-        W.append(np.clip(W[-1] + rng.normal(0.0, step, 6), 0.8 * ARM.lower, 0.8 * ARM.upper))
-    return np.array(W)
+    return random_walk(ARM, Q_HOME, n, seed, step)
 
 
 # ---- joint moves ---------------------------------------------------------------------------------
