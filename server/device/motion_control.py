@@ -83,16 +83,14 @@ class MotionControl:
         self._changed = threading.Condition()
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
-        # A path run is checked against the cell as it plays on the real-time clock only: on the
-        # lock-step and fast clocks simulated time outruns a check made in wall time, so the
-        # arm would slow for it (a simulation not as commanded); there the whole run is
-        # checked before it starts. Tests turn it on there, and make a later stretch late by
-        # `check_ahead_delay` s (the arm then slows along the path, run_check.py).
-        self.check_ahead = link.clock_kind == "realtime"
-        self.check_ahead_delay = 0.0
-        # A long path run is TIMED as it plays as well (issue 31 item 4), on the real-time
-        # clock only for the same reason; tests turn it on there.
+        # A long path run is timed and checked against the cell as it plays (issue 31 item 4)
+        # on the real-time clock only: on the lock-step and fast clocks simulated time outruns
+        # work done in wall time, so the arm would slow for it (a simulation not as
+        # commanded); there the whole run is timed and checked before it starts. Tests turn
+        # it on there, and make each later stretch late by `check_ahead_delay` s (the arm then
+        # slows along the path, run_check.py).
         self.time_ahead = link.clock_kind == "realtime"
+        self.check_ahead_delay = 0.0
         self._appending = threading.Lock()   # an append and a motion's end, one at a time
         # Long paths are planned beside a cycle process in a process of their own as well.
         self.planning = (PlanningProcess(collisions, link.cycle_time, self._planning_lost)
@@ -174,33 +172,20 @@ class MotionControl:
         path = self.paths.get(name)
         if path is None:
             raise NotFound(f"no path named {name!r}")
-        key = f"run-{next(self._ids)}"
+        settings = settings or self.settings.current
         if self.time_ahead:
-            return self._path_move_lazily(key, path, cycles, settings)
-        trajectories, checked, brake = self.planning.run(
-            "plan_path_start", key, path, self.planning_start(),
-            settings or self.settings.current, cycles, f"PathMove {name}", self.check_ahead)
-        rows = sum(len(t) for t in trajectories)
-        try:
-            motion = self._start("PathMove", name, trajectories,
-                                 *self._path_marks(path, cycles), checked=True,
-                                 ahead=(checked, brake) if checked < rows else None)
-        except BaseException:
-            self.planning.run("drop_run", key)
-            raise
-        if checked < rows:   # the rest is checked while the path plays (run_check.py)
-            run_check.following(self.planning, key, motion.command_id, checked, rows,
-                                self.send, lambda: self._motion is motion,
-                                lambda: self.check_ahead_delay)
-        return motion.command_id
+            return self._path_move_lazily(f"run-{next(self._ids)}", path, cycles, settings)
+        trajectories = self.planning.run("plan_path_run", path, self.planning_start(),
+                                         settings, cycles, f"PathMove {name}")
+        return self.start("PathMove", name, trajectories, *self._path_marks(path, cycles),
+                          checked=True)
 
-    def _path_move_lazily(self, key: str, path, cycles: int,
-                          settings: MotionSettings | None) -> str:
+    def _path_move_lazily(self, key: str, path, cycles: int, settings: MotionSettings) -> str:
         """path_move on a run timed as it plays (issue 31 item 4): it starts on its first
-        pieces timed and checked, and run_check.follow_lazily hands the cycle the rest."""
+        pieces timed and checked, and run_check.follow hands the cycle the rest."""
         pieces, continues, checked, brake, everything = self.planning.run(
-            "plan_path_lazily", key, path, self.planning_start(),
-            settings or self.settings.current, cycles, f"PathMove {path.name}")
+            "plan_path_lazily", key, path, self.planning_start(), settings, cycles,
+            f"PathMove {path.name}")
         trajectories, _ = run_check.joined(pieces, continues)
         try:
             motion = self._start("PathMove", path.name, trajectories,
@@ -210,9 +195,9 @@ class MotionControl:
             self.planning.run("drop_run", key)
             raise
         if not everything:
-            run_check.following_lazily(self.planning, key, motion.command_id,
-                                       lambda *args: self._hand_on(motion, *args), self.send,
-                                       lambda: self.check_ahead_delay)
+            run_check.following(self.planning, key, motion.command_id,
+                                lambda *args: self._hand_on(motion, *args), self.send,
+                                lambda: self.check_ahead_delay)
         return motion.command_id
 
     def _hand_on(self, motion: RunningMotion, pieces: list, continues: list, checked: int,

@@ -162,41 +162,10 @@ def plan_path_run(ctx: PlanningContext, path: StoredPath, q_start: np.ndarray,
     return trajectories
 
 
-def plan_path_start(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
-                    settings: MotionSettings, cycles: int, what: str, ahead: bool = True
-                    ) -> tuple[list, int, int]:
-    """plan_path_run with only its first stretch checked against the cell (run_check.py),
-    or all of it unless `ahead`: (trajectories, rows checked, brake rows); the rest waits
-    under `key` for check_path_ahead."""
-    trajectories = path_planning.plan_run(ctx.planner, path, q_start, settings, cycles)
-    arm = ctx.planner.arm
-    brake = run_check.brake_rows(trajectories, ctx.planner.dt,
-                                 np.asarray(arm.max_acceleration), np.asarray(arm.max_jerk))
-    run = ctx.runs[key] = run_check.RunCheck(trajectories, what)
-    checked = min(run.rows, brake + run_check.LEAD) if ahead else run.rows
-    check_path_ahead(ctx, key, 0, checked)
-    return trajectories, checked, brake
-
-
-def check_path_ahead(ctx: PlanningContext, key: str, start: int, stop: int) -> None:
-    """Rows start to stop of a run plan_path_start planned, checked against the cell as it is
-    now; the run is forgotten after its last rows or a refusal."""
-    run = ctx.runs.get(key)
-    if run is None:   # the planning process holding it ended, and another started
-        raise Internal("the rest of this run was lost with the planning process that held it")
-    try:
-        run.check(ctx.scene, start, stop)
-    except Exception:
-        ctx.runs.pop(key, None)
-        raise
-    if stop >= run.rows:
-        ctx.runs.pop(key, None)
-
-
 def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
                      settings: MotionSettings, cycles: int, what: str
                      ) -> tuple[list, list, int, int, bool]:
-    """plan_path_start for a run TIMED as it plays as well (issue 31 item 4): its first
+    """plan_path_run for a run timed and checked as it plays (issue 31 item 4): its first
     pieces, timed until they hold enough rows to brake from their fastest plus
     run_check.LEAD, and those rows checked; the rest waits under `key` for next_pieces.
     Returns next_pieces' answer for all of them."""
@@ -217,8 +186,8 @@ def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: 
 
 def _brake_rows(ctx: PlanningContext, speed: np.ndarray) -> int:
     arm = ctx.planner.arm
-    return run_check.brake_rows_from(speed, ctx.planner.dt, np.asarray(arm.max_acceleration),
-                                     np.asarray(arm.max_jerk))
+    return run_check.brake_rows(speed, ctx.planner.dt, np.asarray(arm.max_acceleration),
+                                np.asarray(arm.max_jerk))
 
 
 def next_pieces(ctx: PlanningContext, key: str, rows: int
@@ -263,7 +232,7 @@ def drop_run(ctx: PlanningContext, key: str) -> None:
 
 
 JOBS = {job.__name__: job for job in (open_stream, feed_stream, finish_stream, load_path,
-                                      plan_path_run, plan_path_start, check_path_ahead,
+                                      plan_path_run,
                                       plan_path_lazily, next_pieces, drop_run)}
 _keys = itertools.count(1)
 
@@ -289,7 +258,7 @@ class _Planning:
 
 class InProcessPlanning(_Planning):
     """The jobs on the calling thread, with the server's planner and scene, one at a time (a
-    path's later stretches are checked on a thread of their own: run_check.follow)."""
+    path's later stretches are timed and checked on a thread of their own: run_check.follow)."""
 
     def __init__(self, planner: Planner, scene: CollisionScene):
         self.context = PlanningContext(planner, scene)

@@ -1,15 +1,15 @@
-"""A path run checked against the cell in stretches, ahead of where the arm plays it (issue 31
-item 4): the run starts once its first rows are checked, and the rest is checked while it
-plays (motion_control.py sends each stretch's end to the cycle, which brakes along the path
-before rows not yet checked: playback.py).
+"""A path run timed and checked against the cell in stretches, ahead of where the arm plays
+it (issue 31 item 4): the run starts once its first rows are timed and checked, and the rest
+is timed and checked while it plays (motion_control.py hands each stretch's pieces and end to
+the cycle, which brakes along the path before rows not yet checked: playback.py).
 
 How far ahead is enough: `brake_rows`, an upper bound on the rows the arm travels while it
-brakes along the path from anywhere in the run at the stop limits, so the first stretch is
-that many rows plus LEAD (what the cycle plays while the next stretch is checked).
+brakes along the path from any row timed so far at the stop limits, so the first stretch is
+that many rows plus LEAD (what the cycle plays while the next stretch is worked out).
 
 `RunCheck` is the planning process's side (process.py's jobs), `follow` the server's: it has
-the later stretches checked one after the other and tells the cycle where each ends, or that
-one was refused (the cycle then brakes along the path and the motion fails with the refusal).
+the later stretches timed and checked one after the other and hands them on, or says that one
+was refused (the cycle then brakes along the path and the motion fails with the refusal).
 """
 from __future__ import annotations
 
@@ -35,19 +35,11 @@ SPARE = 8
 log = logging.getLogger(__name__)
 
 
-def brake_rows(trajectories: list, dt: float, acceleration: np.ndarray,
-               jerk: np.ndarray) -> int:
-    """Rows (samples at rate 1) the play may advance while it brakes from any sample of the
-    run: a joint at v rad/s stops within v / a + a / j s at acceleration a and jerk j, and
-    the play moves at most one row per cycle meanwhile."""
-    speed = np.max([np.max(np.abs(t.velocities), axis=0) for t in trajectories], axis=0)
-    return brake_rows_from(speed, dt, acceleration, jerk)
-
-
-def brake_rows_from(speed: np.ndarray, dt: float, acceleration: np.ndarray,
-                    jerk: np.ndarray) -> int:
-    """brake_rows for joints moving at most at `speed` (rad/s): a run timed as it plays
-    has its fastest so far."""
+def brake_rows(speed: np.ndarray, dt: float, acceleration: np.ndarray, jerk: np.ndarray) -> int:
+    """Rows (samples at rate 1) the play may advance while it brakes from any row whose joints
+    move at most at `speed` (rad/s: the fastest of the rows timed so far, the only ones the
+    arm plays): a joint at v rad/s stops within v / a + a / j s at acceleration a and jerk j,
+    and the play moves at most one row per cycle meanwhile."""
     fastest = float(np.max(np.asarray(speed) / acceleration))
     seconds = fastest + float(np.max(acceleration / jerk))
     return int(math.ceil(BRAKE_FACTOR * seconds / dt)) + SPARE
@@ -90,40 +82,6 @@ class RunCheck:
             raise Collision(f"{self.what} would collide: {contact}", **contact.metadata())
 
 
-def following(*args) -> threading.Thread:
-    """`follow(*args)` on a thread of its own, started."""
-    thread = threading.Thread(target=follow, args=args, name=f"check {args[2]}", daemon=True)
-    thread.start()
-    return thread
-
-
-def follow(planning, key: str, command_id: str, checked: int, rows: int,
-           send: Callable[[dict], None], running: Callable[[], bool],
-           delay: Callable[[], float] = lambda: 0.0) -> None:
-    """The server's side: rows `checked` to `rows` of the run under
-    `key` checked by `planning` (process.py) STRETCH rows at a time, each stretch's end sent to
-    the cycle as {"op": "checked", "id", "rows", "all"}, a refusal as {"op": "refused", "id",
-    "message"}; stops once the motion no longer `running()`. `delay()`: seconds to wait before
-    each stretch (0 in service; tests make a stretch late with it: MotionControl's
-    check_ahead_delay)."""
-    try:
-        while checked < rows:
-            time.sleep(delay())
-            if not running():
-                planning.run("drop_run", key)
-                return
-            stop = min(rows, checked + STRETCH)
-            planning.run("check_path_ahead", key, checked, stop)
-            checked = stop
-            send({"op": "checked", "id": command_id, "rows": checked,
-                  "all": checked >= rows})
-    except CommandError as refusal:   # a collision, or the planning process lost
-        _refuse(send, command_id, refusal.message)
-    except Exception as error:   # never a silent end: the arm would wait at rest for rows
-        log.exception("checking %s ahead of the arm failed", command_id)
-        _refuse(send, command_id, f"internal error checking the path ahead: {error!r}")
-
-
 def joined(pieces: list, continues: list[bool]) -> tuple[list, bool]:
     """Pieces as the cycle plays them: each that continues the one before joined to it (one
     segment); and whether the first continues a piece sent before."""
@@ -140,24 +98,24 @@ def joined(pieces: list, continues: list[bool]) -> tuple[list, bool]:
     return out, bool(continues and continues[0])
 
 
-def following_lazily(*args) -> threading.Thread:
-    """`follow_lazily(*args)` on a thread of its own, started."""
-    thread = threading.Thread(target=follow_lazily, args=args, name=f"time {args[2]}",
-                              daemon=True)
+def following(*args) -> threading.Thread:
+    """`follow(*args)` on a thread of its own, started."""
+    thread = threading.Thread(target=follow, args=args, name=f"time {args[2]}", daemon=True)
     thread.start()
     return thread
 
 
-def follow_lazily(planning, key: str, command_id: str,
-                  hand_on: Callable[[list, list, int, int, bool], bool],
-                  send: Callable[[dict], None], delay: Callable[[], float] = lambda: 0.0
-                  ) -> None:
+def follow(planning, key: str, command_id: str,
+           hand_on: Callable[[list, list, int, int, bool], bool],
+           send: Callable[[dict], None], delay: Callable[[], float] = lambda: 0.0) -> None:
     """The server's side of a run timed as it plays: its next STRETCH rows checked, and the
     pieces timed for them, by `planning` (process.py's next_pieces) one stretch after the
     other, each handed to `hand_on(pieces, continues, rows checked, brake rows, all
-    checked)`, which
-    sends them to the cycle (False: the motion no longer runs, and this ends); a refusal is
-    sent as in follow. `delay()` as in follow."""
+    checked)`, which sends them to the cycle (False: the motion no longer runs, and this
+    ends); a refusal goes to the cycle as {"op": "refused", "id", "message"} (it brakes
+    along the path and the motion fails with it). `delay()`: seconds to wait before each
+    stretch (0 in service; tests make a stretch late with it: MotionControl's
+    check_ahead_delay)."""
     try:
         everything = False
         while not everything:

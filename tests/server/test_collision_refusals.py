@@ -117,8 +117,7 @@ def test_a_path_run_checks_each_of_its_pieces_once_whatever_its_cycles(arm):
     assert many.configurations == two.configurations
 
 
-@pytest.mark.parametrize("ahead", ["check_ahead", "time_ahead"])   # checked, or timed too
-def test_a_refusal_in_a_later_piece_stops_the_arm_on_the_path_and_fails_the_motion(arm, ahead):
+def test_a_refusal_in_a_later_piece_stops_the_arm_on_the_path_and_fails_the_motion(arm):
     """The way back from the last point to the first (joints straight from b to a) sweeps
     through the table: the second piece of a two-cycle run. A run is checked against the cell
     as it plays (issue 31 item 4): it starts, the later piece is refused while the arm moves,
@@ -128,7 +127,7 @@ def test_a_refusal_in_a_later_piece_stops_the_arm_on_the_path_and_fails_the_moti
     a, _ = _around(arm)
     run, first_pass = _plan_run(arm, "around", 2), _plan_run(arm, "around", 1)
     dt = run[0].dt
-    setattr(arm.server.device.motions, ahead, True)   # as on the real-time clock
+    arm.server.device.motions.time_ahead = True   # as on the real-time clock
     reply = arm.device.PathMove(motion_pb2.PathMoveRequest(path_name="around",
                                                            number_of_cycles=2))
     events = arm.wait_command(reply.ret_val.command_id)

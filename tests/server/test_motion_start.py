@@ -119,37 +119,19 @@ def sent_to_cycle(arm) -> list[tuple[dict, np.ndarray]]:
     return sent
 
 
-def test_a_long_path_moves_before_its_last_stretch_is_checked(fast):
-    """240 blended points: the run is handed to the cycle with its first stretch checked, and
-    the arm has left its start when the last stretch's check is sent (read on the ring at that
-    moment: the planner's own progress against the arm's)."""
-    points = long_path(fast, "long", 240)
-    fast.server.device.motions.check_ahead = True   # as on the real-time clock
-    fast.server.device.motions.check_ahead_delay = 0.05
-    sent = sent_to_cycle(fast)
-    run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="long"),
-                                           timeout=30))
-    (start, _), *stretches = sent
-    assert start["op"] == "run" and start["checked"] > 0
-    assert [m["op"] for m, _ in stretches] == ["checked"] * len(stretches) and stretches
-    assert [m["rows"] for m, _ in stretches] == sorted(m["rows"] for m, _ in stretches)
-    _, where = stretches[-1]
-    assert np.abs(where - np.array(points[0])).max() > 1e-3, "the arm had not left its start"
-    assert np.allclose(fast.joints(), points[-1], atol=1e-4)
-
-
 def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
-    """Each later stretch's check waits 0.3 s (check_ahead_delay): the lock-step cycle runs
-    far ahead meanwhile, so the arm brakes to rest before the rows not checked, and goes on
-    when they are. Every cycle keeps the velocity, acceleration and jerk limits, and every
-    setpoint lies on the planned path; the motion ends done at the last point."""
+    """Each later stretch waits 0.3 s before it is timed and checked (check_ahead_delay): the
+    lock-step cycle runs far ahead meanwhile, so the arm brakes to rest before the rows not
+    checked, and goes on when they are. Every cycle keeps the velocity, acceleration and jerk
+    limits, and every setpoint lies on the timed path; the motion ends done at the last
+    point."""
     from landscape.server.planning import path_planning
     points = long_path(fast, "late", 240)
     motions = fast.server.device.motions
-    planned = np.concatenate([t.positions for t in path_planning.plan_run(
+    planned = np.concatenate([t.positions for t, _ in path_planning.plan_run_lazily(
         motions.planner, motions.paths.get("late"), motions.planning_start(),
         fast.server.device.settings, 1)])
-    motions.check_ahead = True   # as on the real-time clock
+    motions.time_ahead = True   # as on the real-time clock
     motions.check_ahead_delay = 0.3
     fast.record_start()
     run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="late"),
