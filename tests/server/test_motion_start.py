@@ -102,6 +102,17 @@ def test_a_joint_move_and_a_path_from_its_first_point_move_on_the_cycle_that_tak
     assert move_step > 0.0, "the move's first cycle held the arm where it was"
 
 
+def resting_away_from(ring, start, cycles: int = 10) -> bool:
+    """Whether the newest `cycles` setpoints are one and the same, away from `start`."""
+    head = ring.head
+    rows = [ring.row(seq) for seq in range(head - cycles, head + 1)]
+    if any(row is None for row in rows):
+        return False
+    setpoints = np.array([row[CMD] for row in rows])
+    return (np.abs(setpoints - setpoints[-1]).max() < 1e-12
+            and np.abs(setpoints[-1] - np.asarray(start)).max() > 1e-3)
+
+
 def sent_to_cycle(arm) -> list[tuple[dict, np.ndarray]]:
     """The run and stretch messages the server sends the cycle, each with the newest cycle's
     setpoint when it was sent (where the arm was then)."""
@@ -120,11 +131,11 @@ def sent_to_cycle(arm) -> list[tuple[dict, np.ndarray]]:
 
 
 def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
-    """Each later stretch waits 0.3 s before it is timed and checked (check_ahead_delay): the
-    lock-step cycle runs far ahead meanwhile, so the arm brakes to rest before the rows not
-    checked, and goes on when they are. Every cycle keeps the velocity, acceleration and jerk
-    limits, and every setpoint lies on the timed path; the motion ends done at the last
-    point."""
+    """The first later stretch is handed to the cycle only once the arm has stood still
+    for it for 10 cycles (late, by the arm's own clock: so on a machine of any speed): the
+    arm brakes to rest before the rows not yet timed and checked, and goes on when they come.
+    Every cycle keeps the velocity, acceleration and jerk limits, and every setpoint lies on
+    the timed path; the motion ends done at the last point."""
     from landscape.server.planning import path_planning
     points = long_path(fast, "late", 240)
     motions = fast.server.device.motions
@@ -132,7 +143,16 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
         motions.planner, motions.paths.get("late"), motions.planning_start(),
         fast.server.device.settings, 1)])
     motions.time_ahead = True   # as on the real-time clock
-    motions.check_ahead_delay = 0.3
+    link, held = motions.link, []
+    send = link.send
+
+    def late(message):
+        if isinstance(message, dict) and message.get("op") in ("append", "checked") \
+                and not held:
+            held.append(message["op"])
+            wait_until(lambda: resting_away_from(link.feedback, points[0]), timeout=120)
+        send(message)
+    link.send = late
     fast.record_start()
     run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="late"),
                                            timeout=60))
