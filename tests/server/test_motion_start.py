@@ -156,22 +156,7 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
     fast.record_start()
     run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="late"),
                                            timeout=60))
-    cmd = fast.recorded_tips()[1]["cmd_pos"]
-    model = fast.server.device.arm
-    dt = 0.004
-    for order, limit in ((1, model.max_velocity), (2, model.max_acceleration),
-                         (3, model.max_jerk)):
-        peak = (np.abs(np.diff(cmd, order, axis=0)).max(axis=0) / dt**order / np.array(limit))
-        assert peak.max() <= 1 + 1e-6, (order, peak)
-    # On the path: each setpoint within a hair of the planned samples' polyline.
-    steps = np.linalg.norm(np.diff(cmd, axis=0), axis=1)
-    for q in cmd:
-        k = int(np.argmin(np.linalg.norm(planned - q, axis=1)))
-        assert _on_chords(planned[max(k - 2, 0):k + 3], q, 1e-4), q
-    # It slowed down to rest mid-path (held for the late stretch) and went on.
-    moving = np.flatnonzero(steps > 1e-9)
-    middle = steps[moving[0]:moving[-1]]
-    assert (middle < 1e-9).sum() >= 10, "the arm never waited for a late stretch"
+    played_within_limits_resting_mid_path(fast, planned)
     assert np.allclose(fast.joints(), points[-1], atol=1e-4)
 
 
@@ -236,20 +221,7 @@ def test_a_path_timed_late_never_stops_dead(paced):
     paced.record_start()
     reply = paced.device.PathMove(motion_pb2.PathMoveRequest(path_name="late"), timeout=60)
     assert paced.wait_command(reply.ret_val.command_id)[-1].event_id == "command_done"
-    cmd = paced.recorded_tips()[1]["cmd_pos"]
-    model = paced.server.device.arm
-    dt = 0.004
-    for order, limit in ((1, model.max_velocity), (2, model.max_acceleration),
-                         (3, model.max_jerk)):
-        peak = (np.abs(np.diff(cmd, order, axis=0)).max(axis=0) / dt**order / np.array(limit))
-        assert peak.max() <= 1 + 1e-6, (order, peak)
-    steps = np.linalg.norm(np.diff(cmd, axis=0), axis=1)
-    moving = np.flatnonzero(steps > 1e-9)
-    for q in cmd[moving[0] + 1:]:
-        k = int(np.argmin(np.linalg.norm(planned - q, axis=1)))
-        assert _on_chords(planned[max(k - 2, 0):k + 3], q, 1e-4), q
-    middle = steps[moving[0]:moving[-1]]
-    assert (middle < 1e-9).sum() >= 10, "the arm never waited for the late pieces"
+    played_within_limits_resting_mid_path(paced, planned)
     assert np.allclose(paced.joints(), points[-1], atol=1e-4)
 
 
@@ -297,6 +269,26 @@ def test_rows_checked_while_the_arm_brakes_for_them_keep_it_within_the_limits(ac
         peak = (np.abs(np.diff(played, order, axis=0)) / dt**order / np.array(limit)).max()
         assert peak <= 1 + 1e-6, (order, peak)
     assert np.allclose(played[-1], timed.positions[-1])
+
+def played_within_limits_resting_mid_path(arm, planned: np.ndarray) -> None:
+    """The recorded setpoints of a run that waited for late rows: every cycle within the
+    velocity, acceleration and jerk limits; from its first move on, every setpoint within a
+    hair of the chords of the `planned` samples (on the path); and at rest for at least 10
+    cycles between its first and last move (it waited, and went on)."""
+    cmd = arm.recorded_tips()[1]["cmd_pos"]
+    model, dt = arm.server.device.arm, 0.004
+    for order, limit in ((1, model.max_velocity), (2, model.max_acceleration),
+                         (3, model.max_jerk)):
+        peak = (np.abs(np.diff(cmd, order, axis=0)).max(axis=0) / dt**order / np.array(limit))
+        assert peak.max() <= 1 + 1e-6, (order, peak)
+    steps = np.linalg.norm(np.diff(cmd, axis=0), axis=1)
+    moving = np.flatnonzero(steps > 1e-9)
+    for q in cmd[moving[0] + 1:]:
+        k = int(np.argmin(np.linalg.norm(planned - q, axis=1)))
+        assert _on_chords(planned[max(k - 2, 0):k + 3], q, 1e-4), q
+    middle = steps[moving[0]:moving[-1]]
+    assert (middle < 1e-9).sum() >= 10, "the arm never waited for the late rows"
+
 
 def _on_chords(near: np.ndarray, q: np.ndarray, tolerance: float) -> bool:
     """Whether q lies within `tolerance` (rad) of the chords between consecutive rows."""
