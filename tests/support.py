@@ -318,3 +318,18 @@ def random_walk(arm, start: np.ndarray, n: int, seed: int, step: float) -> np.nd
     for _ in range(n - 1):
         W.append(np.clip(W[-1] + rng.normal(0.0, step, 6), 0.8 * arm.lower, 0.8 * arm.upper))
     return np.array(W)
+
+
+def tool_line(arm, start_xyz, dy: float, near: np.ndarray):
+    """(dense joint waypoints, tool_path) of a straight line of a 15 cm tool pointing down from
+    `start_xyz` (m, base frame), `dy` m along y, its first configuration nearest `near`: the
+    Cartesian path the timing tests time."""
+    from landscape.robot.units import pose_matrix
+    from landscape.server.planning.motion.cartesian import straight_line, tool_pose
+    kin = Kinematics(arm)
+    tcp = pose_matrix([0.0, 0.0, 0.15], [0.0, 0.0, 0.0])
+    start = pose_matrix(list(start_xyz), [np.pi, 0.0, 0.0])
+    q0, _ = kin.reverse(start @ np.linalg.inv(tcp), near)
+    goal = start.copy()
+    goal[:3, 3] += [0.0, dy, 0.0]
+    return straight_line(kin, q0, goal, tcp=tcp), tool_pose(kin, tcp)

@@ -10,15 +10,12 @@ import numpy as np
 import pytest
 
 from landscape.robot.arm import arm_model
-from landscape.robot.kinematics import Kinematics
-from landscape.robot.units import pose_matrix
-from landscape.server.planning.motion.cartesian import straight_line, tool_pose
 from landscape.server.planning.motion.horizon import final_until, joined, raw_in_stretches
 from landscape.server.planning.motion.jerk_timing import FilteredProfile
 from landscape.server.planning.motion.timing import (ConstAccelProfile, chord_parameters,
                                                      gridpoints, tool_constraints, topp_ra)
 from landscape.server.planning.motion.trajectory import JointPath, Limits, PlanningError
-from support import random_walk
+from support import random_walk, tool_line
 
 ARM = arm_model()
 Q_HOME = np.array([0.0, 0.3, 1.4, 0.0, 0.9, 0.0])
@@ -119,15 +116,9 @@ def test_a_horizon_short_of_braking_is_slower_but_never_stalls(horizon):
 def test_a_straight_line_keeps_its_tool_rows_and_per_stage_limits_across_stretches():
     """Tool acceleration rows and one acceleration row per stage (what the jerk-limited
     timing lowers) are cut with the grid: the joined profile is the whole one's."""
-    kin = Kinematics(ARM)
-    tcp = pose_matrix([0.0, 0.0, 0.15], [0.0, 0.0, 0.0])
-    start = pose_matrix([0.5, -0.4, 0.55], [np.pi, 0.0, 0.0])
-    q0, _ = kin.reverse(start @ np.linalg.inv(tcp), Q_HOME)
-    goal = start.copy()
-    goal[:3, 3] += [0.0, 0.8, 0.0]
+    W, tip = tool_line(ARM, (0.5, -0.4, 0.55), 0.8, Q_HOME)
     limits = Limits.scaled(ARM, 100, 100, linear_velocity=0.5, linear_acceleration=2.0)
-    path, grid, caps, rows = section(straight_line(kin, q0, goal, tcp=tcp), limits,
-                                     tool_pose(kin, tcp))
+    path, grid, caps, rows = section(W, limits, tip)
     assert rows is not None
     accel = np.tile(limits.acceleration, (len(grid) - 1, 1))
     accel[len(accel) // 2:] *= 0.7

@@ -20,7 +20,7 @@ from landscape.server.planning.motion.sample_check import excess_per_sample
 from landscape.server.planning.motion.stretch_timing import time_in_stretches
 from landscape.server.planning.motion.timing import (LIMIT_SLACK, chord_parameters, time_path)
 from landscape.server.planning.motion.trajectory import JointPath, Limits
-from support import random_walk
+from support import random_walk, tool_line
 
 ARM = arm_model()
 DT = 0.004
@@ -167,16 +167,7 @@ def test_a_straight_line_keeps_the_tool_limits_across_stretches():
     within them (the tool rows are cut with the grid, and lowered with the joints' limits
     where a sample exceeds: before, the slow-downs left a tool excess of 1.0007 in place and
     the section was refused)."""
-    from landscape.robot.units import pose_matrix
-    from landscape.server.planning.motion.cartesian import straight_line, tool_pose
-    kin = Kinematics(ARM)
-    tcp = pose_matrix([0.0, 0.0, 0.15], [0.0, 0.0, 0.0])
-    start = pose_matrix([0.5, -0.4, 0.55], [np.pi, 0.0, 0.0])
-    q0, _ = kin.reverse(start @ np.linalg.inv(tcp), Q_HOME)
-    goal = start.copy()
-    goal[:3, 3] += [0.0, 0.8, 0.0]
-    W = straight_line(kin, q0, goal, tcp=tcp)
-    tip = tool_pose(kin, tcp)
+    W, tip = tool_line(ARM, (0.5, -0.4, 0.55), 0.8, Q_HOME)
     limits = Limits.scaled(ARM, 100, 100, linear_velocity=1.0, linear_acceleration=3.0)
     chunks = list(time_in_stretches(W, limits, DT, tool_path=tip, stretch=0.2, horizon=1.0))
     assert len(chunks) > 2
