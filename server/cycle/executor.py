@@ -23,6 +23,11 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                     "arrays": SharedArrays of run_arrays.pack_run, optional "guard": GuardSpec,
                     "comply": ComplySpec}: segments played in order; a mark reports its label
                     when its sample is passed
+                   a run checked or timed as it plays (run_check.py) adds "checked" (rows
+                    checked so far) and "brake" (rows a stop may take), then comes on with
+                    {"op": "checked", "id", "rows", "all"}, {"op": "append", "id", "arrays",
+                    "continues", "rows", "brake", "all"} (later pieces) or {"op": "refused",
+                    "id", "message"} (brake along the path, then fail)
                    {"op": "comply", "id", "spec": ComplySpec}: compliance for the running motion
                    {"op": "stop", optional "acceleration", "jerk": this stop's limits}
                    {"op": "resume"}  {"op": "abort"}
