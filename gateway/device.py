@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from dataclasses import dataclass
 
 from landscape.client import (AsyncRobot, DeviceLink, Endpoint, Frame, Identity, LandscapeError,
@@ -29,6 +30,7 @@ log = logging.getLogger(__name__)
 
 PROGRAM = "crcl-gateway"      # landscape-client on every call (identity.md)
 ENDING_WAIT = 10.0            # s a new session waits for this gateway's sessions still ending
+RETRY = 1.0                   # s at most between Lock attempts while a session ends
 
 
 class CrclDevice:
@@ -75,7 +77,7 @@ class CrclDevice:
                            identity=self.link.identity.acting_for(f"crcl {peer}"))
         await robot.open()
         try:
-            await _lock(robot)
+            await _lock(robot, self.feed)
         except LandscapeError as refused:
             await robot.close()
             state = await robot.get_device_state()
@@ -85,20 +87,29 @@ class CrclDevice:
         return Control(robot)
 
 
-async def _lock(robot: AsyncRobot) -> None:
+async def _lock(robot: AsyncRobot, feed: StateFeed) -> None:
     """Lock, waiting (up to ENDING_WAIT) for a device still bringing its last holder's session
     to an end: unlocked already, but braking and turning the drives off, so Lock is not valid
-    yet (a CRCL client's InitCanon right after a lost lock)."""
-    deadline = asyncio.get_running_loop().time() + ENDING_WAIT
+    yet (a CRCL client's InitCanon right after a lost lock). The wait is on the state feed the
+    gateway reads anyway, until a sample shows the device UNLOCKED, not on GetDeviceState asked
+    again and again."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + ENDING_WAIT
     while True:
         try:
             return await robot.lock()
         except LandscapeError:
+            asked = time.monotonic()
             state = await robot.get_device_state()
             if (state.locked or state.state == types_pb2.DEVICE_STATE_UNLOCKED
-                    or asyncio.get_running_loop().time() > deadline):
+                    or loop.time() > deadline):
                 raise
-            await asyncio.sleep(0.05)
+            # A sample from after the refusal; one that misses the end (a stream down, another
+            # client's Lock at once) costs a retry after RETRY, never more.
+            await feed.until(
+                lambda sample: (sample.received >= asked and sample.message.device_state
+                                == types_pb2.DEVICE_STATE_UNLOCKED),
+                timeout=min(RETRY, max(deadline - loop.time(), 0.0)))
 
 
 @dataclass(frozen=True)
