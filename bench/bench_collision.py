@@ -149,7 +149,7 @@ def path_run(W: np.ndarray, margin: float, repeat: int) -> dict[int, tuple[list[
                             timeout=60)
             motions, out = server.device.motions, {}
             for cycles in (1000, 1):
-                run = path_planning.plan_run(motions.planner, motions.paths.get("p"),
+                run = path_planning.plan_run(motions.planner, server.device.path_runs.paths.get("p"),
                                              motions.planning_start(), server.device.settings,
                                              cycles)
                 out[cycles] = timed(lambda: motions.check_collisions(run), repeat)

@@ -138,11 +138,11 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
     the timed path; the motion ends done at the last point."""
     from landscape.server.planning import path_planning
     points = long_path(fast, "late", 240)
-    motions = fast.server.device.motions
+    motions, runs = fast.server.device.motions, fast.server.device.path_runs
     planned = np.concatenate([t.positions for t, _ in path_planning.plan_run_lazily(
-        motions.planner, motions.paths.get("late"), motions.planning_start(),
+        motions.planner, runs.paths.get("late"), motions.planning_start(),
         fast.server.device.settings, 1)])
-    motions.time_ahead = True   # as on the real-time clock
+    runs.time_ahead = True   # as on the real-time clock
     link, held = motions.link, []
     send = link.send
 
@@ -166,9 +166,9 @@ def test_a_long_path_starts_before_it_is_fully_timed(fast):
     checked), and the arm has left its start when the last of them is sent. It ends done at
     the last point, having passed every point's mark in order."""
     points = long_path(fast, "long", 240)
-    motions = fast.server.device.motions
-    motions.time_ahead = True   # as on the real-time clock
-    motions.check_ahead_delay = 0.05
+    runs = fast.server.device.path_runs
+    runs.time_ahead = True   # as on the real-time clock
+    runs.check_ahead_delay = 0.05
     sent, marks = sent_to_cycle(fast), marked(fast)
     run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="long"),
                                            timeout=30))
@@ -202,12 +202,12 @@ def test_a_path_timed_late_never_stops_dead(paced):
     from landscape.server.planning import path_planning
     from landscape.server.planning.process import PlanningProcess
     points = long_path(paced, "late", 240)
-    motions = paced.server.device.motions
+    motions, runs = paced.server.device.motions, paced.server.device.path_runs
     planned = np.concatenate([t.positions for t, _ in path_planning.plan_run_lazily(
-        motions.planner, motions.paths.get("late"), motions.planning_start(),
+        motions.planner, runs.paths.get("late"), motions.planning_start(),
         paced.server.device.settings, 1)])
-    motions.planning = planning = PlanningProcess(motions.collisions, motions.planner.dt)
-    motions.time_ahead = True   # as on the real-time clock
+    runs.planning = planning = PlanningProcess(motions.collisions, motions.planner.dt)
+    runs.time_ahead = True   # as on the real-time clock
     link, resumed = motions.link, []
     send = link.send
 
