@@ -142,6 +142,7 @@ class Device:
             raise ControllerFailure("no feedback from the controller")
         sample = self.link.feedback.latest()
         self.state_machine.controller_reported(sample.enable, sample.estop)
+        self.motions.warm_up()
         for started in self.on_controller_start:
             started()
 

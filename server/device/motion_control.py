@@ -32,13 +32,15 @@ from landscape.server.device.state_machine import MANUAL_OFF, StateMachine
 from landscape.server.device.motion_settings import MotionSettings
 from landscape.server.device.states import State
 from landscape.server.device.stored_settings import SettingsKeeper
-from landscape.server.errors import ControllerFailure, ManualControlMode, WrongState
+from landscape.server.errors import (CommandError, ControllerFailure, ManualControlMode,
+                                     WrongState)
 from landscape.server.events import alarms
 from landscape.server.events.bus import EventBus, Phase, Severity
 from landscape.server.link.clock import CycleProcessError
 from landscape.server.link.controller_link import ControllerLink
 from landscape.server.planning.collision import CheckResult, CollisionScene
 from landscape.server.planning.moves import Planner
+from landscape.server.planning.motion.trajectory import Trajectory
 from landscape.server.planning.process import check_run
 from landscape.server.planning.targets import Frame
 
@@ -90,6 +92,15 @@ class MotionControl:
         return self._motion
 
     # ---- 3.4 single motions ----------------------------------------------------------------
+
+    def warm_up(self) -> None:
+        """Check the arm where it holds against the cell: the process's first check builds the
+        cell's model and imports what it uses (about 90 ms), at start rather than in the first
+        move's handler."""
+        q = self.planning_start()
+        with contextlib.suppress(CommandError):
+            self.check_collisions([Trajectory(self.planner.dt, np.array([q, q]),
+                                              np.zeros((2, len(q))))], "the arm at rest")
 
     def planning_start(self) -> np.ndarray:
         """Where the next motion starts: the setpoint the arm holds, rad."""
