@@ -25,6 +25,7 @@ from landscape.server.link.controller_link import ControllerLink
 from landscape.server.planning import aux_commands, run_check
 from landscape.server.planning.collision import CollisionScene
 from landscape.server.planning.moves import Planner
+from landscape.server.planning.path_planning import LONG_SECTION
 from landscape.server.planning.paths import PathLibrary, PathStore
 from landscape.server.planning.process import InProcessPlanning, PlanningProcess
 from landscape.server.planning.targets import Frame
@@ -47,6 +48,9 @@ class PathRuns:
         # slows along the path, run_check.py).
         self.time_ahead = link.clock_kind == "realtime"
         self.check_ahead_delay = 0.0
+        # rad of joint path above which a stretch is timed in chunks as it plays (tests make
+        # their paths' sections long with a lower one)
+        self.long_section = LONG_SECTION
         self._runs = itertools.count(1)   # keys of runs timed as they play
         # Long paths are planned beside a cycle process in a process of their own as well.
         self.planning = (PlanningProcess(collisions, link.cycle_time, self._planning_lost)
@@ -97,7 +101,7 @@ class PathRuns:
         pieces timed and checked, and run_check.follow hands the cycle the rest."""
         pieces, continues, checked, brake, everything = self.planning.run(
             "plan_path_lazily", key, path, self.motions.planning_start(), settings, cycles,
-            f"PathMove {path.name}")
+            f"PathMove {path.name}", self.long_section)
         trajectories, _ = run_check.joined(pieces, continues)
         try:
             motion = self.motions.start_motion("PathMove", path.name, trajectories,
