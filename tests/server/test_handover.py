@@ -1,9 +1,9 @@
 """Issue 8.5: handing a long motion to the cycle process costs the cycle nothing: the
 trajectory goes through shared memory, and no cycle unpickles or copies it; what crosses the
 pipe is its block's name and layout, whatever its length (a short run's rows go with the
-message: issue 31 item 4). The cycle's timing during the
-hand-over is printed here and measured in bench/bench_stop.py (a shared machine can make any
-cycle late, real-time priority or not: timing is not asserted in tests)."""
+message: issue 31 item 4). The cycle's timing during the hand-over is printed here and
+measured in bench/bench_stop.py (a shared machine can make any cycle late, real-time priority
+or not: timing is not asserted in tests)."""
 from __future__ import annotations
 
 import pickle
