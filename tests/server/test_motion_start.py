@@ -105,21 +105,6 @@ def test_a_joint_move_and_a_path_from_its_first_point_move_on_the_cycle_that_tak
     assert move_step > 0.0, "the move's first cycle held the arm where it was"
 
 
-def test_a_long_joint_move_starts_on_its_first_rows_checked_and_ends_done(fast):
-    """A joint move checked as it plays (as on the real-time clock): the run goes to the cycle
-    with its first rows checked (those a stop may take, plus the lead), the rest follows in
-    one "checked" message, and the move ends done at its goal."""
-    fast.server.device.motions.check_ahead = True
-    sent = sent_to_cycle(fast)
-    goal = [1.5, 0.3, 1.4, 0.0, 0.9, 0.0]
-    run(fast, lambda: fast.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(
-        frame=JOINT, values=goal, speed=20), timeout=30))
-    (start, _), (rest, _) = sent
-    assert start["op"] == "run" and 0 < start["brake"] < start["checked"]
-    assert rest["op"] == "checked" and rest["all"] and rest["rows"] > start["checked"]
-    assert np.allclose(fast.joints(), goal, atol=1e-4)
-
-
 def resting_away_from(ring, start, cycles: int = 10) -> bool:
     """Whether the newest `cycles` setpoints are one and the same, away from `start`."""
     head = ring.head
