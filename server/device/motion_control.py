@@ -38,7 +38,6 @@ from landscape.server.events import alarms
 from landscape.server.events.bus import EventBus, Phase, Severity
 from landscape.server.link.clock import CycleProcessError
 from landscape.server.link.controller_link import ControllerLink
-from landscape.server.planning import run_check
 from landscape.server.planning.collision import CheckResult, CollisionScene
 from landscape.server.planning.moves import Planner
 from landscape.server.planning.motion.trajectory import Trajectory
@@ -80,10 +79,6 @@ class MotionControl:
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
         self._appending = threading.Lock()   # an append and a motion's end, one at a time
-        # A single move is checked against the cell as it plays on the real-time clock (issue
-        # 31 item 4): its first rows before it starts, the rest right after (tests turn it on
-        # for the lock-step clock, whose simulated time would outrun the check).
-        self.check_ahead = link.clock_kind == "realtime"
         # A motion's marks (path_runs.py: tags and aux commands), as the cycle reports them.
         self.on_mark: Callable[[RunningMotion, int], None] = lambda motion, label: None
 
@@ -117,37 +112,9 @@ class MotionControl:
         """Seed 3.4.1 moveAbsolute / moveRelative: plan, then start; values in SI (joints rad;
         x, y, z m and roll, pitch, yaw rad); `settings`: this move's (default: the device's).
         Nothing moves if planning fails."""
-        what = f"{command} {point_name}".strip()
-        if not self.check_ahead:
-            trajectory = self.plan_move(frame, values, relative, straight, speed_percent,
-                                        settings, what)
-            return self.start(command, point_name, [trajectory], checked=True)
-        trajectory = self.planner.move(self.planning_start(), settings or self.settings.current,
-                                       frame, values, relative, straight, speed_percent)
-        return self._start_checking_ahead(command, point_name, trajectory, what)
-
-    def _start_checking_ahead(self, command: str, point_name: str, trajectory,
-                              what: str) -> str:
-        """Start a move once the rows a stop may take from its fastest, plus run_check.LEAD,
-        are checked against the cell (a refusal there: nothing moved); the rest is checked
-        after the start, and a refusal then brakes the arm along the path before the rows it
-        was not cleared for and fails the motion (run_check.refuse), as a path run's."""
-        check, first, brake = run_check.check_start(
-            trajectory, what, self.collisions, np.asarray(self.arm.max_acceleration),
-            np.asarray(self.arm.max_jerk))
-        if first == check.rows:
-            return self.start(command, point_name, [trajectory], checked=True)
-        motion = self.start_motion(command, point_name, [trajectory], checked=True,
-                                   ahead=(first, brake))
-        run_check.checking_rest(check, self.collisions, first, motion.command_id,
-                                lambda message: self._hand_on_checked(motion, message),
-                                self.send)
-        return motion.command_id
-
-    def _hand_on_checked(self, motion: RunningMotion, message: dict) -> None:
-        with self.appending(motion) as running:
-            if running:
-                self.send(message)
+        trajectory = self.plan_move(frame, values, relative, straight, speed_percent, settings,
+                                    f"{command} {point_name}".strip())
+        return self.start(command, point_name, [trajectory], checked=True)
 
     def plan_move(self, frame: Frame, values: np.ndarray, relative: bool, straight: bool,
                   speed_percent: float | None, settings: MotionSettings | None = None,

@@ -10,8 +10,6 @@ that many rows plus LEAD (what the cycle plays while the next stretch is worked 
 `RunCheck` is the planning process's side (process.py's jobs), `follow` the server's: it has
 the later stretches timed and checked one after the other and hands them on, or says that one
 was refused (the cycle then brakes along the path and the motion fails with the refusal).
-A single move (motion_control.py) is timed whole and checked so: `check_start` before it
-starts, `checking_rest` after.
 """
 from __future__ import annotations
 
@@ -84,44 +82,6 @@ class RunCheck:
             raise Collision(f"{self.what} would collide: {contact}", **contact.metadata())
 
 
-def check_start(trajectory: Trajectory, what: str, scene: CollisionScene,
-                acceleration: np.ndarray, jerk: np.ndarray) -> tuple[RunCheck, int, int]:
-    """A single move checked as far as its start needs: the rows a stop may take from its
-    fastest (at the stop's `acceleration` and `jerk`) plus LEAD, or all of it if shorter.
-    Returns (its RunCheck, rows checked, brake rows); raises Collision (nothing moved)."""
-    check = RunCheck([trajectory], what)
-    brake = brake_rows(np.max(np.abs(trajectory.velocities), axis=0), trajectory.dt,
-                       acceleration, jerk)
-    first = min(brake + LEAD, check.rows)
-    check.check(scene, 0, first)
-    return check, first, brake
-
-
-def checking_rest(check: RunCheck, scene: CollisionScene, first: int, command_id: str,
-                  hand_on: Callable[[dict], None], send: Callable[[dict], None]
-                  ) -> threading.Thread:
-    """The rows of a started move after `first` checked on a thread of their own: then
-    `hand_on({"op": "checked", ...})` (it sends it while the motion runs), or a refusal sent
-    to the cycle (refuse)."""
-    def rest() -> None:
-        try:
-            check.check(scene, first, check.rows)
-        except CommandError as refusal:
-            refuse(send, command_id, refusal.message)
-            return
-        except Exception as error:   # never a silent end: the arm would wait at rest
-            log.exception("checking %s ahead of the arm failed", command_id)
-            refuse(send, command_id, f"internal error checking the move ahead: {error!r}")
-            return
-        try:
-            hand_on({"op": "checked", "id": command_id, "rows": check.rows, "all": True})
-        except CommandError as gone:   # the controller is gone: the motion failed already
-            log.warning("%s checked, not sent: %s", command_id, gone)
-    thread = threading.Thread(target=rest, name=f"check {command_id}", daemon=True)
-    thread.start()
-    return thread
-
-
 def joined(pieces: list, continues: list[bool]) -> tuple[list, bool]:
     """Pieces as the cycle plays them: each that continues the one before joined to it (one
     segment); and whether the first continues a piece sent before."""
@@ -166,15 +126,13 @@ def follow(planning, key: str, command_id: str,
                 planning.run("drop_run", key)
                 return
     except CommandError as refusal:   # a collision, a timing refused, the process lost
-        refuse(send, command_id, refusal.message)
+        _refuse(send, command_id, refusal.message)
     except Exception as error:   # never a silent end: the arm would wait at rest for rows
         log.exception("timing %s ahead of the arm failed", command_id)
-        refuse(send, command_id, f"internal error timing the path ahead: {error!r}")
+        _refuse(send, command_id, f"internal error timing the path ahead: {error!r}")
 
 
-def refuse(send: Callable[[dict], None], command_id: str, message: str) -> None:
-    """The rest of a run checked as it plays refused: the cycle brakes along the path before
-    the rows not checked and fails the motion with `message`."""
+def _refuse(send: Callable[[dict], None], command_id: str, message: str) -> None:
     try:
         send({"op": "refused", "id": command_id, "message": message})
     except CommandError as gone:   # the controller is gone: the motion failed already

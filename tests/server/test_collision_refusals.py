@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 import grpc
-from landscape.server.planning import path_planning, run_check
-from landscape.server.planning.targets import Frame
+from landscape.server.planning import path_planning
 from landscape.server.device.states import State
 from landscape.robot.units import pose_matrix
 from landscape.v1 import digital_io_service_pb2 as io_pb
@@ -197,35 +196,3 @@ def test_a_sideways_motion_of_the_bare_flange_into_a_rack_tool_is_refused(arm):
     assert info.reason == "COLLISION"
     assert {info.metadata["body_a"], info.metadata["body_b"]} == {"link6", "gripper"}
     assert np.allclose(arm.joints(), before, atol=1e-6)         # nothing moved
-
-
-def test_a_move_found_colliding_after_it_started_brakes_before_it_and_fails(arm):
-    """A joint move is checked against the cell as it plays (issue 31 item 4, on the real-time
-    clock): the rows a stop may take from its fastest, plus the lead, before it starts; the
-    rest right after. A slow move from beside the table through it (its first rows clear):
-    it starts, the later rows are refused, the arm comes to rest on the path before the rows
-    it was not cleared for, and the motion fails naming the table, with an alarm."""
-    a, b = _around(arm)
-    motions = arm.server.device.motions
-    motions.check_ahead = True   # as on the real-time clock
-    speed = 5.0
-    planned = motions.planner.move(a, arm.server.device.settings, Frame.JOINT, b, False, False,
-                                   speed)
-    _, first, _ = run_check.check_start(planned, "the move", arm.server.device.collisions,
-                                        np.asarray(motions.arm.max_acceleration),
-                                        np.asarray(motions.arm.max_jerk))
-    assert first < len(planned), "the move is checked whole before it starts"
-    reply = arm.device.MoveAbsolute(motion_pb2.MoveAbsoluteRequest(frame=JOINT, values=list(b),
-                                                                   speed=speed))
-    failed = arm.wait_command(reply.ret_val.command_id)[-1]
-    assert failed.event_id == "command_failed", failed
-    assert "table" in failed.command.message
-    collides = float(failed.command.message.split("at t = ")[1].split(" s")[0]) / planned.dt
-    assert arm.server.device.state is State.RESTING
-    held = arm.server.link.sample().command   # the setpoint: on the path, between two rows
-    nearest = int(np.argmin(np.abs(planned.positions - held).max(axis=1)))
-    assert np.abs(planned.positions[nearest] - held).max() \
-        <= np.abs(np.diff(planned.positions, axis=0)).max() + 1e-9
-    assert 0 < nearest < first < collides, "it moved, and stopped within the rows cleared"
-    alarms = [e for e in arm.history() if e.event_id == "alarm" and "table" in e.detail.message]
-    assert alarms, "no alarm named the refusal"
