@@ -147,9 +147,9 @@ def path_run(W: np.ndarray, margin: float, repeat: int) -> dict[int, tuple[list[
             tags = [types_pb2.TagStruct(joint_values=list(q), transition_speed=50) for q in W]
             device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=tags)]),
                             timeout=60)
-            motions, out = server.device.motions, {}
+            motions, paths, out = server.device.motions, server.device.path_runs.paths, {}
             for cycles in (1000, 1):
-                run = path_planning.plan_run(motions.planner, motions.paths.get("p"),
+                run = path_planning.plan_run(motions.planner, paths.get("p"),
                                              motions.planning_start(), server.device.settings,
                                              cycles)
                 out[cycles] = timed(lambda: motions.check_collisions(run), repeat)

@@ -13,9 +13,10 @@ round trip in the same run. Prints figures, no pass/fail.
 - A long blended path's timing (100 points, about 20 s of motion), in this process: the first
   chunk of rows time_in_stretches gives out (issue 31 item 4) beside time_path's timing of
   the whole section, same run.
-- A long path (WAVY, 240 points) run by PathMove, send -> first moving cycle, timed as it plays (as in
-  service on this clock: MotionControl.time_ahead) beside timed whole before it starts, same
-  run; each run stopped and aborted once it moves.
+- A long path (WAVY, 240 points, one 9 rad section) run by PathMove, send -> first moving
+  cycle, as in service on this clock (PathRuns.time_ahead: checked as it plays; a section
+  that short is timed whole, path_planning.LONG_SECTION) beside timed and checked whole
+  before it starts, same run; each run stopped and aborted once it moves.
 
 The device server runs here on the real-time clock (its cycle process apart); the client runs
 in a child process, and reads the recorder there (a shared-memory ring), so the bench adds no
@@ -143,9 +144,9 @@ class Stamps:
     def __init__(self, server):
         self.began: list[float] = []
         self.sent: list[float] = []
-        motions = server.device.motions
-        for name in ("move", "path_move"):
-            setattr(motions, name, self._entered(getattr(motions, name)))
+        motions, runs = server.device.motions, server.device.path_runs
+        motions.move = self._entered(motions.move)
+        runs.path_move = self._entered(runs.path_move)
         send = motions.link.send
 
         def stamped(message):
@@ -211,7 +212,7 @@ def long_path_start(runs: int) -> None:
     try:
         first = {}
         for lazily in (False, True):
-            server.device.motions.time_ahead = lazily
+            server.device.path_runs.time_ahead = lazily
             first[lazily] = collect(in_child(long_starter, server.target, server.link.feedback,
                                              runs, not first), 900)
     finally:

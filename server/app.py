@@ -211,7 +211,7 @@ def _serve_metrics(config: ServerConfig, metrics: DeviceMetrics, device: Device,
     """/metrics on, with the planner timed and the bus watched; StartupError if it cannot."""
     motions = device.motions
     motions.planner = metrics.time_planning(motions.planner, ("move", "arc"))
-    motions.planning = metrics.time_planning(motions.planning, ("run",))
+    device.path_runs.planning = metrics.time_planning(device.path_runs.planning, ("run",))
     metrics.watch(bus)
     security = config.security
     tls = (MetricsTLS(security.tls_cert, security.tls_key, security.tls_ca if security.mtls

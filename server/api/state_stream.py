@@ -224,7 +224,7 @@ class StateHub:
             device_state=convert.DEVICE_STATE_PB[status.state], motion_control_state=motion,
             control_mode=mode, command_id=status.command_id,
             point_name=running.point_name if running else "",
-            tag_name=device.motions.last_tag[1], estop=status.estop,
+            tag_name=device.path_runs.last_tag[1], estop=status.estop,
             units=convert.units_to_pb(units))
         if self.workcell is not None:
             sample.end_effector, sample.end_effector_state = self.workcell.tools.state(row[IO])

@@ -4,7 +4,10 @@ A trajectory of ten minutes is about ten megabytes; unpickling it on the cycle t
 make that cycle late by tens of milliseconds. Across processes the arrays go into one block of
 POSIX shared memory and the message carries only its name and layout, so taking them costs
 the cycle one mmap whatever their size. On the lock-step thread (same process) the arrays are
-passed as they are.
+passed as they are, and so are a short run's (under INLINE_BYTES) across processes: making a
+block costs the sender more (shm_open, ftruncate, mmap and two messages to the resource
+tracker: about 0.5 ms, before the motion's first cycle) than unpickling them costs the cycle
+(under 0.1 ms).
 
 The receiving side calls `open()` once (it unlinks the block's name: the mapping stays valid
 until `close()`); the sending side calls `discard()` when the run is over, which unlinks the
@@ -20,6 +23,7 @@ import _posixshmem
 import numpy as np
 
 _ALIGN = 64
+INLINE_BYTES = 64 * 1024   # about 450 rows of a run (1.8 s at 4 ms): pickled with the message
 
 
 @dataclass
@@ -32,7 +36,7 @@ class SharedArrays:
     @classmethod
     def create(cls, arrays: dict[str, np.ndarray], shared: bool) -> "SharedArrays":
         arrays = {name: np.ascontiguousarray(a) for name, a in arrays.items()}
-        if not shared:
+        if not shared or sum(a.nbytes for a in arrays.values()) <= INLINE_BYTES:
             return cls(tuple((n, a.dtype.str, a.shape, 0) for n, a in arrays.items()),
                        local=arrays)
         layout, offset = [], 0

@@ -1,13 +1,14 @@
 """The device: one robot's state machine, lock, power and safety, above its controller.
 
 Every transport (gRPC servicers now; the CRCL gateway and the dashboard through gRPC) reaches
-the robot through these methods and `motions` (motion_control.py). They take and return domain
-values in SI (api/convert.py does the units); they raise CommandError subclasses (errors.py)
-and change nothing when they do.
+the robot through these methods, `motions` (motion_control.py) and `path_runs`
+(path_runs.py). They take and return domain values in SI (api/convert.py does the units); they
+raise CommandError subclasses (errors.py) and change nothing when they do.
 
 The Device puts together what it is made of and is the one object the servicers hold: the
 state machine (state_machine.py: the state, the lock holder, the lease, the epoch, power,
 e-stop and error, every transition a compare-and-set), the motions (motion_control.py), the
+path runs (path_runs.py), the
 drives (power.py), the safety actions (safety.py), the sessions, the RSVP questions and the
 settings. Each part is given the narrow things it uses, never the Device.
 
@@ -33,6 +34,7 @@ from landscape.robot.kinematics import Kinematics
 from landscape.server.cycle.feedback import Sample
 from landscape.server.device import states
 from landscape.server.device.motion_control import MotionControl
+from landscape.server.device.path_runs import PathRuns
 from landscape.server.device.motion_settings import MotionSettings
 from landscape.server.device.power import Power
 from landscape.server.device.rsvp import RsvpBroker
@@ -87,9 +89,12 @@ class Device:
         self.settings_keeper = SettingsKeeper(MotionSettings(arm), store, reset_settings,
                                               WRITE_BEHIND if settings_delay is None
                                               else settings_delay)
-        self.motions = MotionControl(self.state_machine, link, bus, arm,
-                                     Planner(self.kinematics, link.cycle_time), collisions,
-                                     store, self.settings_keeper, set(outputs))
+        planner = Planner(self.kinematics, link.cycle_time)
+        self.motions = MotionControl(self.state_machine, link, bus, arm, planner, collisions,
+                                     self.settings_keeper)
+        self.path_runs = PathRuns(self.motions, link, bus, planner, collisions, store,
+                                  self.settings_keeper, set(outputs))
+        self.motions.on_mark = self.path_runs.mark
         self.power = Power(self.state_machine, self.motions, link, enable_timeout)
         self.safety_actions = SafetyActions(
             self.state_machine, self.power, self.motions, link, bus, self.rsvp, self.reset,
@@ -137,6 +142,7 @@ class Device:
             raise ControllerFailure("no feedback from the controller")
         sample = self.link.feedback.latest()
         self.state_machine.controller_reported(sample.enable, sample.estop)
+        self.motions.warm_up()
         for started in self.on_controller_start:
             started()
 
@@ -147,7 +153,7 @@ class Device:
         self.safety.wait_idle(timeout)
         self.safety.close()
         self.settings_keeper.close()     # the settings written behind, now
-        self.motions.close()
+        self.path_runs.close()
 
     # ---- state -----------------------------------------------------------------------------
 

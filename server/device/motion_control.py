@@ -5,7 +5,8 @@ The device's state machine (state_machine.py) says when a motion may start; this
 shared memory, follows the Executor's reports (started, marks, paused, done, failed, aborted),
 publishes the command events and moves the state Resting <-> Moving <-> Paused (through the
 state machine's compare-and-set). It is given what it uses: the state machine, the link to the
-controller, the bus, the planner, the collision scene, the path store and the settings.
+controller, the bus, the planner, the collision scene and the settings; path runs (load, move,
+marks) are path_runs.py's.
 
 Ordering: a motion is registered, handed over and only then is the state moved and "started"
 published, all inside the state machine's `atomic()`, so a report can never overtake the start and no
@@ -24,8 +25,6 @@ from typing import Callable
 import numpy as np
 
 from landscape.robot.arm import ArmModel
-from landscape.robot.controller import DoutValue, Status
-from landscape.server.config import PROCESS_CLOCKS
 from landscape.server.cycle.run_arrays import pack_run
 from landscape.server.cycle.shared_array import SharedArrays
 from landscape.server.device import states
@@ -33,16 +32,16 @@ from landscape.server.device.state_machine import MANUAL_OFF, StateMachine
 from landscape.server.device.motion_settings import MotionSettings
 from landscape.server.device.states import State
 from landscape.server.device.stored_settings import SettingsKeeper
-from landscape.server.errors import ControllerFailure, ManualControlMode, NotFound, WrongState
+from landscape.server.errors import (CommandError, ControllerFailure, ManualControlMode,
+                                     WrongState)
 from landscape.server.events import alarms
 from landscape.server.events.bus import EventBus, Phase, Severity
 from landscape.server.link.clock import CycleProcessError
 from landscape.server.link.controller_link import ControllerLink
-from landscape.server.planning import aux_commands, run_check
 from landscape.server.planning.collision import CheckResult, CollisionScene
 from landscape.server.planning.moves import Planner
-from landscape.server.planning.paths import PathLibrary, PathStore
-from landscape.server.planning.process import InProcessPlanning, PlanningProcess, check_run
+from landscape.server.planning.motion.trajectory import Trajectory
+from landscape.server.planning.process import check_run
 from landscape.server.planning.targets import Frame
 
 log = logging.getLogger(__name__)
@@ -70,35 +69,18 @@ class RunningMotion:
 
 class MotionControl:
     def __init__(self, state: StateMachine, link: ControllerLink, bus: EventBus, arm: ArmModel,
-                 planner: Planner, collisions: CollisionScene, paths: PathStore,
-                 settings: SettingsKeeper, outputs: set[str]):
+                 planner: Planner, collisions: CollisionScene, settings: SettingsKeeper):
         self.state, self.link, self.bus, self.arm = state, link, bus, arm
         self.collisions, self.settings = collisions, settings
         self.planner = planner
-        self.paths = PathLibrary(paths)
-        self.outputs = outputs          # digital outputs aux commands may set
-        self.last_tag = ("", "")        # (path name, tag name), for getTagId
         self.motion_state = states.ROBOT_IDLE
         self._motion: RunningMotion | None = None
         self._changed = threading.Condition()
         self._ids = itertools.count(1)
         self._holds = 0                 # no_new_motion() blocks in force
-        # A long path run is timed and checked against the cell as it plays (issue 31 item 4)
-        # on the real-time clock only: on the lock-step and fast clocks simulated time outruns
-        # work done in wall time, so the arm would slow for it (a simulation not as
-        # commanded); there the whole run is timed and checked before it starts. Tests turn
-        # it on there, and make each later stretch late by `check_ahead_delay` s (the arm then
-        # slows along the path, run_check.py).
-        self.time_ahead = link.clock_kind == "realtime"
-        self.check_ahead_delay = 0.0
         self._appending = threading.Lock()   # an append and a motion's end, one at a time
-        # Long paths are planned beside a cycle process in a process of their own as well.
-        self.planning = (PlanningProcess(collisions, link.cycle_time, self._planning_lost)
-                         if link.clock_kind in PROCESS_CLOCKS
-                         else InProcessPlanning(self.planner, collisions))
-
-    def _planning_lost(self, why: str) -> None:
-        self.bus.alarm(Severity.ERROR, alarms.PLANNING_LOST, why)
+        # A motion's marks (path_runs.py: tags and aux commands), as the cycle reports them.
+        self.on_mark: Callable[[RunningMotion, int], None] = lambda motion, label: None
 
     @property
     def running_id(self) -> str:
@@ -109,11 +91,16 @@ class MotionControl:
     def running(self) -> RunningMotion | None:
         return self._motion
 
-    def close(self) -> None:
-        self.planning.close()
-        self.paths.close()
-
     # ---- 3.4 single motions ----------------------------------------------------------------
+
+    def warm_up(self) -> None:
+        """Check the arm where it holds against the cell: the process's first check builds the
+        cell's model and imports what it uses (about 90 ms), at start rather than in the first
+        move's handler."""
+        q = self.planning_start()
+        with contextlib.suppress(CommandError):
+            self.check_collisions([Trajectory(self.planner.dt, np.array([q, q]),
+                                              np.zeros((2, len(q))))], "the arm at rest")
 
     def planning_start(self) -> np.ndarray:
         """Where the next motion starts: the setpoint the arm holds, rad."""
@@ -146,87 +133,6 @@ class MotionControl:
                                       goal, relative, speed_percent)
         return self.start("MoveArc", point_name, [trajectory])
 
-    # ---- 3.5 paths -------------------------------------------------------------------------
-
-    def path_load(self, name: str, frame: Frame, straight: bool, relative: bool, specs,
-                  total: int | None = None) -> tuple[int, int]:
-        """Seed 3.5.1 pathLoad: resolve and check every point (PointSpecs, or a StreamRef to
-        a PathLoad stream's), and the whole path against the cell, then append them to the
-        named queue in one transaction; nothing is stored if any point fails. Returns (points
-        loaded, path length)."""
-        path, loaded = self.planning.run("load_path", self.paths.get(name), name, frame,
-                                         straight, relative, specs, self.settings.current,
-                                         self.outputs, self.planning_start(), total)
-        self.paths.put(path)
-        return loaded, len(path.points)
-
-    def path_clear(self, name: str) -> None:
-        motion = self._motion
-        if motion is not None and motion.point_name == name and motion.command == "PathMove":
-            raise WrongState(f"path {name!r} is running; stop and abort it first")
-        self.paths.delete(name)
-
-    def path_move(self, name: str, cycles: int, settings: MotionSettings | None = None) -> str:
-        """Seed 3.5.2 pathMove: `cycles` passes; 0 is a dry run without aux commands;
-        `settings`: this run's (default: the device's)."""
-        path = self.paths.get(name)
-        if path is None:
-            raise NotFound(f"no path named {name!r}")
-        settings = settings or self.settings.current
-        if self.time_ahead:
-            return self._path_move_lazily(f"run-{next(self._ids)}", path, cycles, settings)
-        trajectories = self.planning.run("plan_path_run", path, self.planning_start(),
-                                         settings, cycles, f"PathMove {name}")
-        return self.start("PathMove", name, trajectories, *self._path_marks(path, cycles),
-                          checked=True)
-
-    def _path_move_lazily(self, key: str, path, cycles: int, settings: MotionSettings) -> str:
-        """path_move on a run timed as it plays (issue 31 item 4): it starts on its first
-        pieces timed and checked, and run_check.follow hands the cycle the rest."""
-        pieces, continues, checked, brake, everything = self.planning.run(
-            "plan_path_lazily", key, path, self.planning_start(), settings, cycles,
-            f"PathMove {path.name}")
-        trajectories, _ = run_check.joined(pieces, continues)
-        try:
-            motion = self._start("PathMove", path.name, trajectories,
-                                 *self._path_marks(path, cycles), checked=True,
-                                 ahead=None if everything else (checked, brake))
-        except BaseException:
-            self.planning.run("drop_run", key)
-            raise
-        if not everything:
-            run_check.following(self.planning, key, motion.command_id,
-                                lambda *args: self._hand_on(motion, *args), self.send,
-                                lambda: self.check_ahead_delay)
-        return motion.command_id
-
-    def _hand_on(self, motion: RunningMotion, pieces: list, continues: list, checked: int,
-                 brake: int, everything: bool) -> bool:
-        """Later pieces of a run timed as it plays, how far it is checked and the brake rows
-        for its fastest so far, sent to the cycle; False if the motion no longer runs."""
-        with self._appending:
-            if self._motion is not motion:
-                return False
-            if not pieces:
-                self.send({"op": "checked", "id": motion.command_id, "rows": checked,
-                           "all": everything})
-                return True
-            trajectories, joins = run_check.joined(pieces, continues)
-            arrays = self.link.share(pack_run(trajectories, self.planner.dt))
-            motion.appended.append(arrays)
-            self.send({"op": "append", "id": motion.command_id, "arrays": arrays,
-                       "continues": joins, "rows": checked, "brake": brake,
-                       "all": everything})
-        return True
-
-    @staticmethod
-    def _path_marks(path, cycles: int) -> tuple[dict, dict]:
-        """A path run's (tags, aux) by mark label (point index); no aux in a dry run."""
-        tags = {i: (p.tag_name, p.tag_index) for i, p in enumerate(path.points) if p.tag_name}
-        aux = {} if cycles == 0 else {i: p.aux_commands for i, p in enumerate(path.points)
-                                      if p.aux_commands}
-        return tags, aux
-
     # ---- starting ----------------------------------------------------------------------------
 
     def check_collisions(self, trajectories: list, what: str = "the motion", *,
@@ -245,13 +151,13 @@ class MotionControl:
         `loops` adds the sensor loops of the run message (executor.py: "guard", "comply") and
         `finish(report) -> message` words its end. Returns the command id that the started /
         tag / done / failed events name (seed: CMD_STARTED_OK)."""
-        return self._start(command, point_name, trajectories, tags, aux, allow=allow,
-                           loops=loops, finish=finish, checked=checked).command_id
+        return self.start_motion(command, point_name, trajectories, tags, aux, allow=allow,
+                                 loops=loops, finish=finish, checked=checked).command_id
 
-    def _start(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
+    def start_motion(self, command, point_name, trajectories, tags=None, aux=None, *, allow=(),
                loops=None, finish=None, checked=False, ahead=None) -> RunningMotion:
-        """start(); `ahead`: (rows checked, brake rows) of a run checked (and timed: _hand_on)
-        as it plays."""
+        """start(), returning the motion; `ahead`: (rows checked, brake rows) of a run checked
+        (and timed: path_runs.py) as it plays."""
         if not checked:
             self.check_collisions(trajectories, f"{command} {point_name}".strip(), allow=allow)
         arrays = self.link.share(pack_run(trajectories, self.planner.dt))
@@ -275,7 +181,7 @@ class MotionControl:
     def play(self, command: str, point_name: str, trajectory, timeout: float) -> RunningMotion:
         """Start one planned motion and wait until it ends or pauses (for commands that move
         the arm in steps, tooling.py); the motion says how it ended."""
-        motion = self._start(command, point_name, [trajectory])
+        motion = self.start_motion(command, point_name, [trajectory])
         self._wait(motion, AT_REST, timeout)
         return motion
 
@@ -390,6 +296,13 @@ class MotionControl:
         if motion is not None:
             self.on_report({"op": "failed", "id": motion.command_id, "message": message})
 
+    @contextlib.contextmanager
+    def appending(self, motion: RunningMotion):
+        """Yields whether `motion` still runs; it runs on (and what is appended to it is
+        discarded with it) until the block ends."""
+        with self._appending:
+            yield self._motion is motion
+
     def send(self, msg: dict) -> None:
         """A message to the cycle (executor.py); ControllerFailure if it is gone."""
         try:
@@ -413,7 +326,7 @@ class MotionControl:
         if op == "started":
             return   # the state moved when the run was sent
         if op == "mark":
-            self._mark(motion, msg["label"])
+            self.on_mark(motion, msg["label"])
             return
         if op == "resumed":
             return   # the state moved when the resume was sent
@@ -451,25 +364,3 @@ class MotionControl:
                         arrays.discard()
         with self._changed:
             self._changed.notify_all()
-
-    def _mark(self, motion: RunningMotion, label: int) -> None:
-        for command in motion.aux.get(label, ()):
-            self._run_aux(motion, command)
-        if label in motion.tags:
-            name, index = motion.tags[label]
-            self.last_tag = (motion.point_name, name)
-            self.bus.command(motion.command_id, motion.command, Phase.TAG_REACHED,
-                             motion.point_name, name, index)
-
-    def _run_aux(self, motion: RunningMotion, command: str) -> None:
-        out = aux_commands.parse(command, self.outputs)
-        controller = self.link.proxy
-        try:
-            io = controller.get_dout_id(out.name)
-            ok = controller.write_dout(io, DoutValue.ONE if out.value else DoutValue.ZERO) \
-                is Status.OK
-        except (CycleProcessError, TimeoutError):
-            ok = False
-        if not ok:
-            self.bus.alarm(Severity.WARNING, alarms.CONTROLLER,
-                           f"aux command {command!r} failed", motion.command_id)

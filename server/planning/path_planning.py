@@ -41,8 +41,10 @@ from landscape.server.planning.targets import Frame, check_joints, check_pose_va
 MAX_CYCLES = 10_000
 MAX_POINTS = 100_000    # per path: a bound on what one client can make the server keep
 # rad of joint path: a stretch between stops longer than this is timed in stretches by
-# plan_run_lazily (several of stretch_timing's horizons; a shorter one times whole in a few ms)
-LONG_SECTION = 8.0
+# plan_run_lazily. Timed so, a run starts on two chunks (the first holds fewer rows than a
+# stop may take plus run_check.LEAD) and two planning jobs; timing whole grows with the
+# length, and starts later than that only past about 20 rad (docs/motion.md).
+LONG_SECTION = 20.0
 
 
 @dataclass(frozen=True)

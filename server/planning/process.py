@@ -163,14 +163,16 @@ def plan_path_run(ctx: PlanningContext, path: StoredPath, q_start: np.ndarray,
 
 
 def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
-                     settings: MotionSettings, cycles: int, what: str
+                     settings: MotionSettings, cycles: int, what: str,
+                     long_section: float = path_planning.LONG_SECTION
                      ) -> tuple[list, list, int, int, bool]:
     """plan_path_run for a run timed and checked as it plays (issue 31 item 4): its first
     pieces, timed until they hold enough rows to brake from their fastest plus
     run_check.LEAD, and those rows checked; the rest waits under `key` for next_pieces.
-    Returns next_pieces' answer for all of them."""
+    `long_section` as in path_planning.plan_run_lazily. Returns next_pieces' answer for all
+    of them."""
     ctx.untimed[key] = Untimed(path_planning.plan_run_lazily(ctx.planner, path, q_start,
-                                                             settings, cycles))
+                                                             settings, cycles, long_section))
     ctx.runs[key] = run_check.RunCheck([], what)
     pieces, continues = [], []
     while True:

@@ -1,6 +1,6 @@
 """A path run timed and checked against the cell in stretches, ahead of where the arm plays
 it (issue 31 item 4): the run starts once its first rows are timed and checked, and the rest
-is timed and checked while it plays (motion_control.py hands each stretch's pieces and end to
+is timed and checked while it plays (path_runs.py hands each stretch's pieces and end to
 the cycle, which brakes along the path before rows not yet checked: playback.py).
 
 How far ahead is enough: `brake_rows`, an upper bound on the rows the arm travels while it
@@ -114,7 +114,7 @@ def follow(planning, key: str, command_id: str,
     checked)`, which sends them to the cycle (False: the motion no longer runs, and this
     ends); a refusal goes to the cycle as {"op": "refused", "id", "message"} (it brakes
     along the path and the motion fails with it). `delay()`: seconds to wait before each
-    stretch (0 in service; tests make a stretch late with it: MotionControl's
+    stretch (0 in service; tests make a stretch late with it: PathRuns's
     check_ahead_delay)."""
     try:
         everything = False

@@ -46,7 +46,7 @@ def test_a_lock_holder_that_dies_or_freezes_mid_path_leaves_the_arm_at_rest_on_i
         line = child.stdout.readline()
         assert line.startswith("moving"), line
         command_id = line.split()[1]
-        wait_until(lambda: device.motions.last_tag == ("line", "a"), timeout=60)
+        wait_until(lambda: device.path_runs.last_tag == ("line", "a"), timeout=60)
         log = RowLog(server.link.feedback)
         os.kill(child.pid, fault)
         wait_until(lambda: device.state is State.UNLOCKED, timeout=10)

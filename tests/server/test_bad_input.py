@@ -88,7 +88,7 @@ def test_bad_path_points_name_their_index_and_store_nothing(arm):
     error = refused(lambda: arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(
         header=header("fast", 5), tags=tags[:5])])))
     assert error.code() is grpc.StatusCode.OUT_OF_RANGE
-    assert arm.server.device.motions.paths == {}
+    assert arm.server.device.path_runs.paths == {}
 
 
 def test_a_stream_without_header_or_with_too_many_points_is_refused(arm):
@@ -103,7 +103,7 @@ def test_a_stream_without_header_or_with_too_many_points_is_refused(arm):
     error = refused(lambda: arm.device.PathLoad(flood(), timeout=60))
     assert error.code() is grpc.StatusCode.OUT_OF_RANGE
     assert str(MAX_POINTS) in error.details()
-    assert arm.server.device.motions.paths == {}
+    assert arm.server.device.path_runs.paths == {}
 
 
 def test_a_path_move_with_negative_cycles_is_refused(arm):
@@ -169,7 +169,7 @@ def test_strings_and_lists_beyond_their_bounds_are_refused_before_anything_happe
         header=header("long-aux", 1), tags=tags)])))
     assert error.code() is grpc.StatusCode.OUT_OF_RANGE
     assert error_info(error).metadata["field"] == "tags[0].aux_commands"
-    assert arm.server.device.state is State.RESTING and "long-aux" not in arm.server.device.motions.paths
+    assert arm.server.device.state is State.RESTING and "long-aux" not in arm.server.device.path_runs.paths
     with grpc.insecure_channel(arm.server.target) as channel:
         error = refused(lambda: Session(channel, "n" * 300).open())
         assert error.code() is grpc.StatusCode.INVALID_ARGUMENT

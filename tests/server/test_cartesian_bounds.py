@@ -42,7 +42,7 @@ def refused(arm, call, field: str) -> str:
     """call() is refused OUT_OF_RANGE naming `field` and its maximum; nothing moved or was
     stored; the server is SERVING. Returns the message."""
     device = arm.server.device
-    before, paths = arm.joints().copy(), dict(device.motions.paths.items())
+    before, paths = arm.joints().copy(), dict(device.path_runs.paths.items())
     with pytest.raises(grpc.RpcError) as error:
         call()
     assert error.value.code() is grpc.StatusCode.OUT_OF_RANGE, error.value.details()
@@ -50,7 +50,7 @@ def refused(arm, call, field: str) -> str:
     assert info.metadata["field"] == field and "maximum" in info.metadata, dict(info.metadata)
     assert device.state is State.RESTING
     assert np.max(np.abs(arm.joints() - before)) < 1e-9
-    assert dict(device.motions.paths.items()) == paths
+    assert dict(device.path_runs.paths.items()) == paths
     assert_serving(arm.session.channel)
     return error.value.details()
 

@@ -78,7 +78,7 @@ def test_a_path_sweeping_through_the_rack_is_refused_at_load_naming_its_segment(
     info = error_info(refused.value)
     assert info.reason == "COLLISION" and info.metadata["body_b"] == "rack"
     assert info.metadata["segment"] == "7"
-    assert "sweep" not in arm.server.device.motions.paths      # nothing stored
+    assert "sweep" not in arm.server.device.path_runs.paths      # nothing stored
     _path(arm, "sweep", points[:7], blend=50)                  # up to point 6 it is clear
 
 
@@ -98,7 +98,7 @@ def _around(arm):
 
 def _plan_run(arm, name, cycles):
     motions = arm.server.device.motions
-    return path_planning.plan_run(motions.planner, motions.paths.get(name),
+    return path_planning.plan_run(motions.planner, arm.server.device.path_runs.paths.get(name),
                                   motions.planning_start(), arm.server.device.settings, cycles)
 
 
@@ -127,7 +127,7 @@ def test_a_refusal_in_a_later_piece_stops_the_arm_on_the_path_and_fails_the_moti
     a, _ = _around(arm)
     run, first_pass = _plan_run(arm, "around", 2), _plan_run(arm, "around", 1)
     dt = run[0].dt
-    arm.server.device.motions.time_ahead = True   # as on the real-time clock
+    arm.server.device.path_runs.time_ahead = True   # as on the real-time clock
     reply = arm.device.PathMove(motion_pb2.PathMoveRequest(path_name="around",
                                                            number_of_cycles=2))
     events = arm.wait_command(reply.ret_val.command_id)

@@ -202,7 +202,7 @@ def _targets():
 def _snapshot(arm):
     device = arm.server.device
     return (device.state, stored_settings.to_record(device.settings),
-            {name: len(path.points) for name, path in device.motions.paths.items()},
+            {name: len(path.points) for name, path in device.path_runs.paths.items()},
             device.motions.running_id, device.feedback().command.copy())
 
 

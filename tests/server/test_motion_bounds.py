@@ -80,7 +80,7 @@ def test_a_path_point_with_a_dwell_of_1e9_s_is_refused_at_load(arm):
     tag = types_pb2.TagStruct(joint_values=q + [0.1, 0, 0, 0, 0, 0], time_delay=1e9)
     assert_refused(arm, lambda: arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(
         header=path_header("long", 1), tags=[tag])]), timeout=10), "time_delay", "maximum")
-    assert arm.server.device.motions.paths.get("long") is None
+    assert arm.server.device.path_runs.paths.get("long") is None
 
 
 def test_dwells_adding_up_past_the_bound_refuse_the_path(arm):
@@ -91,7 +91,7 @@ def test_dwells_adding_up_past_the_bound_refuse_the_path(arm):
                                 time_delay=0.75 * MAX_MOTION_SECONDS) for i in range(2)]
     assert_refused(arm, lambda: arm.device.PathLoad(iter([motion_pb2.PathLoadRequest(
         header=path_header("dwells", 2), tags=tags)]), timeout=10), "time_delay", "maximum")
-    assert arm.server.device.motions.paths.get("dwells") is None
+    assert arm.server.device.path_runs.paths.get("dwells") is None
 
 
 def test_a_ten_minute_motion_is_planned():

@@ -17,6 +17,9 @@ from support import Arm, wait_until
 
 JOINT = types_pb2.REFERENCE_FRAME_JOINT_FRAME
 HOME = [0.0, 0.3, 1.4, 0.0, 0.9, 0.0]
+# rad: long_path's section (about 9 rad) is timed in chunks as it plays above this, as a
+# section longer than path_planning.LONG_SECTION is in service
+SECTION = 4.0
 
 
 @pytest.fixture
@@ -138,11 +141,11 @@ def test_a_late_stretch_slows_the_arm_along_the_path_and_it_goes_on(fast):
     the timed path; the motion ends done at the last point."""
     from landscape.server.planning import path_planning
     points = long_path(fast, "late", 240)
-    motions = fast.server.device.motions
+    motions, runs = fast.server.device.motions, fast.server.device.path_runs
     planned = np.concatenate([t.positions for t, _ in path_planning.plan_run_lazily(
-        motions.planner, motions.paths.get("late"), motions.planning_start(),
-        fast.server.device.settings, 1)])
-    motions.time_ahead = True   # as on the real-time clock
+        motions.planner, runs.paths.get("late"), motions.planning_start(),
+        fast.server.device.settings, 1, SECTION)])
+    runs.time_ahead, runs.long_section = True, SECTION   # as on the real-time clock
     link, held = motions.link, []
     send = link.send
 
@@ -166,9 +169,9 @@ def test_a_long_path_starts_before_it_is_fully_timed(fast):
     checked), and the arm has left its start when the last of them is sent. It ends done at
     the last point, having passed every point's mark in order."""
     points = long_path(fast, "long", 240)
-    motions = fast.server.device.motions
-    motions.time_ahead = True   # as on the real-time clock
-    motions.check_ahead_delay = 0.05
+    runs = fast.server.device.path_runs
+    runs.time_ahead, runs.long_section = True, SECTION   # as on the real-time clock
+    runs.check_ahead_delay = 0.05
     sent, marks = sent_to_cycle(fast), marked(fast)
     run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="long"),
                                            timeout=30))
@@ -181,6 +184,23 @@ def test_a_long_path_starts_before_it_is_fully_timed(fast):
     assert appended, "every piece was timed before the run started"
     assert np.abs(appended[-1] - np.array(points[0])).max() > 1e-3, \
         "the arm had not left its start when the last piece was sent"
+    assert np.allclose(fast.joints(), points[-1], atol=1e-4)
+
+
+def test_a_section_under_the_long_section_is_timed_whole_before_its_run_starts(fast):
+    """long_path's section (about 9 rad) is under path_planning.LONG_SECTION: timing it in
+    chunks as it plays would start it later than timing it whole (the first chunk holds fewer
+    rows than a stop may take plus the lead, so a second is timed before the start). Its run
+    goes to the cycle with all its rows; it is still checked as it plays ("checked" only, no
+    "append"), and ends done at the last point."""
+    points = long_path(fast, "medium", 240)
+    fast.server.device.path_runs.time_ahead = True   # as on the real-time clock
+    sent = sent_to_cycle(fast)
+    run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="medium"),
+                                           timeout=30))
+    (start, _), *later = sent
+    assert start["op"] == "run" and start["checked"] > 0
+    assert [m["op"] for m, _ in later] == ["checked"] * len(later)
     assert np.allclose(fast.joints(), points[-1], atol=1e-4)
 
 
@@ -202,12 +222,12 @@ def test_a_path_timed_late_never_stops_dead(paced):
     from landscape.server.planning import path_planning
     from landscape.server.planning.process import PlanningProcess
     points = long_path(paced, "late", 240)
-    motions = paced.server.device.motions
+    motions, runs = paced.server.device.motions, paced.server.device.path_runs
     planned = np.concatenate([t.positions for t, _ in path_planning.plan_run_lazily(
-        motions.planner, motions.paths.get("late"), motions.planning_start(),
-        paced.server.device.settings, 1)])
-    motions.planning = planning = PlanningProcess(motions.collisions, motions.planner.dt)
-    motions.time_ahead = True   # as on the real-time clock
+        motions.planner, runs.paths.get("late"), motions.planning_start(),
+        paced.server.device.settings, 1, SECTION)])
+    runs.planning = planning = PlanningProcess(motions.collisions, motions.planner.dt)
+    runs.time_ahead, runs.long_section = True, SECTION   # as on the real-time clock
     link, resumed = motions.link, []
     send = link.send
 

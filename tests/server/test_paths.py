@@ -154,7 +154,7 @@ def test_stop_and_resume_a_path_reports_the_remaining_tags(tmp_path):
     try:
         load(arm.device, header("slow", 6), ring(6, transition_speed=0, speed=20))
         run = arm.device.PathMove(motion_pb2.PathMoveRequest(path_name="slow"))
-        wait_until(lambda: arm.server.device.motions.last_tag[1] == "t2", timeout=30)
+        wait_until(lambda: arm.server.device.path_runs.last_tag[1] == "t2", timeout=30)
         arm.device.StopMotion(motion_pb2.StopMotionRequest())
         assert arm.server.device.state is State.PAUSED
         arm.device.ResumeMotion(motion_pb2.ResumeMotionRequest())
@@ -168,18 +168,18 @@ def test_stop_and_resume_a_path_reports_the_remaining_tags(tmp_path):
 def test_paths_survive_a_restart(tmp_path):
     file = str(tmp_path / "paths.sqlite3")
     server = start_server(paths_file=file)
-    server.device.motions.paths  # loaded (empty) at start
+    server.device.path_runs.paths  # loaded (empty) at start
     try:
         arm_points = [np.array([0.2 * i, 0.1, 1.4, 0.0, 1.2, 0.0]) for i in range(4)]
         from landscape.server.planning.path_planning import PointSpec
         from landscape.server.planning.targets import Frame
-        server.device.motions.path_load("kept", Frame.JOINT, False, False,
+        server.device.path_runs.path_load("kept", Frame.JOINT, False, False,
                                 [PointSpec(q, tag_name=f"k{i}") for i, q in enumerate(arm_points)])
     finally:
         server.stop(grace=None)
     again = start_server(paths_file=file)
     try:
-        kept = again.device.motions.paths["kept"]
+        kept = again.device.path_runs.paths["kept"]
         assert [p.tag_name for p in kept.points] == ["k0", "k1", "k2", "k3"]
         assert np.allclose(kept.points[3].joints, arm_points[3])
     finally:

@@ -181,7 +181,7 @@ def test_a_long_path_is_planned_outside_the_servers_interpreter():
     holder = locked_session(server)
     try:
         device, _, _ = stubs(holder.channel)
-        planning = server.device.motions.planning
+        planning = server.device.path_runs.planning
         assert isinstance(planning, PlanningProcess) and planning.pid != os.getpid()
         tags = [types_pb2.TagStruct(x=0.5 + 0.1 * math.cos(i / 300), y=0.1 * math.sin(i / 300),
                                     z=0.6, roll=math.pi) for i in range(2000)]
@@ -207,7 +207,7 @@ def test_a_long_path_is_planned_outside_the_servers_interpreter():
                 metadata=(("landscape-lease", holder.lease),))
         assert refused.value.code() is grpc.StatusCode.INVALID_ARGUMENT
         assert "message 1 of the PathLoad stream" in refused.value.details()
-        assert len(server.device.motions.paths.get("long").points) == 2000
+        assert len(server.device.path_runs.paths.get("long").points) == 2000
     finally:
         holder.close()
         server.stop(grace=None)

@@ -210,7 +210,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
         # long path streams in; only storing it takes the command lock. Each message is parsed
         # and kept by the planning (planning_process.py: in a process of its own beside a cycle
         # process), reached from the parsing thread, never from the event loop.
-        planning, parse = self.device.motions.planning, self.dispatch.parse
+        planning, parse = self.device.path_runs.planning, self.dispatch.parse
         key = await self.dispatch.run(parse, planning.open_stream, self.device.settings.units)
         try:
             async for request in request_iterator:
@@ -223,9 +223,9 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
 
             def store():
                 with self.device.command("PathLoad", lease):
-                    return self.device.motions.path_load(header.path_name, frame, straight,
-                                                         relative, StreamRef(key),
-                                                         header.number_of_points or None)
+                    return self.device.path_runs.path_load(header.path_name, frame, straight,
+                                                           relative, StreamRef(key),
+                                                           header.number_of_points or None)
             loaded, length = await self.dispatch.run(self.dispatch.commands, store)
         finally:
             planning.drop_stream(key)
@@ -233,14 +233,14 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
                                            path_length=length)
 
     def PathClearPath(self, request, context):
-        self.device.motions.path_clear(request.path_name)
+        self.device.path_runs.path_clear(request.path_name)
         return motion_pb2.PathClearPathResponse(
             ret_val=convert.ok(f"path {request.path_name!r} cleared"))
 
     def PathMove(self, request, context):
         cycles = request.number_of_cycles if request.HasField("number_of_cycles") else 1
         return motion_pb2.PathMoveResponse(
-            ret_val=convert.started(self.device.motions.path_move(
+            ret_val=convert.started(self.device.path_runs.path_move(
                 request.path_name, cycles, convert.move_settings(self.device.settings, request))))
 
     # ---- 3.6 interruptions ----
@@ -269,7 +269,7 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
         return motion_pb2.AbortMotionResponse(ret_val=convert.ok())
 
     def GetTagId(self, request, context):
-        path_name, tag = self.device.motions.last_tag
+        path_name, tag = self.device.path_runs.last_tag
         return settings_pb2.GetTagIdResponse(ret_val=convert.ok(), path_name=path_name, tag_id=tag)
 
     # ---- 3.7 sensors ----

@@ -19,7 +19,7 @@ class PathReads:
     """ListPaths and GetPath; `self.device` and `self.dispatch` are DeviceServicer's."""
 
     def ListPaths(self, request, context):
-        paths, unreadable = self.device.motions.paths.snapshot()
+        paths, unreadable = self.device.path_runs.paths.snapshot()
         units = self.device.settings.units
         return stored_paths_pb2.ListPathsResponse(
             ret_val=convert.ok(f"{len(paths)} paths"),
@@ -27,7 +27,7 @@ class PathReads:
             unreadable=unreadable, units=convert.units_to_pb(units))
 
     async def GetPath(self, request, context):
-        paths, _ = self.device.motions.paths.snapshot()
+        paths, _ = self.device.path_runs.paths.snapshot()
         path = paths.get(request.path_name)
         if path is None:
             raise NotFound(f"no path named {request.path_name!r}")
