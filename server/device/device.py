@@ -8,9 +8,9 @@ raise CommandError subclasses (errors.py) and change nothing when they do.
 The Device puts together what it is made of and is the one object the servicers hold: the
 state machine (state_machine.py: the state, the lock holder, the lease, the epoch, power,
 e-stop and error, every transition a compare-and-set), the motions (motion_control.py), the
-path runs (path_runs.py), the
-drives (power.py), the safety actions (safety.py), the sessions, the RSVP questions and the
-settings. Each part is given the narrow things it uses, never the Device.
+path runs (path_runs.py), the drives (power.py), the safety actions (safety.py), the
+sessions, the RSVP questions and the settings. Each part is given the narrow things it uses,
+never the Device.
 
 Concurrency:
 - Mutating commands run one at a time (`command()`); the state and the lease are checked
