@@ -68,7 +68,7 @@ class Motion:
         self._braking: tuple[np.ndarray, np.ndarray] | None = None   # this stop's limits
         self._step = 0
         self._planner = RampPlanner(dt)
-        self._recent = np.tile(self.positions[0], (3, 1))   # the last 3 played, newest first
+        self._recent = (self.positions[0],) * 3   # the last 3 played, newest first (read-only)
         # A run checked against the cell as it plays (run_check.py): its rows checked so far
         # (None: all) and how many rows a stop may take; `awaiting` while braking or held for
         # the next stretch.
@@ -220,14 +220,14 @@ class Motion:
                 self._ramp = None
         elif self.rate == 1.0:
             self.s = min(self.s + 1.0, float(self.last))
-        self._recent = np.roll(self._recent, 1, axis=0)
-        self._recent[0] = self.position()
+        # Shifted by reference, not rolled: every cycle pays for this.
+        self._recent = (self.position(), *self._recent[:2])
 
     def _plan_ramp(self) -> None:
         stopping = self.target_rate == 0.0
         acceleration, jerk = ((self._braking or (self.stop_limit, self.stop_jerk)) if stopping
                               else (self.run_limit, self.run_jerk))
-        ramp = self._planner.plan(self.positions, self._recent, self.s, self.rate,
+        ramp = self._planner.plan(self.positions, np.array(self._recent), self.s, self.rate,
                                   self.rate_change, self.target_rate, acceleration, jerk)
         if ramp is not None:
             self._ramp, self._step = ramp, 0
