@@ -34,6 +34,10 @@ STOP_SCALES = (1.0, 0.85, 0.7, 0.5)   # a stop's bounds from the speed now, trie
 CALM = 7            # samples in a row where the planned motion leaves a resume room
 RETRY = 0.6         # the bounds of the next attempt, against the last one's
 SLACK = 1e-9        # relative: what rounding may add to a checked value
+# Cycles a ramp may take, at most (9 minutes at 4 ms: a stop from full speed at 0.1 % of the
+# acceleration takes about one): a longer one is refused, not sampled cycle by cycle (at bounds
+# low enough, that asked for gigabytes and minutes inside a cycle).
+MAX_CYCLES = 1 << 17
 
 
 def sampled(trajectory: Trajectory, cycles: int) -> np.ndarray:
@@ -141,8 +145,8 @@ class RampPlanner:
         acceleration then takes at most its square of the limit), held until a calm stretch
         of the planned motion, and up to full rate there."""
         last = len(positions) - 1
-        if last < 1:
-            return None
+        if last < 1 or not 0.0 <= sigma <= last:
+            return None     # no stretch to ramp along
         if target == 0.0:
             # Bounds from the speed now first (a planned motion that speeds up meanwhile adds
             # less than its speed-up, the rate falling), then from the fastest the stop covers.
@@ -221,7 +225,7 @@ class RampPlanner:
         inp.target_velocity, inp.target_acceleration = [0.0], [0.0]
         inp.control_interface = ControlInterface.Velocity
         inp.duration_discretization = DurationDiscretization.Continuous
-        if self._otg.calculate(inp, self._trajectory) not in (Result.Working, Result.Finished):
+        if not self._calculated():
             return None
         trajectory = self._trajectory
         cycles = max(1, int(math.ceil(trajectory.duration - 1e-9)))
@@ -278,7 +282,10 @@ class RampPlanner:
         window = lo + 3
         bounds = ramp = None
         for _ in range(1 if now else 2):    # the stretch the ramp covers decides its bounds
-            step = np.abs(np.diff(positions[max(lo - 1, 0):min(window, last) + 1], axis=0))
+            stretch = positions[max(lo - 1, 0):min(window, last) + 1]
+            if len(stretch) < 2:
+                return None    # past the segment's end: nothing to take the bounds from
+            step = np.abs(np.diff(stretch, axis=0))
             fastest = np.maximum(step.max(axis=0), 1e-12)          # rad per sample
             wanted = (scale * float(np.min(acceleration * dt * dt / fastest)),
                       scale * float(np.min(jerk * dt ** 3 / fastest)))
@@ -302,7 +309,7 @@ class RampPlanner:
         inp.target_velocity, inp.target_acceleration = [target], [0.0]
         inp.control_interface = ControlInterface.Velocity
         inp.duration_discretization = DurationDiscretization.Continuous
-        if self._otg.calculate(inp, self._trajectory) not in (Result.Working, Result.Finished):
+        if not self._calculated():
             return None
         end = self._trajectory.at_time(self._trajectory.duration)[0][0]
         if target == 1.0:   # a resume: onto a whole sample at full rate, or to the end at rest
@@ -313,8 +320,7 @@ class RampPlanner:
                 inp.target_position, inp.target_velocity = [float(landing)], [1.0]
             else:
                 inp.target_position, inp.target_velocity = [float(last)], [0.0]
-            if self._otg.calculate(inp, self._trajectory) not in (Result.Working,
-                                                                  Result.Finished):
+            if not self._calculated():
                 return None
         elif end > last:
             return None
@@ -327,6 +333,17 @@ class RampPlanner:
         else:
             states[-1, 1:] = target, 0.0
         return states[:, 0], states[:, 1], states[:, 2]
+
+    def _calculated(self) -> bool:
+        """Whether ruckig planned the input into the trajectory, within MAX_CYCLES. Its Python
+        binding raises ValueError for the results its enum lacks (-101, the duration beyond
+        ruckig's numerical range): a refusal like any other."""
+        try:
+            result = self._otg.calculate(self._input, self._trajectory)
+        except ValueError:
+            return False
+        return (result in (Result.Working, Result.Finished)
+                and self._trajectory.duration <= MAX_CYCLES)
 
     def _fits(self, positions: np.ndarray, recent: np.ndarray, ramp, target: float,
               acceleration: np.ndarray, jerk: np.ndarray) -> bool:
