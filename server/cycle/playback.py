@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from landscape.server.cycle.ramps import RampPlanner, hermite_at
+from landscape.server.cycle.joined_rows import JoinedRows
 from landscape.server.cycle.run_arrays import GrowingSegments, Segments
 
 if TYPE_CHECKING:
@@ -83,8 +84,9 @@ class Motion:
         self.segment = index
         segment = self.segments[index]
         # Nothing here walks the whole segment: a long one costs the cycle nothing to load.
-        self.positions = np.asarray(segment["positions"], dtype=float)
-        self.velocities = np.asarray(segment["velocities"], dtype=float)
+        # A joined one (GrowingSegments) is read across its parts, and grows in place.
+        rows = segment["positions"]
+        self.positions = rows if isinstance(rows, JoinedRows) else np.asarray(rows, dtype=float)
         self.marks = segment.get("marks", ())   # (sample, label) rows, in order
         self.next_mark = 0
         self.s = 0.0
@@ -107,14 +109,6 @@ class Motion:
     @property
     def last(self) -> int:
         return len(self.positions) - 1
-
-    def sample(self, table: np.ndarray) -> np.ndarray:
-        """The table's row at the play position, linear between samples (velocities)."""
-        i = min(int(self.s), self.last)
-        frac = self.s - i
-        if frac == 0.0 or i == self.last:
-            return table[i]
-        return table[i] + frac * (table[i + 1] - table[i])
 
     def _curve(self) -> tuple[np.ndarray, np.ndarray]:
         """The Hermite curve and its slope at the play position, worked out once per position:
