@@ -23,6 +23,7 @@ arm's full deceleration, or the set one: executor.py's "stop_acceleration") and
 """
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -89,7 +90,23 @@ class Motion:
         self.positions = rows if isinstance(rows, JoinedRows) else np.asarray(rows, dtype=float)
         self.marks = segment.get("marks", ())   # (sample, label) rows, in order
         self.next_mark = 0
+        self._next_mark_at = self._mark_at(0)
         self.s = 0.0
+
+    def _mark_at(self, index: int) -> float:
+        """The sample of mark `index` of the segment (inf: no such mark)."""
+        return float(self.marks[index][0]) if index < len(self.marks) else math.inf
+
+    def passed_marks(self) -> list[int]:
+        """The labels of the marks the play position has passed since last asked, in order."""
+        if self.s < self._next_mark_at:   # each cycle: one comparison, no array read
+            return []
+        labels = []
+        while self.s >= self._next_mark_at:
+            labels.append(int(self.marks[self.next_mark][1]))
+            self.next_mark += 1
+            self._next_mark_at = self._mark_at(self.next_mark)
+        return labels
 
     def next_segment(self) -> bool:
         """At the end of a segment: go on with the next one, if any; stopping, the play waits
@@ -184,6 +201,7 @@ class Motion:
         s, next_mark = self.s, self.next_mark
         self._load(self.segment)
         self.s, self.next_mark, self._curve_at = s, next_mark, None
+        self._next_mark_at = self._mark_at(next_mark)
 
     def refuse(self, message: str) -> bool:
         """A later stretch was refused: brake along the path, to fail with `message` at rest;
