@@ -50,11 +50,11 @@ PATH_POINTS = 40
 LOOPS = 3   # of the path (about 3.7 s each at the default speed)
 
 
-def whole_stack(runs: int, clock: str = "lockstep") -> tuple[float, float, float]:
-    """(simulated s, wall s, CPU s of the cycle process) of `runs` runs of a blended ~10 s
-    joint path through gRPC, the server's controller on `clock` ("lockstep": a thread of the
-    server, as the tests run it, CPU NaN; "fast": its own cycle process, as `--clock fast` runs
-    it)."""
+def whole_stack(runs: int, clock: str = "lockstep") -> tuple[float, float, float, float]:
+    """(simulated s, wall s, CPU s of the cycle process, CPU s of this process: the server
+    and its client) of `runs` runs of a blended ~10 s joint path through gRPC, the server's
+    controller on `clock` ("lockstep": a thread of the server, as the tests run it, cycle
+    process CPU NaN; "fast": its own cycle process, as `--clock fast` runs it)."""
     server = serve(ServerConfig(port=0, clock=clock))
     session = locked_session(server, "bench")
     device = device_service_pb2_grpc.DeviceServiceStub(session.channel)
@@ -73,9 +73,10 @@ def whole_stack(runs: int, clock: str = "lockstep") -> tuple[float, float, float
         device.PathLoad(iter([motion_pb2.PathLoadRequest(header=header, tags=points)]), timeout=60)
         def now() -> float:   # the controller's time, from its newest feedback row
             return server.link.feedback.latest().time
-        simulated = wall = cpu = 0.0
+        simulated = wall = cpu = own = 0.0
         for _ in range(runs):
             cpu -= _cpu_seconds(server.link.cycle_pid)
+            own -= time.process_time()
             began, began_sim = time.perf_counter(), now()
             command = device.PathMove(motion_pb2.PathMoveRequest(
                 path_name="lockstep", number_of_cycles=LOOPS), timeout=60).ret_val.command_id
@@ -87,9 +88,10 @@ def whole_stack(runs: int, clock: str = "lockstep") -> tuple[float, float, float
             wall += time.perf_counter() - began
             simulated += now() - began_sim
             cpu += _cpu_seconds(server.link.cycle_pid)
+            own += time.process_time()
             if event.event_id != "command_done":
                 raise RuntimeError(f"the path did not complete: {event.command.message}")
-        return simulated, wall, cpu
+        return simulated, wall, cpu, own
     finally:
         events.cancel()
         try:
@@ -137,9 +139,9 @@ def main() -> None:
     cycle = load_cell(None).controller.cycle_time
     runs = 1 if args.quick else 3
     load_before = os.getloadavg()
-    fast_sim, fast_wall, fast_cpu = whole_stack(runs, "fast")
+    fast_sim, fast_wall, fast_cpu, fast_server_cpu = whole_stack(runs, "fast")
     fast_bare_wall, fast_bare_cpu = bare_controller(fast_sim)   # the same simulated time
-    simulated, wall, _ = whole_stack(runs, "lockstep")
+    simulated, wall, _, _ = whole_stack(runs, "lockstep")
     bare_wall, _ = bare_controller(simulated)
     physics_sim, physics_wall = pybullet_alone(round(simulated / cycle))
     print(f"lock-step speed, {simulated:.1f} simulated s of a {PATH_POINTS}-point blended path "
@@ -160,7 +162,8 @@ def main() -> None:
     fast_cycles = fast_sim / cycle
     print(f"  CPU per cycle, --clock fast: the cycle process {fast_cpu / fast_cycles * 1e6:.1f} us, "
           f"the bare controller {fast_bare_cpu / fast_cycles * 1e6:.1f} us "
-          f"(a busy machine takes wall time from both, not CPU time)")
+          f"(a busy machine takes wall time from both, not CPU time); the server and its "
+          f"client {fast_server_cpu / fast_cycles * 1e6:.1f} us")
     print(f"  goal (issue 18): whole stack >= {GOAL:g} x real time")
     print(f"  load averages (1, 5, 15 min): before {_load(load_before)}, "
           f"after {_load(os.getloadavg())}")

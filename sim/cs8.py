@@ -78,6 +78,8 @@ class SimulatedCS8(Controller):
         self._torque_mode = False
         self._cyclic_failing = False
         self._destroyed = False
+        self._state_was: tuple = ()
+        self._state = State()
 
     # ---- the cycle ----------------------------------------------------------------------------
 
@@ -235,8 +237,11 @@ class SimulatedCS8(Controller):
             self._event("emergency stop pressed: drives disabled")
 
     def state(self) -> State:
-        return State(self._init, self._enable, self._calib, self._drives.settle,
-                     EstopState.ESTOP if self.panel.estop_pressed else EstopState.NO_ESTOP)
+        now = (self._init, self._enable, self._calib, self._drives.settle,
+               EstopState.ESTOP if self.panel.estop_pressed else EstopState.NO_ESTOP)
+        if now != self._state_was:   # the same (frozen) State while nothing changed: a
+            self._state_was, self._state = now, State(*now)   # cyclic function asks each cycle
+        return self._state
 
     # ---- LLI: the synchronous calls -----------------------------------------------------------
 

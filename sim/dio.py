@@ -48,6 +48,10 @@ class DigitalIO:
             self._by_unit[s.unit].append(s)
         self._read_input, self._on_output = read_input, on_output
         self._outputs = {u.id: 0 for u in spec.units if u.direction == "output"}
+        # Per input unit, its wired bits as (mask, wire): what a read of the unit looks at
+        # (the cycle reads its I/O image every cycle).
+        self._wired = {u: [(s.mask, s.wire) for s in signals if s.wire != "none"]
+                       for u, signals in self._by_unit.items() if u not in self._outputs}
 
     # ---- by name ------------------------------------------------------------------------------
 
@@ -77,14 +81,15 @@ class DigitalIO:
     def read_unit(self, unit: int, mask: int = -1) -> int:
         """The unit's bits as an int: bit i set when the signal at bit i is 1. Only the bits of
         `mask` are read (the others read 0): some inputs cost a look at the world."""
-        if unit not in self.units:
-            raise KeyError(f"no I/O unit {unit} (units: {sorted(self.units)})")
         if unit in self._outputs:
             return self._outputs[unit] & mask
-        bits = 0
-        for s in self._by_unit[unit]:
-            if s.mask & mask and s.wire != "none" and self._read_input(s.wire):
-                bits |= s.mask
+        wired = self._wired.get(unit)
+        if wired is None:
+            raise KeyError(f"no I/O unit {unit} (units: {sorted(self.units)})")
+        bits, read = 0, self._read_input
+        for bit, wire in wired:
+            if bit & mask and read(wire):
+                bits |= bit
         return bits
 
     def write_unit(self, unit: int, bits_on: int = 0, bits_off: int = 0) -> None:

@@ -33,6 +33,11 @@ from landscape.server.cycle.stats import StatsRing
 # server's threads end, before the child is seen reparented: it cannot tell the two apart.
 ORPHAN_GRACE = 0.3
 GONE = "the device server is gone"
+# s of wall time between two sends of the cycle's reports on the free-running clock, at most
+# (--clock fast: a cycle every ~0.1 ms): each send wakes the server, whose work then competes
+# with the cycle's; the reports still come in order, within half a real cycle of their own.
+# What the parent sends is read every cycle all the same (a stop never waits).
+FREE_FLUSH_PERIOD = 0.002
 
 
 class _AsyncTask:
@@ -87,10 +92,13 @@ class _Frames:
         self.fd = fd
         self.buffer = bytearray()
         self.ended = False   # the parent closed its end, or died
+        # Asked every cycle: a poll object registered once costs half a select.
+        self._arrived = select.poll()
+        self._arrived.register(fd, select.POLLIN)
 
     def fill(self, limit: int = 1 << 20) -> None:
         """Read what has arrived (up to `limit` bytes), never waiting for more."""
-        while limit > 0 and select.select((self.fd,), (), (), 0)[0]:
+        while limit > 0 and self._arrived.poll(0):
             try:
                 chunk = os.read(self.fd, min(limit, 1 << 18))
             except OSError:
@@ -123,7 +131,7 @@ class _Server:
     reads what the parent sent, and serves calls in order within the time budget."""
 
     def __init__(self, conn, controller, mailbox: Mailbox, stats: StatsRing, parent_pid: int,
-                 guard: float):
+                 guard: float, flush_period: float = 0.0):
         self.conn = conn
         self.fd = conn.fileno()
         self.frames = _Frames(self.fd)
@@ -139,10 +147,15 @@ class _Server:
         self.ended_by = ""            # why the loop ended, unless the parent asked (STOP)
         self.cycles = 0
         self.modules: frozenset[str] = frozenset()   # what the loop starts with
+        self.flush_period = flush_period   # s between two sends of reports, at least
+        self._flushed = 0.0                # perf_counter s of the last
 
     def between(self, deadline: float) -> bool:
+        """deadline: the next cycle's (perf_counter s), or now on the free-running clock."""
         self.cycles += 1
-        self.flush()
+        if self.mailbox.outbox and deadline - self._flushed >= self.flush_period:
+            self._flushed = deadline
+            self.flush()
         done = self.async_task.take()
         if done is not None:
             self._reply(*done)
@@ -239,6 +252,8 @@ class _Server:
         return serve_call(self.controller, self.mailbox, method, args)
 
     def _reply(self, call_id: int, ok: bool, value: Any) -> None:
+        if self.mailbox.outbox:   # the reports held back (flush_period) go first, as posted
+            self.flush()
         try:
             self.conn.send((REPLY, call_id, ok, value))
         except (BrokenPipeError, ConnectionError, EOFError):
@@ -321,7 +336,8 @@ def child_main(factory: Callable[[Mailbox], Steppable], conn, stats: StatsRing,
             raise ValueError(f"the clock's cycle time {cycle_time} s differs from the "
                              f"controller's {own} s")
         loop = CycleLoop(controller.step, cycle_time, stats, spin, free)
-        server = _Server(conn, controller, mailbox, stats, parent_pid, guard)
+        server = _Server(conn, controller, mailbox, stats, parent_pid, guard,
+                         FREE_FLUSH_PERIOD if free else 0.0)
         problems = tune_for_latency(rt_priority)
         conn.send((READY, {"pid": os.getpid(), "cycle_time": loop.cycle_time,
                            "tuning_problems": problems}))

@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from landscape.robot.controller import EstopState
-from landscape.server.cycle.feedback import (CMD, ENABLE, ESTOP, IO, MODEL_TAU, QD, SENSORS, SEQ,
-                                             TAU, TIME, WALL, WIDTH, Q, FeedbackRing)
+from landscape.server.cycle.feedback import MODEL_TAU, FeedbackRing
 
 
 class CycleRecord:
@@ -18,7 +17,9 @@ class CycleRecord:
         self.ring, self.cycle_time, self.dynamics = ring, cycle_time, dynamics
         self.sequence = ring.head + 1 if ring is not None else 0   # goes on after a restart
         self.setpoints: tuple | None = None   # the last three cycles' (6,), newest first
-        self._row = np.full(WIDTH, np.nan)
+        self._stamp = np.zeros(3)          # SEQ, TIME, WALL of the row being written
+        self._power = np.zeros(2)          # ENABLE, ESTOP
+        self._no_model = np.full(MODEL_TAU.stop - MODEL_TAU.start, np.nan)
 
     @property
     def watched(self) -> bool:
@@ -50,15 +51,14 @@ class CycleRecord:
         """This cycle's row, stamped `wall` (unix s); then the sequence goes on."""
         if self.ring is None:
             return
-        row = self._row
-        row[SEQ] = self.sequence
-        row[TIME] = getattr(ctrl, "time", 0.0)
-        row[WALL] = wall
-        row[Q], row[QD], row[CMD], row[TAU] = fbk.pos, fbk.vel, pos, fbk.torque
-        row[ENABLE] = int(state.enable)
-        row[ESTOP] = 1.0 if state.estop is EstopState.ESTOP else 0.0
-        row[SENSORS] = sensors
-        row[IO] = io_image
-        row[MODEL_TAU] = model
-        self.ring.write(self.sequence, row)
+        stamp, power = self._stamp, self._power
+        stamp[0], stamp[1], stamp[2] = self.sequence, getattr(ctrl, "time", 0.0), wall
+        power[0] = int(state.enable)
+        power[1] = 1.0 if state.estop is EstopState.ESTOP else 0.0
+        # Into the ring's slot in one numpy call, in the row's column order (feedback.py):
+        # every cycle pays for this.
+        np.concatenate((stamp, fbk.pos, fbk.vel, pos, fbk.torque, power, sensors, io_image,
+                        self._no_model if np.isscalar(model) else model),
+                       out=self.ring.slot(self.sequence))
+        self.ring.publish(self.sequence)
         self.sequence += 1

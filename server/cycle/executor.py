@@ -97,6 +97,7 @@ class Executor:
         self._last_wanted = np.zeros(6)   # the velocity a sensor loop wanted, last cycle
         self._tracker: PositionTracker | None = None    # a sensor loop's setpoints (jerk)
         self._velocity = np.zeros(6)                    # the commanded velocity, last cycle
+        self._no_torque = np.zeros(6)   # the commands' torque feed-forward (read-only)
         self._limits = None if arm is None else (np.asarray(arm.max_velocity),
                                                  np.asarray(arm.max_acceleration),
                                                  np.asarray(arm.max_jerk))
@@ -144,7 +145,7 @@ class Executor:
                 self._end_jog(*self._jog.ending)
         else:
             pos, vel = self._hold, np.zeros_like(self._hold)
-        ctrl.set(JointCmd(pos, vel))
+        ctrl.set(JointCmd(pos, vel, self._no_torque))
         self._velocity = np.asarray(vel, dtype=float)
         model = self._record.model_torques(fbk, pos, whole)
 
@@ -174,11 +175,9 @@ class Executor:
         if motion.settling is None:
             motion.keep_to_checked()
             motion.advance()
-            marks = motion.marks
-            while motion.next_mark < len(marks) and marks[motion.next_mark][0] <= motion.s:
+            for label in motion.passed_marks():
                 self._reports.append({"op": "mark", "id": motion.id, "wall_time": self._wall,
-                                      "label": int(marks[motion.next_mark][1])})
-                motion.next_mark += 1
+                                      "label": label})
             running = motion.target_rate == 1.0 and not motion.paused
             if running:
                 self._watch(motion, fbk, sensors)

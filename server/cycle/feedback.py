@@ -129,6 +129,14 @@ class FeedbackRing:
     def write(self, sequence: int, row: np.ndarray) -> None:
         """Store `row` (WIDTH,) as cycle `sequence`, then publish it."""
         self._table[sequence % self.rows] = row
+        self.publish(sequence)
+
+    def slot(self, sequence: int) -> np.ndarray:
+        """The row (WIDTH,) where cycle `sequence` goes: written in place, then `publish`ed."""
+        return self._table[sequence % self.rows]
+
+    def publish(self, sequence: int) -> None:
+        """Cycle `sequence`'s row is written: readers may take it."""
         self._head[0] = sequence
         now = time.monotonic()
         if now - self._last_tick >= self.tick_period:

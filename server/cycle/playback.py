@@ -23,11 +23,13 @@ arm's full deceleration, or the set one: executor.py's "stop_acceleration") and
 """
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from landscape.server.cycle.ramps import RampPlanner, hermite_at
+from landscape.server.cycle.joined_rows import JoinedRows
 from landscape.server.cycle.run_arrays import GrowingSegments, Segments
 
 if TYPE_CHECKING:
@@ -68,7 +70,7 @@ class Motion:
         self._braking: tuple[np.ndarray, np.ndarray] | None = None   # this stop's limits
         self._step = 0
         self._planner = RampPlanner(dt)
-        self._recent = np.tile(self.positions[0], (3, 1))   # the last 3 played, newest first
+        self._recent = (self.positions[0],) * 3   # the last 3 played, newest first (read-only)
         # A run checked against the cell as it plays (run_check.py): its rows checked so far
         # (None: all) and how many rows a stop may take; `awaiting` while braking or held for
         # the next stretch.
@@ -83,11 +85,28 @@ class Motion:
         self.segment = index
         segment = self.segments[index]
         # Nothing here walks the whole segment: a long one costs the cycle nothing to load.
-        self.positions = np.asarray(segment["positions"], dtype=float)
-        self.velocities = np.asarray(segment["velocities"], dtype=float)
+        # A joined one (GrowingSegments) is read across its parts, and grows in place.
+        rows = segment["positions"]
+        self.positions = rows if isinstance(rows, JoinedRows) else np.asarray(rows, dtype=float)
         self.marks = segment.get("marks", ())   # (sample, label) rows, in order
         self.next_mark = 0
+        self._next_mark_at = self._mark_at(0)
         self.s = 0.0
+
+    def _mark_at(self, index: int) -> float:
+        """The sample of mark `index` of the segment (inf: no such mark)."""
+        return float(self.marks[index][0]) if index < len(self.marks) else math.inf
+
+    def passed_marks(self) -> list[int]:
+        """The labels of the marks the play position has passed since last asked, in order."""
+        if self.s < self._next_mark_at:   # each cycle: one comparison, no array read
+            return []
+        labels = []
+        while self.s >= self._next_mark_at:
+            labels.append(int(self.marks[self.next_mark][1]))
+            self.next_mark += 1
+            self._next_mark_at = self._mark_at(self.next_mark)
+        return labels
 
     def next_segment(self) -> bool:
         """At the end of a segment: go on with the next one, if any; stopping, the play waits
@@ -107,14 +126,6 @@ class Motion:
     @property
     def last(self) -> int:
         return len(self.positions) - 1
-
-    def sample(self, table: np.ndarray) -> np.ndarray:
-        """The table's row at the play position, linear between samples (velocities)."""
-        i = min(int(self.s), self.last)
-        frac = self.s - i
-        if frac == 0.0 or i == self.last:
-            return table[i]
-        return table[i] + frac * (table[i + 1] - table[i])
 
     def _curve(self) -> tuple[np.ndarray, np.ndarray]:
         """The Hermite curve and its slope at the play position, worked out once per position:
@@ -190,6 +201,7 @@ class Motion:
         s, next_mark = self.s, self.next_mark
         self._load(self.segment)
         self.s, self.next_mark, self._curve_at = s, next_mark, None
+        self._next_mark_at = self._mark_at(next_mark)
 
     def refuse(self, message: str) -> bool:
         """A later stretch was refused: brake along the path, to fail with `message` at rest;
@@ -220,14 +232,14 @@ class Motion:
                 self._ramp = None
         elif self.rate == 1.0:
             self.s = min(self.s + 1.0, float(self.last))
-        self._recent = np.roll(self._recent, 1, axis=0)
-        self._recent[0] = self.position()
+        # Shifted by reference, not rolled: every cycle pays for this.
+        self._recent = (self.position(), *self._recent[:2])
 
     def _plan_ramp(self) -> None:
         stopping = self.target_rate == 0.0
         acceleration, jerk = ((self._braking or (self.stop_limit, self.stop_jerk)) if stopping
                               else (self.run_limit, self.run_jerk))
-        ramp = self._planner.plan(self.positions, self._recent, self.s, self.rate,
+        ramp = self._planner.plan(self.positions, np.array(self._recent), self.s, self.rate,
                                   self.rate_change, self.target_rate, acceleration, jerk)
         if ramp is not None:
             self._ramp, self._step = ramp, 0

@@ -34,6 +34,10 @@ STOP_SCALES = (1.0, 0.85, 0.7, 0.5)   # a stop's bounds from the speed now, trie
 CALM = 7            # samples in a row where the planned motion leaves a resume room
 RETRY = 0.6         # the bounds of the next attempt, against the last one's
 SLACK = 1e-9        # relative: what rounding may add to a checked value
+# Cycles a ramp may take, at most (9 minutes at 4 ms: a stop from full speed at 0.1 % of the
+# acceleration takes about one): a longer one is refused, not sampled cycle by cycle (at bounds
+# low enough, that asked for gigabytes and minutes inside a cycle).
+MAX_CYCLES = 1 << 17
 
 
 def sampled(trajectory: Trajectory, cycles: int) -> np.ndarray:
@@ -62,44 +66,59 @@ def sampled(trajectory: Trajectory, cycles: int) -> np.ndarray:
 
 def hermite(positions: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Positions (K, M) and their derivatives per sample (K, M) at play positions sigma (K,) on
-    the samples (N, M) of M joints: the quintic Hermite curve through them, with each sample's velocity and
-    acceleration from central differences (the trajectory held at rest past its ends). Exact at
-    whole samples, C2 between them."""
+    the samples (N, M) of M joints: the quintic Hermite curve through them, with each sample's
+    velocity and acceleration from central differences (the trajectory held at rest past its
+    ends). Exact at whole samples, C2 between them."""
     n = len(positions)
     if n == 1:
         held = np.repeat(positions, len(sigma), axis=0)
         return held, np.zeros_like(held)
     i = np.clip(np.floor(sigma).astype(int), 0, n - 2)
-    t = (sigma - i)[:, None]
-    return _quintic(t, *(positions[np.clip(i + k, 0, n - 1)] for k in (-1, 0, 1, 2)))
+    weights = _weights((sigma - i)[:, None])
+    rows = [positions[np.clip(i + k, 0, n - 1)] for k in (-1, 0, 1, 2)]
+    return (sum(w * row for w, row in zip(weights[:4], rows)),
+            sum(w * row for w, row in zip(weights[4:], rows)))
 
 
 def hermite_at(positions: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """`hermite` at one play position, as the cycle asks for it: the same curve, its weights
-    in floats and the four rows by index (the array form's small numpy calls cost the cycle
-    ~250 us, three quarters of the lock-step stack's time)."""
+    """`hermite` at one play position, as the cycle asks for it every cycle: at a whole sample
+    (the play at its planned pace) the sample and its central difference, else the curve's
+    weights in floats times the four rows at once (the array form's small numpy calls would
+    cost the cycle more than its physics). Read-only: the position may be a view of
+    `positions`."""
     n = len(positions)
     if n == 1:
-        return positions[0].copy(), np.zeros_like(positions[0])
-    i = min(max(int(np.floor(sigma)), 0), n - 2)
-    return _quintic(sigma - i, positions[max(i - 1, 0)], positions[i], positions[i + 1],
-                    positions[min(i + 2, n - 1)])
+        return positions[0], np.zeros_like(positions[0])
+    if sigma == (k := int(sigma)) and 0 <= k < n:
+        return positions[k], (positions[min(k + 1, n - 1)] - positions[max(k - 1, 0)]) * 0.5
+    i = min(max(math.floor(sigma), 0), n - 2)
+    rows = (positions[i - 1:i + 3] if 1 <= i <= n - 3
+            else positions[[max(i - 1, 0), i, i + 1, min(i + 2, n - 1)]])
+    curve = np.array(_weights(sigma - i)).reshape(2, 4) @ rows
+    return curve[0], curve[1]
 
 
-def _quintic(t, p0, p1, p2, p3):
-    """The curve and its derivative at fraction t between samples p1 and p2 (p0 and p3 their
-    neighbours): t a float and rows (M,), or a column (K, 1) and rows (K, M)."""
-    v0, v1 = (p2 - p0) / 2.0, (p3 - p1) / 2.0
-    a0, a1 = p2 - 2.0 * p1 + p0, p3 - 2.0 * p2 + p1
-    t2, t3 = t * t, t * t * t
+def _weights(t):
+    """The weights of the four samples around the play position (the one before, the two it
+    lies between, the one after) in the curve, then in its derivative, at fraction t between
+    the middle two: floats, or arrays of them. The quintic Hermite basis, with each sample's
+    velocity (p[k+1] - p[k-1]) / 2 and acceleration p[k+1] - 2 p[k] + p[k-1] put in."""
+    t2 = t * t
+    t3 = t2 * t
     t4, t5 = t3 * t, t3 * t2
-    q = ((1 - 10 * t3 + 15 * t4 - 6 * t5) * p1 + (t - 6 * t3 + 8 * t4 - 3 * t5) * v0
-         + (t2 / 2 - 1.5 * t3 + 1.5 * t4 - t5 / 2) * a0 + (t3 / 2 - t4 + t5 / 2) * a1
-         + (-4 * t3 + 7 * t4 - 3 * t5) * v1 + (10 * t3 - 15 * t4 + 6 * t5) * p2)
-    dq = ((-30 * t2 + 60 * t3 - 30 * t4) * (p1 - p2) + (1 - 18 * t2 + 32 * t3 - 15 * t4) * v0
-          + (t - 4.5 * t2 + 6 * t3 - 2.5 * t4) * a0 + (1.5 * t2 - 4 * t3 + 2.5 * t4) * a1
-          + (-12 * t2 + 28 * t3 - 15 * t4) * v1)
-    return q, dq
+    h0 = 1 - 10 * t3 + 15 * t4 - 6 * t5            # the basis: at the first sample
+    h1 = t - 6 * t3 + 8 * t4 - 3 * t5              # its velocity
+    h2 = t2 / 2 - 1.5 * t3 + 1.5 * t4 - t5 / 2     # its acceleration
+    h3 = t3 / 2 - t4 + t5 / 2                      # the second's acceleration
+    h4 = -4 * t3 + 7 * t4 - 3 * t5                 # its velocity
+    h5 = 10 * t3 - 15 * t4 + 6 * t5               # the second sample
+    d0 = -30 * t2 + 60 * t3 - 30 * t4              # their derivatives (d5 = -d0)
+    d1 = 1 - 18 * t2 + 32 * t3 - 15 * t4
+    d2 = t - 4.5 * t2 + 6 * t3 - 2.5 * t4
+    d3 = 1.5 * t2 - 4 * t3 + 2.5 * t4
+    d4 = -12 * t2 + 28 * t3 - 15 * t4
+    return (h2 - h1 / 2, h0 - 2 * h2 + h3 - h4 / 2, h5 + h1 / 2 + h2 - 2 * h3, h3 + h4 / 2,
+            d2 - d1 / 2, d0 - 2 * d2 + d3 - d4 / 2, -d0 + d1 / 2 + d2 - 2 * d3, d3 + d4 / 2)
 
 
 class RampPlanner:
@@ -126,8 +145,8 @@ class RampPlanner:
         acceleration then takes at most its square of the limit), held until a calm stretch
         of the planned motion, and up to full rate there."""
         last = len(positions) - 1
-        if last < 1:
-            return None
+        if last < 1 or not 0.0 <= sigma <= last:
+            return None     # no stretch to ramp along
         if target == 0.0:
             # Bounds from the speed now first (a planned motion that speeds up meanwhile adds
             # less than its speed-up, the rate falling), then from the fastest the stop covers.
@@ -206,7 +225,7 @@ class RampPlanner:
         inp.target_velocity, inp.target_acceleration = [0.0], [0.0]
         inp.control_interface = ControlInterface.Velocity
         inp.duration_discretization = DurationDiscretization.Continuous
-        if self._otg.calculate(inp, self._trajectory) not in (Result.Working, Result.Finished):
+        if not self._calculated():
             return None
         trajectory = self._trajectory
         cycles = max(1, int(math.ceil(trajectory.duration - 1e-9)))
@@ -263,7 +282,10 @@ class RampPlanner:
         window = lo + 3
         bounds = ramp = None
         for _ in range(1 if now else 2):    # the stretch the ramp covers decides its bounds
-            step = np.abs(np.diff(positions[max(lo - 1, 0):min(window, last) + 1], axis=0))
+            stretch = positions[max(lo - 1, 0):min(window, last) + 1]
+            if len(stretch) < 2:
+                return None    # past the segment's end: nothing to take the bounds from
+            step = np.abs(np.diff(stretch, axis=0))
             fastest = np.maximum(step.max(axis=0), 1e-12)          # rad per sample
             wanted = (scale * float(np.min(acceleration * dt * dt / fastest)),
                       scale * float(np.min(jerk * dt ** 3 / fastest)))
@@ -287,7 +309,7 @@ class RampPlanner:
         inp.target_velocity, inp.target_acceleration = [target], [0.0]
         inp.control_interface = ControlInterface.Velocity
         inp.duration_discretization = DurationDiscretization.Continuous
-        if self._otg.calculate(inp, self._trajectory) not in (Result.Working, Result.Finished):
+        if not self._calculated():
             return None
         end = self._trajectory.at_time(self._trajectory.duration)[0][0]
         if target == 1.0:   # a resume: onto a whole sample at full rate, or to the end at rest
@@ -298,8 +320,7 @@ class RampPlanner:
                 inp.target_position, inp.target_velocity = [float(landing)], [1.0]
             else:
                 inp.target_position, inp.target_velocity = [float(last)], [0.0]
-            if self._otg.calculate(inp, self._trajectory) not in (Result.Working,
-                                                                  Result.Finished):
+            if not self._calculated():
                 return None
         elif end > last:
             return None
@@ -312,6 +333,17 @@ class RampPlanner:
         else:
             states[-1, 1:] = target, 0.0
         return states[:, 0], states[:, 1], states[:, 2]
+
+    def _calculated(self) -> bool:
+        """Whether ruckig planned the input into the trajectory, within MAX_CYCLES. Its Python
+        binding raises ValueError for the results its enum lacks (-101, the duration beyond
+        ruckig's numerical range): a refusal like any other."""
+        try:
+            result = self._otg.calculate(self._input, self._trajectory)
+        except ValueError:
+            return False
+        return (result in (Result.Working, Result.Finished)
+                and self._trajectory.duration <= MAX_CYCLES)
 
     def _fits(self, positions: np.ndarray, recent: np.ndarray, ramp, target: float,
               acceleration: np.ndarray, jerk: np.ndarray) -> bool:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from landscape.server.cycle.joined_rows import JoinedRows
+
 
 def pack_run(trajectories, dt: float) -> dict[str, np.ndarray]:
     """The arrays of a run of back-to-back trajectories, for `Segments` (the cycle)."""
@@ -46,11 +48,15 @@ class Segments:
 class GrowingSegments:
     """The segments of a run timed as it plays (issue 31 item 4): blocks of Segments appended
     as they come, a block's first segment joined to the one before if it continues it (its
-    rows follow on, the arm moving: one segment to play). A joined segment's arrays are
-    copied when read."""
+    rows follow on, the arm moving: one segment to play). A joined segment is read across its
+    parts (JoinedRows), never copied whole, and the one read grows in place as parts come:
+    an append costs the cycle the same however long the segment is."""
+
+    ROWS = ("positions", "velocities", "accelerations")
 
     def __init__(self, first):
         self._parts: list[list[tuple]] = [[(first, i)] for i in range(len(first))]
+        self._joined: dict[int, dict] = {}   # segment index -> it read across its parts
 
     def __len__(self) -> int:
         return len(self._parts)
@@ -61,15 +67,29 @@ class GrowingSegments:
         for i in range(len(block)):
             if i == 0 and continues:
                 self._parts[-1].append((block, i))
+                joined = self._joined.get(len(self._parts) - 1)
+                if joined is not None:
+                    self._join(joined, block[i])
             else:
                 self._parts.append([(block, i)])
 
     def __getitem__(self, index: int) -> dict:
-        parts = [block[i] for block, i in self._parts[index]]
+        parts = self._parts[index]
         if len(parts) == 1:
-            return parts[0]
-        offsets = np.cumsum([0, *(len(p["positions"]) for p in parts[:-1])])
-        marks = [p["marks"] + np.array([offset, 0]) for p, offset in zip(parts, offsets)]
-        return {**{name: np.concatenate([p[name] for p in parts])
-                   for name in ("positions", "velocities", "accelerations")},
-                "marks": np.concatenate(marks).reshape(-1, 2)}
+            block, i = parts[0]
+            return block[i]
+        index %= len(self._parts)
+        joined = self._joined.get(index)
+        if joined is None:
+            joined = {name: JoinedRows() for name in self.ROWS}
+            joined["marks"] = []   # (sample in the joined segment, label)
+            for block, i in parts:
+                self._join(joined, block[i])
+            self._joined[index] = joined
+        return joined
+
+    def _join(self, joined: dict, segment: dict) -> None:
+        offset = len(joined["positions"])
+        for name in self.ROWS:
+            joined[name].extend(segment[name])
+        joined["marks"].extend((int(at) + offset, int(label)) for at, label in segment["marks"])

@@ -252,7 +252,9 @@ def test_a_cycle_process_that_resumes_after_its_silence_never_commands_the_arm_a
         wait_until(lambda: abs(server.device.feedback().velocity[0]) > 0.05, timeout=10)
         os.kill(pid, signal.SIGSTOP)
         wait_until(lambda: server.link.lost is not None, timeout=5)
-        os.kill(pid, signal.SIGCONT)
+        # The server kills a lost cycle process: on a busy machine it may be gone already.
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
         wait_until(lambda: not _alive(pid), timeout=5)
         head = server.link.feedback.head
         time.sleep(0.3)   # 75 cycles: a live process would have written rows
