@@ -61,7 +61,12 @@ class Subscription:
     def __init__(self, bus: EventBus, capacity: int, replay: Sequence[Event]):
         self._bus = bus
         self._capacity = capacity
-        self._cond = threading.Condition(threading.Lock())
+        # The raw lock on the hot paths (a publish offers every subscriber an event; an async
+        # reader takes it): the condition only for readers that wait on a thread, so a
+        # publish pays for a notify only when one does (issue 31 item 6).
+        self._lock = threading.Lock()
+        self._cond = threading.Condition(self._lock)
+        self._blocked = 0          # threads waiting in get()
         self._replay = deque(replay)   # resumed events; not bounded, the history bounds it
         self._live: deque[Event] = deque()
         self._closed = False
@@ -73,9 +78,13 @@ class Subscription:
 
         Returns None on timeout or once the subscription is closed.
         """
-        with self._cond:
-            if not self._cond.wait_for(self._ready, timeout) or self._closed:
-                return None
+        with self._lock:
+            self._blocked += 1
+            try:
+                if not self._cond.wait_for(self._ready, timeout) or self._closed:
+                    return None
+            finally:
+                self._blocked -= 1
             return self._next()
 
     def __iter__(self) -> Iterator[Event]:
@@ -85,18 +94,16 @@ class Subscription:
     async def next_async(self) -> Event | None:
         """The next event, awaited on the running loop; None once closed. Publishers on any
         thread wake it through the loop (no thread waits for it)."""
-        loop = asyncio.get_running_loop()
         while True:
-            with self._cond:
+            with self._lock:
                 if self._closed:
                     return None
                 if self._replay or self._live or self._draining:
                     return self._next()
-                waiter = self._waiter = loop.create_future()
-            try:
-                await waiter
-            finally:
-                self._waiter = None
+                waiter = self._waiter = asyncio.get_running_loop().create_future()
+            # Whoever takes the waiter (offer, end) clears it; a cancelled one is never
+            # resolved (_resolve looks).
+            await waiter
 
     @property
     def closed(self) -> bool:
@@ -119,7 +126,7 @@ class Subscription:
     def offer(self, event: Event, clock: Callable[[], float]) -> asyncio.Future | None:
         """Take `event`; returns the async reader's wake-up, if one waits, for the publisher
         to resolve (with the others of its loop in one hand-over: `_wake_all`)."""
-        with self._cond:
+        with self._lock:
             live = self._live
             if len(live) >= self._capacity:
                 # Full: drop what is pending (merging an unread loss notice) and say so once.
@@ -129,13 +136,14 @@ class Subscription:
                 live.clear()
                 live.append(_lost(first, event.sequence - 1, clock()))
             live.append(event)
-            self._cond.notify()
+            if self._blocked:
+                self._cond.notify()
             waiter, self._waiter = self._waiter, None
             return waiter
 
     def end(self, drain: bool = False) -> None:
         """No more events; with `drain`, the pending ones are still delivered first."""
-        with self._cond:
+        with self._lock:
             if drain:
                 self._draining = True
             else:
@@ -146,13 +154,13 @@ class Subscription:
             self._wake()
 
     def _next(self) -> Event | None:
-        # With _cond held: the next pending event, or None once a drained bus has none left.
+        # With the lock held: the next pending event, or None once a drained bus has none left.
         if self._replay or self._live:
             return (self._replay or self._live).popleft()
         return None
 
     def _wake(self) -> None:
-        # With _cond held: hand the async reader's wake-up to its loop.
+        # With the lock held: hand the async reader's wake-up to its loop.
         waiter, self._waiter = self._waiter, None
         if waiter is not None:
             waiter.get_loop().call_soon_threadsafe(_resolve, waiter)

@@ -81,8 +81,10 @@ class RealTimeClock:
         self._pending: dict[int, _Pending] = {}
         self._pending_lock = threading.Lock()
         self._ids = itertools.count(1)
-        self._inbox: queue.Queue = queue.Queue()
-        self._callbacks: queue.Queue = queue.Queue()
+        # C-level queues: the reader's hand-over to the dispatch thread (a tag event's way to
+        # its subscribers) costs no Python-level lock and condition (issue 31 item 6).
+        self._inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._callbacks: queue.SimpleQueue = queue.SimpleQueue()
         self._event_func: Callable[[str], None] | None = None
         self._threads: list[threading.Thread] = []
         self._proxy = None
