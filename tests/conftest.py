@@ -2,10 +2,23 @@
 with TLS and role tokens."""
 from __future__ import annotations
 
+import os
+
 import grpc
 import pytest
 
 from support import make_keys, start_secured_server, start_server
+
+
+@pytest.fixture(scope="session", autouse=True)
+def own_working_folder(tmp_path_factory):
+    """Each pytest process (each xdist worker) works in a folder of its own: what a server
+    writes to its default relative paths (var/paths.sqlite3, var/audit.log, var/records/)
+    lands there, never in the checkout that the workers share."""
+    before = os.getcwd()
+    os.chdir(tmp_path_factory.mktemp("cwd"))
+    yield
+    os.chdir(before)
 
 
 @pytest.fixture
@@ -96,3 +109,6 @@ def pytest_collection_modifyitems(config, items):
     if physics_only:
         config.hook.pytest_deselected(items=physics_only)
         items[:] = kept
+    # The slow modules first (each in its own order): the workers (pytest-xdist, a module to a
+    # worker) take them on while the many short ones fill in, instead of ending on them.
+    items.sort(key=lambda item: item.nodeid.partition("::")[0] not in SLOW_MODULES)
