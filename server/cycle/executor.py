@@ -5,14 +5,13 @@ setpoint and sets it. While the drives are not enabled it commands the measured 
 that enabling starts from where the arm is and never jumps (LLI 5.3.3).
 
 A motion is a timed trajectory played one sample per cycle, stopped and resumed along its path
-within the acceleration limits (playback.py).
-
-A motion may carry a sensor loop (force_control.py): a guard (moveReact) that stops it when a
-sensor crosses a threshold (on a force, the stop then settles the force near the threshold), a
-compliance (comply) that shifts its setpoints to hold a force.
-Instead of a motion, a jog session (jog_control.py) may integrate velocity requests. The I/O
-image and watches are read every cycle (cycle_inputs.py), the sensors while a loop or a reader of
-the rows needs them; the arm model's torques (arm_dynamics.py) go into watched rows (feedback.py).
+within the acceleration limits (playback.py). It may carry a sensor loop (force_loops.py): a
+guard (moveReact) that stops it when a sensor crosses a threshold (on a force, the stop then
+settles the force near the threshold), a compliance (comply) that shifts its setpoints to hold
+a force. Instead of a motion, a jog session (jog_integrator.py) may integrate velocity
+requests. The I/O image and watches are read every cycle (inputs.py), the sensors while a loop
+or a reader of the rows needs them; the arm model's torques (arm_dynamics.py) go into watched
+rows (feedback.py).
 
 Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plain dicts
 (picklable, so they cross the process boundary):
@@ -33,7 +32,7 @@ Every cycle's feedback goes into the feedback ring (feedback.py). Messages, plai
                    {"op": "resume"}  {"op": "abort"}
                    {"op": "payload", "parameters": (10,)}: what the flange carries now
                     (arm_dynamics.py)
-                   the jog messages (jog_control.py) and the I/O ones (cycle_inputs.py)
+                   the jog messages (jog_integrator.py) and the I/O ones (inputs.py)
   cycle -> server  {"op": "controller", "enable": EnableState value, "estop": bool} on change
                    {"op": "started", "id", "wall_time"}  {"op": "mark", "id", "label",
                     "wall_time"} (wall_time: unix s of the cycle)

@@ -64,7 +64,7 @@ class Motion:
         self.guard: ThresholdMonitor | None = None
         self.compliance: Admittance | None = None
         self.stopped_by: ThresholdMonitor | None = None   # the guard that fired
-        self.force_settle: ForceSettle | None = None      # after its stop (force_control.py)
+        self.force_settle: ForceSettle | None = None      # after its stop (force_loops.py)
         self.unsettled = ""   # why the force is not settled after all (a stop or an abort)
         self._ramp: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # sigma, r, dr
         self._braking: tuple[np.ndarray, np.ndarray] | None = None   # this stop's limits

@@ -8,7 +8,7 @@ cell file). What the seed leaves open, decided as a cell integrator would expect
   it: the tool changer's lock couples the tool at the flange (the tool offset and the
   collision scene follow, as after GetTool) and opens only with the tool in its rack slot (a
   changer does not drop a tool). The description goes to the server's log with the change.
-- signalDigitalIO watches bits of a unit in the cycle (cycle_inputs.py): polled every
+- signalDigitalIO watches bits of a unit in the cycle (inputs.py): polled every
   pollingCycleTime ms (0: every cycle), it fires once, at the first poll that finds all of the
   bits set (bits set already fire at once), then it is done; not fired within pollingTimeOut
   ms (0: no timeout) it fails, saying so. It answers CMD_STARTED_OK with a command id; firing
@@ -125,7 +125,7 @@ class DigitalIO:
         return watch.command_id
 
     def on_report(self, msg: dict) -> None:
-        """The cycle's "io_signal" and "io_timeout" reports (cycle_inputs.py)."""
+        """The cycle's "io_signal" and "io_timeout" reports (inputs.py)."""
         with self._lock:
             watch = self.watches.pop(msg["id"], None)
         if watch is None:

@@ -1,5 +1,5 @@
 """Guarded and compliant motion (seed 3.7.2 moveReact and comply): checks, planning, and what
-their events say. The loops themselves run in the cycle (force_control.py).
+their events say. The loops themselves run in the cycle (force_loops.py).
 
 What the seed leaves open, decided as a cell integrator would expect:
 - Both move relative to the tool tip, in the tool frame (`motion` x, y, z), in a straight
@@ -12,7 +12,7 @@ What the seed leaves open, decided as a cell integrator would expect:
   stops when a watched (non-zero) component reaches its threshold from the side it started
   on (pressing down on a table with the tool pointing down: fz falls, a threshold of -20 N).
   It stops at the arm's full deceleration; on a force threshold it then settles the force
-  near the threshold (force_control.ForceSettle: along the watched axes it approached on,
+  near the threshold (force_loops.ForceSettle: along the watched axes it approached on,
   within 5 % of the threshold, at most 5 mm and 2 s, no faster than the approach), so that at
   rest the force is the threshold's whatever the approach speed. Then it is done; the done
   event says whether it triggered, the reading and the tip's position (world frame) at the

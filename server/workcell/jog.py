@@ -10,7 +10,7 @@ going, failed when the drives go off); the device is Moving meanwhile, so nothin
 the arm. Each request gives velocities in percent, -100 to 100, of the axis's jog speed:
 a joint's maximum velocity, or the arm's linear and angular tool speeds, times the set speed
 (SetSpeed). The cycle integrates them within the joint ranges, the acceleration limits and
-the manual-mode tip speed, with the deadman (jog_control.py): no request for the deadman
+the manual-mode tip speed, with the deadman (jog_integrator.py): no request for the deadman
 timeout (default DEADMAN_TIMEOUT, from the stream's first request) stops the arm at its full
 deceleration and ends the session; releasing the deadman holds the arm until it is pressed.
 Near the cell the arm slows and stops at the collision margin (jog_guard.py); the stream's

@@ -7,11 +7,11 @@ ring every PERIOD_CYCLES cycles and measures its clearance in the collision scen
 in the rack, the parts and the floor). Within SLOW_ZONE of the margin it sends the cycle the
 clearance's gradient in joint space (finite differences, m/rad) and the rate at which the arm
 may still close it, (clearance - margin) / TAU: the approach slows in proportion to the room
-left and stops at the margin; jog_control.py applies this every cycle. TAU is long beside the
+left and stops at the margin; jog_integrator.py applies this every cycle. TAU is long beside the
 guard's delay (a few cycles), so what the arm travels before the next figure arrives is a
 small fraction of the room left. Beyond the zone it sends "no gradient" and the jog is free.
 It sends every tick: figures that stop coming (this thread stalled) hold the arm in the cycle
-(jog_control.STALE_CYCLES).
+(jog_integrator.STALE_CYCLES).
 """
 from __future__ import annotations
 
