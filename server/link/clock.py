@@ -135,9 +135,11 @@ class ThreadedLockStepClock:
                 thread.join(5.0)
 
     def hold(self) -> None:
-        """Stop stepping after the current cycle (simulated time stands still); calls and
-        messages are still served. For tests that need a race to happen in a given order."""
+        """Stop stepping (simulated time stands still) once the cycle under way, if one is,
+        has ended: this returns after it. Calls and messages are still served. For tests that
+        need a race to happen in a given order."""
         self._released.clear()
+        self.between_cycles(lambda controller: None)   # served after the cycle under way
 
     def hold_at(self, seconds: float) -> None:
         """`hold` after the first cycle that brings the controller's time to `seconds`."""
