@@ -47,7 +47,11 @@ def test_a_motion_in_progress_is_not_handed_over(chromium, dashboard, cell_serve
     other = Page(chromium, dashboard, name="operator-1")
     olga.take_control()
     olga.page.fill("#path-name", "far")
-    olga.page.fill("#path-points", "f1 1.2 0.4 1.2 0 1.3 0\nf2 -1.2 0.1 1.5 0 1.4 0.8")
+    # Ten points back and forth, five times the two it had: the motion still runs when the
+    # stop comes on a busy machine (the two ended first on the suite's two workers).
+    olga.page.fill("#path-points", "\n".join(
+        f"f{i} 1.2 0.4 1.2 0 1.3 0" if i % 2 else f"f{i} -1.2 0.1 1.5 0 1.4 0.8"
+        for i in range(1, 11)))
     olga.click("btn-path-load")
     olga.click("btn-path-run")
     olga.shows("st-state", "moving")
