@@ -163,8 +163,7 @@ def plan_path_run(ctx: PlanningContext, path: StoredPath, q_start: np.ndarray,
 
 
 def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: np.ndarray,
-                     settings: MotionSettings, cycles: int, what: str,
-                     long_section: float = path_planning.LONG_SECTION
+                     settings: MotionSettings, cycles: int, what: str, long_section: float
                      ) -> tuple[list, list, int, int, bool]:
     """plan_path_run for a run timed and checked as it plays (issue 31 item 4): its first
     pieces, timed until they hold enough rows to brake from their fastest plus
