@@ -79,6 +79,10 @@ class SimulatedCS8(Controller):
         self._cyclic_failing = False
         self._destroyed = False
         self._state_was: tuple = ()
+        # A press not yet seen by a cycle: reported until the next cycle has run, so a release
+        # served before any cycle (both between the same two) does not hide the e-stop from
+        # the cyclic function, as a safety relay holds a short press.
+        self._estop_unseen = False
         self._state = State()
 
     # ---- the cycle ----------------------------------------------------------------------------
@@ -100,6 +104,7 @@ class SimulatedCS8(Controller):
             self._recorder.append(self.time, *drives.reference(), fbk.pos, fbk.vel, fbk.torque)
         if self.cyclic is not None:
             self._run_cyclic()
+        self._estop_unseen = False
 
     def _run_cyclic(self) -> None:
         try:
@@ -228,6 +233,7 @@ class SimulatedCS8(Controller):
         return Status.OK
 
     def _on_estop(self, pressed: bool) -> None:
+        self._estop_unseen = self._estop_unseen or pressed
         if not pressed:
             self._event("emergency stop released")
         elif self._enable is EnableState.DISABLED:
@@ -238,7 +244,8 @@ class SimulatedCS8(Controller):
 
     def state(self) -> State:
         now = (self._init, self._enable, self._calib, self._drives.settle,
-               EstopState.ESTOP if self.panel.estop_pressed else EstopState.NO_ESTOP)
+               EstopState.ESTOP if self.panel.estop_pressed or self._estop_unseen
+               else EstopState.NO_ESTOP)
         if now != self._state_was:   # the same (frozen) State while nothing changed: a
             self._state_was, self._state = now, State(*now)   # cyclic function asks each cycle
         return self._state

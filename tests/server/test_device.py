@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from landscape.client import Session
+from landscape.server.events import alarms
 from landscape.server.device.states import State
 from landscape.robot.controller import EnableState
 from landscape.v1 import control_pb2, event_service_pb2, settings_pb2, types_pb2
@@ -193,6 +194,30 @@ def test_estop_faults_the_device_and_reset_needs_it_released_then_asks_the_holde
         kinds = [e.event_id for e in bus_history(server)]
         assert kinds.index("rsvp_request") < kinds.index("rsvp_answer")
         assert any(e.event_id == "alarm" and e.detail.code == 102 for e in bus_history(server))
+    finally:
+        session.close()
+
+
+def test_an_estop_pressed_and_released_between_two_cycles_is_still_an_estop(server):
+    """Found by the page's test on a busy machine: the release came before any cycle saw the
+    press, so the device took it for a plain controller error and asked nothing. A press lasts
+    at least the cycle after it, as a safety relay's does."""
+    answers = []
+
+    def answer(request):
+        answers.append(request)
+        return "stay", list(request.data)
+
+    session = Session(grpc.insecure_channel(server.target), "operator", on_rsvp=answer).open()
+    try:
+        session.lock()
+        activate(session)
+        server.link.between_cycles(lambda c: (c.panel.press_estop(), c.panel.release_estop()))
+        wait_until(lambda: answers, timeout=10)          # asked, after the release
+        assert answers[0].event_id == "estop_released"
+        assert server.device.state is State.ERROR        # the holder said stay
+        assert any(e.event_id == "alarm" and e.detail.code == alarms.ESTOP
+                   for e in bus_history(server))
     finally:
         session.close()
 
