@@ -12,6 +12,7 @@ from __future__ import annotations
 import threading
 import time
 
+import grpc
 import numpy as np
 import pytest
 
@@ -236,11 +237,19 @@ def test_a_jog_its_reversal_and_its_deadman_stop_keep_the_jerk_limit(tmp_path):
                     time.sleep(0.02)
             time.sleep(0.5)          # silence: the deadman stops the arm
 
-        done = threading.Event()
-        call = arm.device.Jog(requests(), timeout=30)
-        threading.Thread(target=lambda: (list(call), done.set()), daemon=True).start()
-        wait_until(lambda: arm.server.device.state is State.RESTING
+        ended = []
+
+        def drain(call):
+            try:
+                list(call)
+            except grpc.RpcError as error:
+                ended.append(error.code())
+
+        threading.Thread(target=drain, args=(arm.device.Jog(requests(), timeout=30),),
+                         daemon=True).start()
+        wait_until(lambda: ended and arm.server.device.state is State.RESTING
                    and arm.server.link.feedback.head > first + 300, timeout=30)
+        assert ended == [grpc.StatusCode.ABORTED]     # the deadman ended the session
         cmd = rows_since(arm, first)[:, CMD]
         assert np.ptp(cmd[:, 4]) > 0.1            # it did move
         assert_smooth(cmd, arm, "jogs and the deadman's stop")

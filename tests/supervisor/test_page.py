@@ -122,7 +122,9 @@ def test_a_second_browser_watches_live_and_cannot_command(chromium, dashboard, c
     owner.click("btn-path-run")
     watcher.expect(watcher.page.locator("#joints .joint:nth-child(1) .jvalue")).not_to_have_text(
         before, timeout=30_000)
-    watcher.shows("st-state", "moving")
+    # The state went to moving: in the watcher's log, which stays (on a busy machine the
+    # path may be done before the watcher's state cell is looked at).
+    watcher.shows("log", "resting → moving")
     # What the watcher may press is refused by the server, with its reason.
     watcher.click("btn-session")
     watcher.expect(watcher.page.locator("#btn-lock")).to_be_enabled(timeout=30_000)
