@@ -154,7 +154,7 @@ def test_a_cartesian_jog_moves_the_tip_straight_within_the_manual_speed(arm):
 
     start = arm.tool_tip()
     pendant = Pendant(arm)
-    pendant.jog(TOOL, [0, 0, 20, 0, 0, 0], 0.3)      # along the tool's z: it points down
+    pendant.jog(TOOL, [0, 0, 20, 0, 0, 0], 0.6)      # along the tool's z: it points down
     pendant.close()
     moved = arm.tool_tip()[:3, 3] - start[:3, 3]
     assert moved[2] < -0.01 and np.linalg.norm(moved[:2]) < 1e-3 * abs(moved[2])
