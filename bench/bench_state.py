@@ -8,7 +8,8 @@ figures, no pass/fail. Command to motion (send -> first moving cycle) is bench_m
 - 1,000 idle event subscribers: the server's resident memory, and the unary call latency
   (GetDeviceState) beside them, against the latency with none.
 - Event latency: tag events of a path from the cycle that passed the tag to 1 and 50
-  subscribers, p50/p99; baseline: a bare stream stamped and sent on a 4 ms tick.
+  subscribers, p50/p99, and the server loop's CPU per event and subscriber; baseline: a bare
+  grpc.aio stream of the same events (the device round's, stamped anew, same spacing).
 
 The device server runs here on the real-time clock (its cycle process apart); every client runs
 in a child process, as supervisors would. Run: .venv/bin/python bench/bench_state.py [--quick]
@@ -18,8 +19,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import functools
-import itertools
 import math
 import multiprocessing as mp
 import os
@@ -34,7 +35,6 @@ from google.protobuf import wrappers_pb2
 from landscape.server.api.convert import event_to_proto
 from landscape.server.app import serve
 from landscape.server.config import ServerConfig
-from landscape.server.events.bus import EventBus, Phase
 from landscape.server.api.stream_caps import DEFAULT_CAPS, Cap
 from landscape.server.device.states import State
 from landscape.v1 import (control_pb2, device_service_pb2_grpc, event_service_pb2,
@@ -84,10 +84,12 @@ async def _ticking(request: wrappers_pb2.UInt64Value, context):
 
 class BareEvents:
     """The event latency's baseline: the bus's work done bare. A thread (as the link's is for
-    the device) stamps a tag event every `interval` s and wakes every waiting stream with one
-    hand-over to the server's loop; each stream then sends it as a plain grpc.aio stream does
-    (a message per stream, serialized by grpc). Same message size as the device's tag events,
-    same streams, same clients."""
+    the device) publishes the events of the device's round before it, stamped anew, at their
+    spacing, and wakes every waiting stream with one hand-over to the server's loop; each
+    stream then sends it as a plain grpc.aio stream does (a message per stream, serialized
+    by grpc). The same events (the path's tags and the command's and state's events around
+    them: a baseline of tags alone sent 50 messages to the device's 54), the same streams, the
+    same clients."""
 
     def __init__(self):
         self.loop: asyncio.AbstractEventLoop | None = None   # the bare server's (BareServer)
@@ -109,15 +111,12 @@ class BareEvents:
         finally:
             self.streams -= 1
 
-    def publish(self, interval: float) -> None:
-        """The path's tag events, t0 .. t49, `interval` s apart (call from a thread)."""
-        event_bus = EventBus()
-        due = time.time()
-        for i in range(TAGS):
-            due += interval
-            time.sleep(max(0.0, due - time.time()))
-            event = event_bus.command("PathMove-3", "PathMove", Phase.TAG_REACHED, "tags",
-                                      f"t{i}", i)
+    def publish(self, events: list) -> None:
+        """`events` (the bus's records) again, as far apart as they were (call from a thread)."""
+        start = time.time()
+        for event in events:
+            time.sleep(max(0.0, start + event.time - events[0].time - time.time()))
+            event = dataclasses.replace(event, time=time.time())
             self.loop.call_soon_threadsafe(self._deliver, event_service_pb2.SubscribeResponse(
                 event=event_to_proto(event)))
 
@@ -392,16 +391,17 @@ def event_latency(server, bare: BareServer, events: BareEvents, holder: Holder, 
         for n in (1, 50):
             device, published, base, cpu = [], [], [], {"device": [], "bare": []}
             for _ in range(rounds):
+                first = server.bus.last_sequence + 1
                 got, used = _event_round(n, server.target, False,
                                          lambda: server.bus.subscriber_count,
                                          lambda: holder.run(1), device_cpu)
                 cpu["device"].append(used)
                 device.append([(t - cycle_of[s]) * 1000 for s, t, _ in got if s in cycle_of])
                 published.append([(t - stamp) * 1000 for _, t, stamp in got])
-                cycles = sorted({cycle_of[s] for s, _, _ in got if s in cycle_of})
-                interval = statistics.median(b - a for a, b in itertools.pairwise(cycles))
+                round_events = _round_events(server, first)
                 got, used = _event_round(n, bare.target, True, lambda: events.streams,
-                                         functools.partial(events.publish, interval), bare_cpu)
+                                         functools.partial(events.publish, round_events),
+                                         bare_cpu)
                 cpu["bare"].append(used)
                 base.append([(t - stamp) * 1000 for _, t, stamp in got])
                 time.sleep(1.0)
@@ -423,6 +423,15 @@ def event_latency(server, bare: BareServer, events: BareEvents, holder: Holder, 
                    baseline_name="bare event stream", goal=1.2 * b99)
     finally:
         motions.on_report = original
+
+
+def _round_events(server, first: int) -> list:
+    """The events the device published from sequence `first` to the end of its path (it
+    rests), which its streams sent; the bus keeps them (its history)."""
+    end = time.monotonic() + 30
+    while server.device.state is not State.RESTING and time.monotonic() < end:
+        time.sleep(0.02)
+    return [server.bus.kept(s) for s in range(first, server.bus.last_sequence + 1)]
 
 
 def _event_round(n: int, target: str, bare: bool, subscribed, publish,
