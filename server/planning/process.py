@@ -100,8 +100,7 @@ class PlanningContext:
 @dataclass
 class Untimed:
     """A run timed as it plays: its pieces not timed yet (plan_run_lazily), whether any are
-    left, how many of its rows are checked, and the fastest speed of each joint timed so
-    far (rad/s)."""
+    left, its rows checked so far, and the fastest speed of each joint timed so far (rad/s)."""
 
     pieces: Iterator
     more: bool = True
@@ -168,10 +167,10 @@ def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: 
                      settings: MotionSettings, cycles: int, what: str, long_section: float
                      ) -> tuple[list, list, int, int, bool]:
     """plan_path_run for a run timed and checked as it plays (issue 31 item 4): its first
-    pieces, timed until they hold enough rows to brake from their fastest plus
-    run_check.LEAD, and those rows checked; the rest waits under `key` for next_pieces.
-    `long_section` as in path_planning.plan_run_lazily. Returns next_pieces' answer for all
-    of them."""
+    pieces, timed until they hold enough rows to brake from their fastest plus run_check.LEAD
+    (and up to STRETCH rows more once its first pass is timed), and those rows checked; the
+    rest waits under `key` for next_pieces. `long_section` as in plan_run_lazily. Returns
+    next_pieces' answer for all of them."""
     ctx.untimed[key] = Untimed(path_planning.plan_run_lazily(ctx.planner, path, q_start,
                                                              settings, cycles, long_section))
     ctx.runs[key] = run_check.RunCheck([], what)
@@ -183,6 +182,11 @@ def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: 
             break   # all of it is checked, or enough
         more, joins, checked, brake, everything = next_pieces(
             ctx, key, brake + run_check.LEAD - untimed.checked)
+        pieces, continues = pieces + more, continues + joins
+    if not everything and run_check.first_pass_timed(pieces, len(path.points) - 1):
+        # Its first pass is timed: the rest costs little to time (the way back, cycles that
+        # reuse its pieces), 2 us a row to check. A short run is checked whole before it starts.
+        more, joins, checked, brake, everything = next_pieces(ctx, key, run_check.STRETCH)
         pieces, continues = pieces + more, continues + joins
     return pieces, continues, checked, brake, everything
 
@@ -235,8 +239,7 @@ def drop_run(ctx: PlanningContext, key: str) -> None:
 
 
 JOBS = {job.__name__: job for job in (open_stream, feed_stream, finish_stream, load_path,
-                                      plan_path_run,
-                                      plan_path_lazily, next_pieces, drop_run)}
+                                      plan_path_run, plan_path_lazily, next_pieces, drop_run)}
 # A run's start: a client waits for it with the arm at rest (no motion to stop), so it runs at
 # the server's niceness; every other job is background work (_main).
 STARTS = frozenset({"plan_path_run", "plan_path_lazily"})
