@@ -13,9 +13,10 @@ without holding the interpreter.
 
 The jobs are plain functions of a PlanningContext, run here in the server when the cycle runs
 in the server as well (the lock-step clock: a stop waits for the cycle's thread anyway).
-One job at a time. A planning process that dies fails its job with Internal, is reported (the
-log, and `on_lost`: the device's alarm), and another one starts at once. One whose server dies
-is killed by the kernel at once, even in the middle of a job (lifeline.py).
+One job at a time; a run's start at the server's niceness, the rest at +10. A planning
+process that dies fails its job with Internal, is reported (the log, and `on_lost`: the
+device's alarm), and another one starts at once. One whose server dies is killed by the
+kernel at once, even in the middle of a job (lifeline.py).
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ import os
 import signal
 import threading
 from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
@@ -98,8 +100,7 @@ class PlanningContext:
 @dataclass
 class Untimed:
     """A run timed as it plays: its pieces not timed yet (plan_run_lazily), whether any are
-    left, how many of its rows are checked, and the fastest speed of each joint timed so
-    far (rad/s)."""
+    left, its rows checked so far, and the fastest speed of each joint timed so far (rad/s)."""
 
     pieces: Iterator
     more: bool = True
@@ -166,10 +167,10 @@ def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: 
                      settings: MotionSettings, cycles: int, what: str, long_section: float
                      ) -> tuple[list, list, int, int, bool]:
     """plan_path_run for a run timed and checked as it plays (issue 31 item 4): its first
-    pieces, timed until they hold enough rows to brake from their fastest plus
-    run_check.LEAD, and those rows checked; the rest waits under `key` for next_pieces.
-    `long_section` as in path_planning.plan_run_lazily. Returns next_pieces' answer for all
-    of them."""
+    pieces, timed until they hold enough rows to brake from their fastest plus run_check.LEAD
+    (and up to STRETCH rows more once its first pass is timed), and those rows checked; the
+    rest waits under `key` for next_pieces. `long_section` as in plan_run_lazily. Returns
+    next_pieces' answer for all of them."""
     ctx.untimed[key] = Untimed(path_planning.plan_run_lazily(ctx.planner, path, q_start,
                                                              settings, cycles, long_section))
     ctx.runs[key] = run_check.RunCheck([], what)
@@ -181,6 +182,11 @@ def plan_path_lazily(ctx: PlanningContext, key: str, path: StoredPath, q_start: 
             break   # all of it is checked, or enough
         more, joins, checked, brake, everything = next_pieces(
             ctx, key, brake + run_check.LEAD - untimed.checked)
+        pieces, continues = pieces + more, continues + joins
+    if not everything and run_check.first_pass_timed(pieces, len(path.points) - 1):
+        # Its first pass is timed: the rest costs little to time (the way back, cycles that
+        # reuse its pieces), 2 us a row to check. A short run is checked whole before it starts.
+        more, joins, checked, brake, everything = next_pieces(ctx, key, run_check.STRETCH)
         pieces, continues = pieces + more, continues + joins
     return pieces, continues, checked, brake, everything
 
@@ -233,8 +239,10 @@ def drop_run(ctx: PlanningContext, key: str) -> None:
 
 
 JOBS = {job.__name__: job for job in (open_stream, feed_stream, finish_stream, load_path,
-                                      plan_path_run,
-                                      plan_path_lazily, next_pieces, drop_run)}
+                                      plan_path_run, plan_path_lazily, next_pieces, drop_run)}
+# A run's start: a client waits for it with the arm at rest (no motion to stop), so it runs at
+# the server's niceness; every other job is background work (_main).
+STARTS = frozenset({"plan_path_run", "plan_path_lazily"})
 _keys = itertools.count(1)
 
 
@@ -353,9 +361,6 @@ def _main(conn, cell, margin: float, cycle_time: float, parent_pid: int) -> None
     # and a mask of blocked signals inherited from the server's threads is dropped.
     signal.pthread_sigmask(signal.SIG_SETMASK, ())
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # Background work: on a busy machine the server's command handling (a stop on its way to
-    # the cycle) goes first.
-    os.nice(10)
     try:   # its name in ps and top (and for bench_soak, which measures it)
         with open("/proc/self/comm", "w") as comm:
             comm.write(PROCESS_NAME)
@@ -363,6 +368,11 @@ def _main(conn, cell, margin: float, cycle_time: float, parent_pid: int) -> None
         pass
     context = PlanningContext(Planner(Kinematics(cell.arm), cycle_time),
                               CollisionScene(cell, margin))
+    # Background work (loads, stretches timed ahead of a moving arm) on a thread at niceness
+    # +10: on a busy machine the server's command handling (a stop on its way to the cycle)
+    # goes first. A start (STARTS) at the server's: at +10 a busy core held one 10 to 140 ms.
+    # (Linux: nice(2) sets the calling thread's niceness, not its process's.)
+    background = ThreadPoolExecutor(1, initializer=os.nice, initargs=(10,))
     while True:
         try:
             job, state, args, dropped = conn.recv()
@@ -370,15 +380,21 @@ def _main(conn, cell, margin: float, cycle_time: float, parent_pid: int) -> None
             return
         for key in dropped:
             context.streams.pop(key, None)
-        try:
-            if state is not None:
-                context.scene.restore(state)
-            answer = (True, JOBS[job](context, *args))
-        except Exception as exc:   # a refusal (CommandError) goes back as it is
-            answer = (False, exc)
+        answer = (_answer(context, job, state, args) if job in STARTS else
+                  background.submit(_answer, context, job, state, args).result())
         try:
             conn.send(answer)
         except (EOFError, OSError):
             return
         except Exception as exc:   # the answer did not pickle
             conn.send((False, Internal(f"planning's answer did not reach the server: {exc!r}")))
+
+
+def _answer(context: PlanningContext, job: str, state, args) -> tuple[bool, object]:
+    try:   # a refusal (CommandError) goes back as it is
+        if state is not None:
+            context.scene.restore(state)
+        return True, JOBS[job](context, *args)
+    except Exception as exc:
+        return False, exc
+

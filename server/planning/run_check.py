@@ -82,6 +82,12 @@ class RunCheck:
             raise Collision(f"{self.what} would collide: {contact}", **contact.metadata())
 
 
+def first_pass_timed(pieces: list, last_point: int) -> bool:
+    """Whether a path run's `pieces` reach its last point (marks are labelled by point index):
+    what is left to time then is the way back and cycles that reuse the pieces, if any."""
+    return any(label == last_point for piece in pieces for _, label in piece.marks)
+
+
 def joined(pieces: list, continues: list[bool]) -> tuple[list, bool]:
     """Pieces as the cycle plays them: each that continues the one before joined to it (one
     segment); and whether the first continues a piece sent before."""

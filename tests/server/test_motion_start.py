@@ -204,6 +204,24 @@ def test_a_section_under_the_long_section_is_timed_whole_before_its_run_starts(f
     assert np.allclose(fast.joints(), points[-1], atol=1e-4)
 
 
+def test_a_short_path_is_checked_whole_before_its_run_starts(fast):
+    """A 100-point blended path of 1.3 s (bench_motion_start's) is timed whole in the start's
+    planning job; checking the rest of its rows there costs about 2 us a row, so its run goes
+    to the cycle checked whole (a collision anywhere in it is the call's error and nothing
+    moved), and no stretch follows. Before, its run started on the 136 rows a stop may take
+    plus the lead, and a second planning job checked the rest as it played."""
+    points = at_first_point(fast, "short", [
+        [0.3 * np.sin(i / 15), 0.2 * np.sin(i / 25), 1.5708 + 0.1 * np.cos(i / 20), 0.0,
+         1.5708, 0.0] for i in range(100)], 40)
+    fast.server.device.path_runs.time_ahead = True   # as on the real-time clock
+    sent = sent_to_cycle(fast)
+    run(fast, lambda: fast.device.PathMove(motion_pb2.PathMoveRequest(path_name="short"),
+                                           timeout=30))
+    assert [m["op"] for m, _ in sent] == ["run"]
+    assert "checked" not in sent[0][0], "the run started on part of its rows checked"
+    assert np.allclose(fast.joints(), points[-1], atol=1e-4)
+
+
 @pytest.fixture
 def paced(tmp_path):
     """The kinematic backend at the pace of the wall clock (a late planning process is late
