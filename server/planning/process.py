@@ -397,4 +397,3 @@ def _answer(context: PlanningContext, job: str, state, args) -> tuple[bool, obje
         return True, JOBS[job](context, *args)
     except Exception as exc:
         return False, exc
-
