@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from landscape.robot.controller import SensorInfo, Status
-from landscape.server.cycle.feedback import ring_sensors
+from landscape.server.cycle.feedback import SENSORS, ring_sensors
 from landscape.server.cycle.tip_model import wrench_at_tip
 from landscape.server.device.stored_settings import SettingsKeeper
 from landscape.server.errors import ControllerFailure, ParamError
@@ -52,15 +52,31 @@ class Sensors:
         return name in self._ring
 
     def reading(self, name: str) -> np.ndarray:
-        """The sensor's present reading in SI (module docstring); a sensor the ring carries is
-        at most a cycle old (while its rows are whole: FeedbackRing.watch), the others are
-        asked of the controller (blocking)."""
+        """The sensor's present reading in SI (module docstring): from the ring if it carries
+        it (`held`), else asked of the controller (blocking)."""
         info = self.info(name)
-        if name in self._ring:
-            sample = self.link.sample()
-            if self.link.feedback.whole(sample.sequence):
-                return self.from_row(name, sample.sensors)
-        return self._tool_frame(info, np.asarray(self.link.proxy.read_sensor(name)))
+        raw = self.held(name)
+        if raw is None:
+            raw = np.asarray(self.link.proxy.read_sensor(name))
+        return self._tool_frame(info, raw)
+
+    def held(self, name: str) -> np.ndarray | None:
+        """`name`'s raw columns (flange frame) in the newest cycle's row, at most a cycle old:
+        None unless the ring carries the sensor and that row is whole (FeedbackRing.watch);
+        then `reading` asks the controller. A read of memory: no wait, no conversion."""
+        place = self._ring.get(name)
+        if place is None:
+            return None
+        ring = self.link.feedback
+        head = ring.head
+        row = ring.row(head)
+        if row is None or not ring.whole(head):
+            return None
+        return np.atleast_1d(row[SENSORS][place])
+
+    def in_tool_frame(self, name: str, raw: np.ndarray) -> np.ndarray:
+        """`held`'s raw columns as `reading` gives them (SI, the tool frame)."""
+        return self._tool_frame(self.info(name), raw)
 
     def from_row(self, name: str, sensors: np.ndarray) -> np.ndarray:
         """A ring sensor's reading from a feedback row's sensor columns (7,)."""
