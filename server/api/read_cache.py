@@ -8,7 +8,7 @@ not changed gets the same message again, which grpc only has to serialize (GetRo
 one forward kinematics, two unit conversions and a message less per call; at 4 ms a cycle
 and 32 clients reading flat out, most reads find the reply of their cycle built already).
 
-Versions are tuples compared element by element: numbers, strings and bytes by value, anything else
+Versions are tuples compared element by element: numbers and strings by value, anything else
 (the settings) by identity, since such a value is replaced, never changed. A reply handed out
 is never changed afterwards (grpc may be serializing it for another call). The cache lives
 on the event loop, where the read-only bodies run (guard.py): no lock.
@@ -20,7 +20,7 @@ from collections.abc import Callable
 from typing import TypeVar
 
 Reply = TypeVar("Reply")
-_BY_VALUE = (int, float, str, bytes, bool, type(None))
+_BY_VALUE = (int, float, str, bool, type(None))
 
 
 def same_version(a: tuple, b: tuple) -> bool:

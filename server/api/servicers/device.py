@@ -275,16 +275,16 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
     # ---- 3.7 sensors ----
     async def GetSensorReading(self, request, context):
         # A sensor the newest cycle's row carries is read from memory, on the loop, its reply
-        # built once per (raw values, settings); any other is asked of the controller.
+        # built once per (cycle, settings); any other is asked of the controller on a thread.
         name, sensors = request.sensor_type, self.workcell.sensors
         kind = sensors.info(name).kind
-        raw = sensors.held(name)
-        if raw is None:
+        cycle = sensors.held_cycle(name)
+        if cycle is None:
             values = await self.dispatch.run(self.dispatch.reads, sensors.reading, name)
             return self._sensor_reply(kind, values, self.device.settings.units)
         settings = self.device.settings
-        return self.replies.reply(f"GetSensorReading {name}", (raw.tobytes(), settings), lambda: (
-            self._sensor_reply(kind, sensors.in_tool_frame(name, raw), settings.units)))
+        return self.replies.reply(f"GetSensorReading {name}", (cycle, settings), lambda: (
+            self._sensor_reply(kind, sensors.reading_at(name, cycle), settings.units)))
 
     @staticmethod
     def _sensor_reply(kind: str, values, units: Units) -> sensing_pb2.GetSensorReadingResponse:
