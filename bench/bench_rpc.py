@@ -3,7 +3,9 @@ the same response size, measured in the same run. Prints, no pass/fail.
 
 For every read-only unary call of DeviceService (any client may make them) and SetSpeed (the
 lock holder's lease): latency p50/p99 and throughput with 1, 8 and 32 concurrent clients, and the
-same for a bare grpc.aio echo server in this process answering a message of the same size.
+same for a bare grpc.aio echo server in this process answering a message of the same size,
+in rounds that alternate the two (each figure the median of its rounds'), with the CPU each
+server's event loop thread spends per call.
 Goals: p50 within 1.2 times the echo for reads (1.5 for commands), throughput with 32 clients
 at least 0.8 times the echo's.
 
@@ -19,6 +21,8 @@ import multiprocessing as mp
 import time
 
 import grpc
+import numpy as np
+from bench_state import loop_cpu
 from common import BareServer, pct, record
 
 from landscape.client import Session
@@ -28,7 +32,7 @@ from landscape.v1 import (control_pb2, device_service_pb2_grpc, end_effector_pb2
                           settings_pb2, types_pb2)
 
 LEASE = "landscape-lease"
-ROUNDS = 5   # device and echo alternate, each measured in this many rounds
+ROUNDS = 7   # device and echo alternate, each measured in this many rounds (figures: medians)
 # Every read-only unary call of DeviceService, then a command.
 CALLS = {
     "GetRobotPosition": (settings_pb2.GetRobotPositionRequest, False),
@@ -104,18 +108,23 @@ class Callers:
         return [x for lat, _ in results for x in lat], max(w for _, w in results)
 
     def beside(self, device: str, echo: str, rpc: str, clients: int, calls: int, lease: str,
-               echo_size: int, rounds: int = ROUNDS):
-        """((p50, p99 ms, calls/s) of the device, the same of the echo), measured in
-        alternating rounds: on a shared machine both meet the same moments of load."""
-        seen = {device: ([], 0.0), echo: ([], 0.0)}
-        for _ in range(rounds):
-            for target, size in ((device, 0), (echo, echo_size)):
+               echo_size: int, cpu: dict, rounds: int = ROUNDS):
+        """((p50, p99 ms, calls/s, server loop CPU us per call) of the device, the same of the
+        echo), measured in rounds that alternate the two and which goes first (on a shared
+        machine both meet the same moments of load): each figure the median of its rounds',
+        so a round that met a burst of load moves it little. cpu: target -> loop_cpu clock."""
+        seen = {device: [], echo: []}
+        for round_ in range(rounds):
+            order = ((device, 0), (echo, echo_size))
+            for target, size in order[::-1] if round_ % 2 else order:
+                used = cpu[target]()
                 latencies, wall = self.measure(target, rpc, clients, max(1, calls // rounds),
                                                lease, size)
-                kept, walls = seen[target]
-                seen[target] = (kept + latencies, walls + wall)
-        return tuple((pct(lat, 50), pct(lat, 99), len(lat) / wall)
-                     for lat, wall in (seen[device], seen[echo]))
+                seen[target].append((pct(latencies, 50), pct(latencies, 99),
+                                     len(latencies) / wall,
+                                     (cpu[target]() - used) / len(latencies) * 1e6))
+        return tuple(tuple(float(np.median(column)) for column in zip(*seen[target]))
+                     for target in (device, echo))
 
     def close(self) -> None:
         for jobs in self.jobs:
@@ -148,23 +157,26 @@ def main() -> None:
     holder = Session(grpc.insecure_channel(server.target), "bench").open()
     lease = holder.lock()
     pool = Callers()
+    cpu = {server.target: loop_cpu(server.runner.loop), echo.target: loop_cpu(echo.loop)}
     try:
         # Settled before the first figure: the controller homed, the planning process up,
         # every caller process and both servers past their first calls.
         time.sleep(3.0)
         for target, size in ((server.target, 0), (echo.target, 24)):
             pool.measure(target, "GetDeviceState", 4, 100, lease, size)
-        print(f"{calls} calls per client; ms p50 / p99, calls/s; ratio = device / echo "
-              f"(p50, and throughput)")
+        print(f"{calls} calls per client; medians of {ROUNDS} alternated rounds: ms p50 / p99, "
+              f"calls/s, the server loop's CPU per call; ratio = device / echo (p50, and "
+              f"throughput)")
         for rpc in args.only or CALLS:
             size = response_size(server, rpc, lease)
             for clients in (1, 8, 32):
                 per = max(20, calls // clients) if clients > 1 else calls
-                (d50, d99, drate), (e50, e99, erate) = pool.beside(
-                    server.target, echo.target, rpc, clients, per, lease, size)
+                (d50, d99, drate, dcpu), (e50, e99, erate, ecpu) = pool.beside(
+                    server.target, echo.target, rpc, clients, per, lease, size, cpu)
                 print(f"  {rpc:17s} {clients:2d} clients: device {d50:6.3f} / {d99:6.3f} ms "
-                      f"{drate:7.0f}/s   echo ({size} B) {e50:6.3f} / {e99:6.3f} ms "
-                      f"{erate:7.0f}/s   ratio {d50 / e50:4.2f}, {drate / erate:4.2f}")
+                      f"{drate:7.0f}/s {dcpu:4.0f} us   echo ({size} B) {e50:6.3f} / "
+                      f"{e99:6.3f} ms {erate:7.0f}/s {ecpu:4.0f} us   "
+                      f"ratio {d50 / e50:4.2f}, {drate / erate:4.2f}")
                 # Goals: reads within 1.2 times the echo (issue 18), commands 1.5 (issue 17).
                 record(f"{rpc} p50, {clients} clients", d50, "ms", baseline=e50,
                        baseline_name="echo", goal=(1.5 if rpc == "SetSpeed" else 1.2) * e50)

@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from landscape.robot.controller import SensorInfo, Status
-from landscape.server.cycle.feedback import ring_sensors
-from landscape.server.cycle.tip_model import wrench_at_tip
+from landscape.server.cycle.feedback import SENSORS, ring_sensors
+from landscape.server.cycle.tip_model import wrench_map
 from landscape.server.device.stored_settings import SettingsKeeper
 from landscape.server.errors import ControllerFailure, ParamError
 from landscape.server.link.controller_link import ControllerLink
@@ -31,6 +31,7 @@ class Sensors:
         self.link, self.settings = link, settings
         self._known: dict[str, SensorInfo] = {}
         self._ring: dict[str, slice | int] = {}
+        self._tip_map: tuple[np.ndarray | None, np.ndarray] = (None, np.eye(6))
 
     def controller_started(self) -> None:
         sensors = self.link.proxy.sensor_map()
@@ -52,15 +53,30 @@ class Sensors:
         return name in self._ring
 
     def reading(self, name: str) -> np.ndarray:
-        """The sensor's present reading in SI (module docstring); a sensor the ring carries is
-        at most a cycle old (while its rows are whole: FeedbackRing.watch), the others are
-        asked of the controller (blocking)."""
+        """The sensor's present reading in SI (module docstring): from the newest row if it
+        carries it (`held_cycle`), else asked of the controller (blocking)."""
+        cycle = self.held_cycle(name)
+        if cycle is not None:
+            return self.reading_at(name, cycle)
         info = self.info(name)
-        if name in self._ring:
-            sample = self.link.sample()
-            if self.link.feedback.whole(sample.sequence):
-                return self.from_row(name, sample.sensors)
         return self._tool_frame(info, np.asarray(self.link.proxy.read_sensor(name)))
+
+    def held_cycle(self, name: str) -> int | None:
+        """The newest cycle, if its row carries `name` (a ring sensor, rows whole:
+        FeedbackRing.watch), at most a cycle old; else None: the controller has to be asked.
+        Two reads of shared memory: no wait."""
+        if name not in self._ring:
+            return None
+        ring = self.link.feedback
+        head = ring.head
+        return head if head >= 0 and ring.whole(head) else None
+
+    def reading_at(self, name: str, cycle: int) -> np.ndarray:
+        """A ring sensor's reading in cycle `cycle`'s row (one `held_cycle` gave)."""
+        row = self.link.feedback.row(cycle)
+        if row is None:   # 1,024 cycles later: not from a cycle held_cycle just gave
+            raise ControllerFailure(f"cycle {cycle}'s feedback is no longer in the ring")
+        return self.from_row(name, row[SENSORS])
 
     def from_row(self, name: str, sensors: np.ndarray) -> np.ndarray:
         """A ring sensor's reading from a feedback row's sensor columns (7,)."""
@@ -74,5 +90,15 @@ class Sensors:
 
     def _tool_frame(self, info: SensorInfo, raw: np.ndarray) -> np.ndarray:
         if info.kind == "force_torque":
-            return wrench_at_tip(raw, self.settings.current.tool_offset)
+            return self._to_tip(self.settings.current.tool_offset) @ raw
         return raw.astype(float)
+
+    def _to_tip(self, tool_offset: np.ndarray) -> np.ndarray:
+        """wrench_map of the tool offset, made once per offset (a new array per change, as
+        the settings are replaced, never changed): a product per reading, not a pinocchio
+        transform."""
+        offset, matrix = self._tip_map
+        if offset is not tool_offset:
+            matrix = wrench_map(tool_offset)
+            self._tip_map = (tool_offset, matrix)
+        return matrix

@@ -273,12 +273,21 @@ class DeviceServicer(PathReads, PoseSolving, services.DEVICE.servicer_base):
         return settings_pb2.GetTagIdResponse(ret_val=convert.ok(), path_name=path_name, tag_id=tag)
 
     # ---- 3.7 sensors ----
-    @blocking
-    def GetSensorReading(self, request, context):
-        sensors = self.workcell.sensors
-        kind = sensors.info(request.sensor_type).kind
-        values = sensors.reading(request.sensor_type)
-        units = self.device.settings.units
+    async def GetSensorReading(self, request, context):
+        # A sensor the newest cycle's row carries is read from memory, on the loop, its reply
+        # built once per (cycle, settings); any other is asked of the controller on a thread.
+        name, sensors = request.sensor_type, self.workcell.sensors
+        kind = sensors.info(name).kind
+        cycle = sensors.held_cycle(name)
+        if cycle is None:
+            values = await self.dispatch.run(self.dispatch.reads, sensors.reading, name)
+            return self._sensor_reply(kind, values, self.device.settings.units)
+        settings = self.device.settings
+        return self.replies.reply(f"GetSensorReading {name}", (cycle, settings), lambda: (
+            self._sensor_reply(kind, sensors.reading_at(name, cycle), settings.units)))
+
+    @staticmethod
+    def _sensor_reply(kind: str, values, units: Units) -> sensing_pb2.GetSensorReadingResponse:
         return sensing_pb2.GetSensorReadingResponse(
             ret_val=convert.ok(), current_data=convert.sensor_to_pb(kind, values, units),
             units=convert.units_to_pb(units))
