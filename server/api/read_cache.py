@@ -24,8 +24,12 @@ _BY_VALUE = (int, float, str, bool, type(None))
 
 
 def same_version(a: tuple, b: tuple) -> bool:
-    return len(a) == len(b) and all(
-        x is y or (type(x) in _BY_VALUE and type(x) is type(y) and x == y) for x, y in zip(a, b))
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b):   # a loop, not all() of a generator: this runs on every read
+        if x is not y and not (type(x) in _BY_VALUE and type(x) is type(y) and x == y):
+            return False
+    return True
 
 
 class ReplyCache:
