@@ -166,17 +166,22 @@ def test_settings_are_reflected_in_their_gets_in_the_current_units(server, holde
     assert accels.world_angular_accel == pytest.approx(math.degrees(2.0))
 
 
-def test_estop_faults_the_device_and_reset_needs_it_released_then_asks_the_holder(server):
-    answers = []
-
+def _active_holder(server, choice: str, answers: list) -> Session:
+    """A lock holder with the drives on, who answers every question `choice` (noted)."""
     def answer(request):
         answers.append(request)
-        return "reset", list(request.data)
+        return choice, list(request.data)
 
     session = Session(grpc.insecure_channel(server.target), "operator", on_rsvp=answer).open()
+    session.lock()
+    activate(session)
+    return session
+
+
+def test_estop_faults_the_device_and_reset_needs_it_released_then_asks_the_holder(server):
+    answers = []
+    session = _active_holder(server, "reset", answers)
     try:
-        session.lock()
-        activate(session)
         device, _, _ = stubs(session.channel)
         server.link.between_cycles(lambda c: c.panel.press_estop())
         wait_until(lambda: server.device.state is State.ERROR)
@@ -203,15 +208,8 @@ def test_an_estop_pressed_and_released_between_two_cycles_is_still_an_estop(serv
     press, so the device took it for a plain controller error and asked nothing. A press lasts
     at least the cycle after it, as a safety relay's does."""
     answers = []
-
-    def answer(request):
-        answers.append(request)
-        return "stay", list(request.data)
-
-    session = Session(grpc.insecure_channel(server.target), "operator", on_rsvp=answer).open()
+    session = _active_holder(server, "stay", answers)
     try:
-        session.lock()
-        activate(session)
         server.link.between_cycles(lambda c: (c.panel.press_estop(), c.panel.release_estop()))
         wait_until(lambda: answers, timeout=10)          # asked, after the release
         assert answers[0].event_id == "estop_released"
