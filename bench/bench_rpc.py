@@ -112,14 +112,14 @@ class Callers:
         """((p50, p99 ms, calls/s, server loop CPU us per call) of the device, the same of the
         echo), measured in rounds that alternate the two and which goes first (on a shared
         machine both meet the same moments of load): each figure the median of its rounds',
-        so a round that met a burst of load moves it little. cpu: target -> loop_cpu clock."""
+        so a round that met a burst of load moves it little. calls: each client's in a round;
+        cpu: target -> loop_cpu clock."""
         seen = {device: [], echo: []}
         for round_ in range(rounds):
             order = ((device, 0), (echo, echo_size))
             for target, size in order[::-1] if round_ % 2 else order:
                 used = cpu[target]()
-                latencies, wall = self.measure(target, rpc, clients, max(1, calls // rounds),
-                                               lease, size)
+                latencies, wall = self.measure(target, rpc, clients, calls, lease, size)
                 seen[target].append((pct(latencies, 50), pct(latencies, 99),
                                      len(latencies) / wall,
                                      (cpu[target]() - used) / len(latencies) * 1e6))
@@ -173,7 +173,7 @@ def main() -> None:
         for rpc in args.only or CALLS:
             size = response_size(server, rpc, lease)
             for clients in (1, 8, 32):
-                per = max(2, calls // clients) * ROUNDS   # each client's, over the rounds
+                per = max(2, calls // clients)   # each client's, in one round
                 (d50, d99, drate, dcpu), (e50, e99, erate, ecpu) = pool.beside(
                     server.target, echo.target, rpc, clients, per, lease, size, cpu)
                 print(f"  {rpc:17s} {clients:2d} clients: device {d50:6.3f} / {d99:6.3f} ms "

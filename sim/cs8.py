@@ -233,7 +233,7 @@ class SimulatedCS8(Controller):
         return Status.OK
 
     def _on_estop(self, pressed: bool) -> None:
-        self._estop_unseen = self._estop_unseen or pressed
+        self._estop_unseen |= pressed
         if not pressed:
             self._event("emergency stop released")
         elif self._enable is EnableState.DISABLED:

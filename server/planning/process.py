@@ -370,7 +370,8 @@ def _main(conn, cell, margin: float, cycle_time: float, parent_pid: int) -> None
                               CollisionScene(cell, margin))
     # Background work (loads, stretches timed ahead of a moving arm) on a thread at niceness
     # +10: on a busy machine the server's command handling (a stop on its way to the cycle)
-    # goes first. A start (STARTS) at the server's: at +10 a busy core held one 10 to 140 ms.
+    # goes first. A start (STARTS) at the server's: at +10 a busy core held one for tens to
+    # hundreds of ms (docs/motion.md).
     # (Linux: nice(2) sets the calling thread's niceness, not its process's.)
     background = ThreadPoolExecutor(1, initializer=os.nice, initargs=(10,))
     while True:

@@ -1,5 +1,5 @@
 """GetSensorReading of a sensor the feedback ring carries (issue 31 item 1): one lookup of the
-newest cycle's row, on the event loop, its reply kept per (raw values, settings); the same
+newest cycle's row, on the event loop, its reply kept per (cycle, settings); the same
 reading, in the same units, as the controller gives when asked."""
 from __future__ import annotations
 
